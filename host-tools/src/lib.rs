@@ -1,0 +1,3 @@
+//! Host side of the soft-tissue simulator: scenes, meshes, the serial reference solver and
+//! the tools behind the `pe` command line.
+pub mod mesh;

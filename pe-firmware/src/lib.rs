@@ -1,0 +1,2 @@
+//! Board firmware library: physics, schedule image and runtime. `no_std`, allocation-free.
+#![no_std]
