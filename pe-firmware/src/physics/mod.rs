@@ -1,0 +1,12 @@
+//! Physics shared by the board and the host: scalar type, tensors, hyperelastic laws, the
+//! Total Lagrangian hexahedron and explicit time integration. Physics never touches links.
+pub mod explicit;
+pub mod hex;
+pub mod material;
+pub mod real;
+pub mod tensor;
+
+pub use explicit::{accumulate_internal_forces, CentralDifference, PhysicsError};
+pub use hex::{GeometryError, HexElement, HexFull, HexReduced, ReferenceHex};
+pub use material::{LameParameters, MaterialLaw, Volumetric};
+pub use real::Real;
