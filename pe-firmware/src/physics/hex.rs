@@ -123,6 +123,8 @@ pub struct ReferenceHex {
     pub gauss_volumes: [f64; 8],
     /// Characteristic length `L_e = V₀ / A_max` (largest face area), m.
     pub characteristic_length: f64,
+    /// Smallest corner Jacobian scaled by the corner's edge lengths (1 for a cube).
+    pub min_scaled_jacobian: f64,
 }
 
 /// Scaled Jacobian threshold under which a cell is refused as degenerate.
@@ -133,7 +135,11 @@ impl ReferenceHex {
         if x.iter().flatten().any(|v| !v.is_finite()) {
             return Err(GeometryError::NonFiniteCoordinate);
         }
-        // Corners: the Jacobian there decides inversion; scaled by edge lengths.
+        // Corners: a zero-length edge (collapsed cell) or a strongly negative scaled
+        // Jacobian (a folded cell) is refused. A slightly negative corner value with
+        // positive Gauss-point values is a valid, if distorted, cell (the MacNeal-Harder
+        // patch has one), so the hard test is at the Gauss points below.
+        let mut min_scaled_jacobian = f64::INFINITY;
         for corner in NODE_XI {
             let jm = jacobian(x, &natural_gradients(corner));
             let d = tensor::det(&jm);
@@ -141,10 +147,21 @@ impl ReferenceHex {
                 libm::sqrt(jm[0][j] * jm[0][j] + jm[1][j] * jm[1][j] + jm[2][j] * jm[2][j])
             });
             let scale = cols[0] * cols[1] * cols[2];
-            if !(d > MIN_SCALED_JACOBIAN * scale) {
+            if !(scale > 0.0) || d < -0.2 * scale {
                 return Err(GeometryError::NonPositiveJacobian { at: corner, det_j: d });
             }
+            min_scaled_jacobian = min_scaled_jacobian.min(d / scale);
         }
+        // Scale for "zero" at the Gauss points: the cube of the shortest edge.
+        let min_edge_scale = {
+            let mut m = f64::INFINITY;
+            for f in FACES {
+                for k in 0..4 {
+                    m = m.min(tensor::norm(&tensor::sub(&x[f[k]], &x[f[(k + 1) % 4]])));
+                }
+            }
+            m * m * m / 8.0
+        };
         let g = 1.0 / libm::sqrt(3.0);
         let mut volume = 0.0;
         let mut sum = [[0.0; 3]; 8];
@@ -155,7 +172,7 @@ impl ReferenceHex {
             let dn = natural_gradients(xi);
             let jm = jacobian(x, &dn);
             let d = tensor::det(&jm);
-            if !(d > 0.0) {
+            if !(d > MIN_SCALED_JACOBIAN * min_edge_scale) {
                 return Err(GeometryError::NonPositiveJacobian { at: xi, det_j: d });
             }
             let jinv = tensor::inverse(&jm, d);
@@ -201,6 +218,7 @@ impl ReferenceHex {
             gauss_gradients,
             gauss_volumes,
             characteristic_length: volume / area_max,
+            min_scaled_jacobian,
         })
     }
 
