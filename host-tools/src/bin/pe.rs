@@ -1,1 +1,181 @@
-fn main() {}
+//! `pe`: the command line of the soft-tissue simulator's host tools.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use host_tools::problem::Problem;
+use host_tools::scene::Scene;
+use host_tools::scene_mesh::builtin_scene;
+use host_tools::solver::{self, Observer};
+use host_tools::output;
+
+#[derive(Parser)]
+#[command(name = "pe", version, about = "Soft-tissue simulator host tools")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(clap::Args)]
+struct SceneArgs {
+    /// Scene file (TOML).
+    scene: Option<PathBuf>,
+    /// Use the built-in scene (uterus, both tubes, probe) instead of a file.
+    #[arg(long, conflicts_with = "scene")]
+    builtin: bool,
+    /// Mesh level of the built-in scene: coarse (~300), medium (~2000), fine (~20000).
+    #[arg(long, default_value = "medium")]
+    level: String,
+}
+
+impl SceneArgs {
+    fn load(&self) -> Result<(Scene, PathBuf, String)> {
+        if self.builtin {
+            return Ok((builtin_scene(&self.level)?, PathBuf::from("."), format!("builtin:{}", self.level)));
+        }
+        let path = self
+            .scene
+            .as_ref()
+            .context("give a scene file or --builtin")?;
+        let scene = Scene::from_file(path)?;
+        let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        Ok((scene, dir, path.display().to_string()))
+    }
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a scene serially on one thread (the reference solver).
+    Solve {
+        #[command(flatten)]
+        scene: SceneArgs,
+        /// Final nodal positions and displacements: node,x,y,z,ux,uy,uz.
+        #[arg(long)]
+        output_nodes: Option<PathBuf>,
+        /// Run report (JSON).
+        #[arg(long)]
+        report: Option<PathBuf>,
+        /// ParaView time series (.vtu frames and series.pvd) into this directory.
+        #[arg(long)]
+        vtk: Option<PathBuf>,
+        /// Override the scene's step count.
+        #[arg(long)]
+        steps: Option<u64>,
+        /// Override the scene's precision (f32 | f64).
+        #[arg(long)]
+        precision: Option<String>,
+        /// Override the scene's integration (reduced | full).
+        #[arg(long)]
+        integration: Option<String>,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Print a scene (e.g. the built-in one) as TOML, to start a scene file from.
+    Scene {
+        #[command(flatten)]
+        scene: SceneArgs,
+    },
+    /// Measure ns per element-step and the flop count of one element-step.
+    Bench {
+        /// Elements of the benchmark mesh (a box).
+        #[arg(long, default_value_t = 2000)]
+        elements: usize,
+        /// Steps to time per configuration.
+        #[arg(long, default_value_t = 200)]
+        steps: u64,
+    },
+}
+
+struct Progress {
+    bar: Option<indicatif::ProgressBar>,
+    frames: Option<output::FrameWriter>,
+    error: Option<anyhow::Error>,
+}
+
+impl Observer for Progress {
+    fn after_step(&mut self, step: u64, time_s: f64, total: u64, u: &dyn Fn() -> Vec<[f64; 3]>) {
+        if let Some(b) = &self.bar {
+            if step % 64 == 0 || step == total {
+                b.set_position(step);
+            }
+        }
+        if let Some(f) = &mut self.frames {
+            if let Err(e) = f.maybe_write(step, time_s, total, u) {
+                self.error.get_or_insert(e);
+            }
+        }
+    }
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Solve { scene, output_nodes, report, vtk, steps, precision, integration, quiet } => {
+            let (mut sc, dir, name) = scene.load()?;
+            if let Some(n) = steps {
+                sc.solver.steps = Some(n);
+            }
+            if let Some(p) = precision {
+                sc.solver.precision = p;
+            }
+            if let Some(i) = integration {
+                sc.solver.integration = i;
+            }
+            let problem = Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
+            let (dt, dt_crit) = problem.time_step().with_context(|| format!("scene {name}"))?;
+            let total = problem.steps(dt);
+            eprintln!(
+                "{name}: {} elements, {} nodes, {} {}, dt = {dt:.3e} s (critical {dt_crit:.3e} s), {total} steps",
+                problem.mesh.cells.len(),
+                problem.mesh.nodes.len(),
+                problem.solver.precision,
+                problem.solver.integration
+            );
+            let bar = (!quiet && total > 2000).then(|| {
+                let b = indicatif::ProgressBar::new(total);
+                b.set_style(
+                    indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} steps  {elapsed} (eta {eta})")
+                        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+                );
+                b
+            });
+            let frames = match &vtk {
+                Some(d) => Some(output::FrameWriter::new(d, &problem.mesh, problem.solver.output_interval, dt)?),
+                None => None,
+            };
+            let mut obs = Progress { bar, frames, error: None };
+            let out = solver::run(&problem, &name, &mut obs)?;
+            if let Some(b) = &obs.bar {
+                b.finish_and_clear();
+            }
+            if let Some(e) = obs.error.take() {
+                return Err(e);
+            }
+            if let Some(f) = obs.frames.take() {
+                f.finish()?;
+            }
+            let r = &out.report;
+            println!(
+                "{} steps in {:.2} s: {:.3e} element-steps/s, real-time factor {:.3}; max |u| = {:.4e} m at node {}; KE = {:.3e} J; probe/prescribed reaction = [{:.4e}, {:.4e}, {:.4e}] N",
+                r.steps, r.wall_s, r.element_steps_per_s, r.real_time_factor, r.max_displacement,
+                r.max_displacement_node, r.kinetic_energy_final,
+                r.prescribed_reaction_n[0], r.prescribed_reaction_n[1], r.prescribed_reaction_n[2]
+            );
+            if let Some(p) = output_nodes {
+                output::write_nodes_csv(&p, &problem.mesh, &out.displacements)?;
+            }
+            if let Some(p) = report {
+                std::fs::write(&p, serde_json::to_string_pretty(&out.report)?)
+                    .with_context(|| format!("writing {}", p.display()))?;
+            }
+        }
+        Command::Scene { scene } => {
+            let (sc, _, _) = scene.load()?;
+            print!("{}", sc.to_toml()?);
+        }
+        Command::Bench { elements, steps } => host_tools::bench::run_cli(elements, steps)?,
+    }
+    Ok(())
+}

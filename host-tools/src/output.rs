@@ -1,0 +1,58 @@
+//! Run outputs shared by `pe solve` and board-sim: the nodes CSV and ParaView frames.
+
+use std::io::Write;
+use std::path::Path;
+
+use anyhow::{Context, Result};
+
+use crate::mesh::Mesh;
+use crate::vtk_out::VtkSeriesWriter;
+
+/// `node,x,y,z,ux,uy,uz`: every mesh node once, in mesh node order (node = its tag).
+/// Values are written with 17 significant digits so the CSV round-trips f64 exactly.
+pub fn write_nodes_csv(path: &Path, mesh: &Mesh, u: &[[f64; 3]]) -> Result<()> {
+    let mut out = String::with_capacity(mesh.nodes.len() * 120);
+    out.push_str("node,x,y,z,ux,uy,uz\n");
+    for (k, (p, d)) in mesh.nodes.iter().zip(u).enumerate() {
+        let tag = mesh.node_tags.get(k).copied().unwrap_or(k as u64 + 1);
+        out.push_str(&format!(
+            "{tag},{:.17e},{:.17e},{:.17e},{:.17e},{:.17e},{:.17e}\n",
+            p[0], p[1], p[2], d[0], d[1], d[2]
+        ));
+    }
+    let mut f = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    f.write_all(out.as_bytes()).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// Writes a frame every `interval_s` of simulated time (and the last one).
+pub struct FrameWriter {
+    writer: VtkSeriesWriter,
+    every_steps: u64,
+}
+
+impl FrameWriter {
+    pub fn new(dir: &Path, mesh: &Mesh, interval_s: f64, dt_s: f64) -> Result<Self> {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let mut writer = VtkSeriesWriter::new(dir, mesh)?;
+        writer.write_frame(0.0, &vec![[0.0; 3]; mesh.nodes.len()])?;
+        Ok(FrameWriter { writer, every_steps: ((interval_s / dt_s).round() as u64).max(1) })
+    }
+
+    pub fn maybe_write(
+        &mut self,
+        step: u64,
+        time_s: f64,
+        total: u64,
+        u: &dyn Fn() -> Vec<[f64; 3]>,
+    ) -> Result<()> {
+        if step % self.every_steps == 0 || step == total {
+            self.writer.write_frame(time_s, &u())?;
+        }
+        Ok(())
+    }
+
+    pub fn finish(self) -> Result<()> {
+        self.writer.finish()
+    }
+}

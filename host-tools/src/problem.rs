@@ -1,0 +1,406 @@
+//! A scene resolved against its mesh: per-cell materials, node sets, constraints and loads,
+//! all in `f64`. This is what the serial solver and the schedule compiler start from.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Context, Result};
+use pe_firmware::physics::{LameParameters, MaterialLaw, ReferenceHex, Volumetric};
+
+use crate::mesh::Mesh;
+use crate::scene::{MaterialSpec, RegionRef, Scene, Selector, SolverSpec};
+
+/// A piecewise-linear function of time through `(t, value)` points, held constant outside.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Path1<const N: usize> {
+    pub points: Vec<(f64, [f64; N])>,
+}
+
+impl<const N: usize> Path1<N> {
+    pub fn at(&self, t: f64) -> [f64; N] {
+        let p = &self.points;
+        match p.iter().position(|(ti, _)| *ti > t) {
+            None => p.last().map(|x| x.1).unwrap_or([0.0; N]),
+            Some(0) => p[0].1,
+            Some(k) => {
+                let (t0, a) = p[k - 1];
+                let (t1, b) = p[k];
+                let s = (t - t0) / (t1 - t0);
+                core::array::from_fn(|i| a[i] + s * (b[i] - a[i]))
+            }
+        }
+    }
+}
+
+/// How a node moves.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NodeKind {
+    Free,
+    Fixed,
+    /// Follows prescribed path number `k`.
+    Prescribed(u32),
+}
+
+#[derive(Clone, Debug)]
+pub struct Load {
+    pub node: u32,
+    pub force: [f64; 3],
+    pub ramp: Option<Path1<1>>,
+}
+
+/// The scene resolved on its mesh.
+#[derive(Clone, Debug)]
+pub struct Problem {
+    pub mesh: Mesh,
+    /// Named node sets the mesh provides (built-in anatomy: "cervix", "probe").
+    pub node_sets: BTreeMap<String, Vec<u32>>,
+    pub laws: Vec<MaterialLaw<f64>>,
+    pub densities: Vec<f64>,
+    /// Material index of every cell.
+    pub cell_material: Vec<u16>,
+    pub reference: Vec<ReferenceHex>,
+    pub node_kind: Vec<NodeKind>,
+    pub paths: Vec<Path1<3>>,
+    pub loads: Vec<Load>,
+    pub gravity: [f64; 3],
+    pub solver: SolverSpec,
+    /// True (gravitational) lumped mass per node, kg.
+    pub mass: Vec<f64>,
+    critical: std::sync::OnceLock<CriticalStep>,
+}
+
+/// The stability limit of a problem's time step.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct CriticalStep {
+    /// The step the solver treats as critical: min of the two below.
+    pub dt_critical_s: f64,
+    /// The seed's `min_e L_e / c_e`.
+    pub dt_element_estimate_s: f64,
+    /// `2 / ω_max` of the linearised mesh at rest.
+    pub dt_power_iteration_s: f64,
+    /// Cell with the smallest `L_e / c`.
+    pub limiting_cell: usize,
+}
+
+fn law_from_spec(m: &MaterialSpec, what: &str) -> Result<MaterialLaw<f64>> {
+    let need = |v: Option<f64>, key: &str| {
+        v.ok_or_else(|| anyhow!("{what}: law \"{}\" needs `{key}`", m.law))
+    };
+    let positive = |v: f64, key: &str| {
+        if v > 0.0 && v.is_finite() {
+            Ok(v)
+        } else {
+            Err(anyhow!("{what}: `{key}` must be positive, got {v}"))
+        }
+    };
+    if !(m.density > 0.0 && m.density.is_finite()) {
+        bail!("{what}: `density` must be positive, got {}", m.density);
+    }
+    match m.law.as_str() {
+        "neo-hookean" | "neo-hookean-decoupled" => {
+            let e = positive(need(m.youngs_modulus, "youngs_modulus")?, "youngs_modulus")?;
+            let nu = need(m.poisson_ratio, "poisson_ratio")?;
+            if !(-1.0 < nu && nu < 0.5) {
+                bail!("{what}: `poisson_ratio` must lie in (-1, 0.5), got {nu}");
+            }
+            let l = LameParameters::from_young_poisson(e, nu);
+            Ok(if m.law == "neo-hookean" {
+                MaterialLaw::NeoHookean(l)
+            } else {
+                MaterialLaw::NeoHookeanDecoupled { mu: l.mu, kappa: l.bulk_modulus() }
+            })
+        }
+        "mooney-rivlin" => {
+            let c10 = need(m.c10, "c10")?;
+            let c01 = need(m.c01, "c01")?;
+            if !(c10 + c01 > 0.0) {
+                bail!("{what}: c10 + c01 must be positive");
+            }
+            let kappa = positive(need(m.bulk_modulus, "bulk_modulus")?, "bulk_modulus")?;
+            let volumetric = match m.volumetric.as_deref().unwrap_or("quadratic") {
+                "quadratic" => Volumetric::Quadratic,
+                "log" => Volumetric::Log,
+                other => bail!("{what}: unknown volumetric \"{other}\" (quadratic | log)"),
+            };
+            Ok(MaterialLaw::MooneyRivlin { c10, c01, kappa, volumetric })
+        }
+        other => bail!(
+            "{what}: unknown law \"{other}\" (neo-hookean | neo-hookean-decoupled | mooney-rivlin)"
+        ),
+    }
+}
+
+fn region_tag(mesh: &Mesh, r: &RegionRef) -> Option<i32> {
+    match r {
+        RegionRef::Tag(t) => Some(*t),
+        RegionRef::Name(n) => mesh.region_names.iter().find(|(_, v)| *v == n).map(|(k, _)| *k),
+    }
+}
+
+impl Problem {
+    /// Resolves `scene` on `mesh`. `node_sets` are the mesh's named node sets.
+    pub fn new(
+        scene: &Scene,
+        mesh: Mesh,
+        node_sets: BTreeMap<String, Vec<u32>>,
+    ) -> Result<Problem> {
+        let n_nodes = mesh.nodes.len();
+        let n_cells = mesh.cells.len();
+        if n_cells == 0 {
+            bail!("mesh {} has no hexahedra", mesh.source);
+        }
+        // Materials: region-specific first, the default (no region) for the rest.
+        if scene.materials.is_empty() {
+            bail!("the scene has no [material]");
+        }
+        let mut laws = Vec::new();
+        let mut densities = Vec::new();
+        let mut cell_material = vec![u16::MAX; n_cells];
+        let mut default = None;
+        for (k, m) in scene.materials.iter().enumerate() {
+            let what = match &m.region {
+                Some(r) => format!("material {k} (region {r})"),
+                None => format!("material {k}"),
+            };
+            laws.push(law_from_spec(m, &what)?);
+            densities.push(m.density);
+            match &m.region {
+                None => {
+                    if default.is_some() {
+                        bail!("{what}: two materials without `region`");
+                    }
+                    default = Some(k as u16);
+                }
+                Some(r) => {
+                    let tag = region_tag(&mesh, r).ok_or_else(|| {
+                        anyhow!("{what}: mesh {} has no region {r} (regions: {:?})", mesh.source, mesh.region_names)
+                    })?;
+                    let mut hit = 0;
+                    for (c, reg) in mesh.cell_regions.iter().enumerate() {
+                        if *reg == tag {
+                            cell_material[c] = k as u16;
+                            hit += 1;
+                        }
+                    }
+                    if hit == 0 {
+                        bail!("{what}: region {r} has no cells in mesh {}", mesh.source);
+                    }
+                }
+            }
+        }
+        for (c, m) in cell_material.iter_mut().enumerate() {
+            if *m == u16::MAX {
+                *m = default.ok_or_else(|| {
+                    let reg = mesh.cell_regions.get(c).copied().unwrap_or(0);
+                    let name = mesh.region_names.get(&reg).cloned().unwrap_or_default();
+                    anyhow!(
+                        "cell {c} of mesh {} is in region {reg} {name:?}, which has no material (add a [[material]] with region = {reg} or one without region)",
+                        mesh.source
+                    )
+                })?;
+            }
+        }
+        // Reference geometry: refuses inverted/degenerate cells by name.
+        let mut reference = Vec::with_capacity(n_cells);
+        for c in 0..n_cells {
+            let r = ReferenceHex::new(&mesh.cell_coords(c)).map_err(|e| {
+                anyhow!("mesh {}: cell {c} (nodes {:?}): {e}", mesh.source, mesh.cells[c].map(|n| mesh.node_tags.get(n as usize).copied().unwrap_or(n as u64)))
+            })?;
+            reference.push(r);
+        }
+        let mut mass = vec![0.0; n_nodes];
+        for (c, r) in reference.iter().enumerate() {
+            let m = densities[cell_material[c] as usize] * r.volume / 8.0;
+            for &n in &mesh.cells[c] {
+                mass[n as usize] += m;
+            }
+        }
+        let select = |s: Selector<'_>, what: &str| -> Result<Vec<u32>> {
+            let mut out = Vec::new();
+            if s.box_.is_none() && s.sphere.is_none() && s.set.is_none() {
+                bail!("{what}: give `box`, `sphere` or `set`");
+            }
+            let mut in_set = vec![false; n_nodes];
+            if let Some(name) = s.set {
+                let set = node_sets.get(name).ok_or_else(|| {
+                    anyhow!("{what}: the mesh provides no node set \"{name}\" (it has {:?})", node_sets.keys().collect::<Vec<_>>())
+                })?;
+                for &n in set {
+                    in_set[n as usize] = true;
+                }
+            }
+            for (n, p) in mesh.nodes.iter().enumerate() {
+                let in_box = s.box_.is_some_and(|b| (0..3).all(|i| b[0][i] <= p[i] && p[i] <= b[1][i]));
+                let in_sphere = s.sphere.is_some_and(|sp| {
+                    (0..3).map(|i| (p[i] - sp.center[i]).powi(2)).sum::<f64>() <= sp.radius * sp.radius
+                });
+                if in_box || in_sphere || in_set[n] {
+                    out.push(n as u32);
+                }
+            }
+            if out.is_empty() {
+                bail!("{what} selects no node of mesh {}", mesh.source);
+            }
+            Ok(out)
+        };
+        let mut node_kind = vec![NodeKind::Free; n_nodes];
+        for (k, f) in scene.fixed.iter().enumerate() {
+            for n in select(f.selector(), &format!("[[fixed]] {k}"))? {
+                node_kind[n as usize] = NodeKind::Fixed;
+            }
+        }
+        let mut paths = Vec::new();
+        for (k, p) in scene.prescribed.iter().enumerate() {
+            let what = format!("[[prescribed]] {k}");
+            if p.path.is_empty() || p.path.windows(2).any(|w| !(w[1][0] > w[0][0])) {
+                bail!("{what}: `path` needs points [t, ux, uy, uz] with increasing t");
+            }
+            for n in select(p.selector(), &what)? {
+                if node_kind[n as usize] == NodeKind::Fixed {
+                    bail!("{what}: node {} is also fixed", mesh.node_tags[n as usize]);
+                }
+                node_kind[n as usize] = NodeKind::Prescribed(paths.len() as u32);
+            }
+            paths.push(Path1 { points: p.path.iter().map(|q| (q[0], [q[1], q[2], q[3]])).collect() });
+        }
+        let mut loads = Vec::new();
+        for (k, l) in scene.load.iter().enumerate() {
+            let what = format!("[[load]] {k}");
+            let nodes = select(l.selector(), &what)?;
+            let share = 1.0 / nodes.len() as f64;
+            let ramp = match &l.ramp {
+                Some(r) => {
+                    if r.is_empty() || r.windows(2).any(|w| !(w[1][0] > w[0][0])) {
+                        bail!("{what}: `ramp` needs points [t, factor] with increasing t");
+                    }
+                    Some(Path1 { points: r.iter().map(|q| (q[0], [q[1]])).collect() })
+                }
+                None => None,
+            };
+            for n in nodes {
+                loads.push(Load { node: n, force: l.force.map(|f| f * share), ramp: ramp.clone() });
+            }
+        }
+        let s = &scene.solver;
+        if !matches!(s.precision.as_str(), "f32" | "f64") {
+            bail!("[solver] precision = \"{}\": expected \"f32\" or \"f64\"", s.precision);
+        }
+        if !matches!(s.integration.as_str(), "reduced" | "full") {
+            bail!("[solver] integration = \"{}\": expected \"reduced\" or \"full\"", s.integration);
+        }
+        if !(s.mass_scaling >= 1.0) {
+            bail!("[solver] mass_scaling must be >= 1, got {}", s.mass_scaling);
+        }
+        if !(s.dt_safety > 0.0) || !(s.hourglass >= 0.0) || !(s.damping >= 0.0) {
+            bail!("[solver] dt_safety must be > 0, hourglass and damping >= 0");
+        }
+        Ok(Problem {
+            mesh,
+            node_sets,
+            laws,
+            densities,
+            cell_material,
+            reference,
+            node_kind,
+            paths,
+            loads,
+            gravity: scene.gravity.as_ref().map(|g| g.acceleration).unwrap_or([0.0; 3]),
+            solver: scene.solver.clone(),
+            mass,
+            critical: std::sync::OnceLock::new(),
+        })
+    }
+
+    /// Reads the scene's mesh (file, generated box or built-in anatomy) and resolves it.
+    pub fn from_scene(scene: &Scene, scene_dir: &Path) -> Result<Problem> {
+        let (mesh, sets) = crate::scene_mesh::load(&scene.mesh, scene_dir)
+            .context("loading the scene's mesh")?;
+        Problem::new(scene, mesh, sets)
+    }
+
+    /// Wave speed `c = √(M / (ρ · mass_scaling))` of cell `c`'s material.
+    pub fn wave_speed(&self, cell: usize) -> f64 {
+        let m = self.cell_material[cell] as usize;
+        (self.laws[m].dilatational_modulus() / (self.densities[m] * self.solver.mass_scaling)).sqrt()
+    }
+
+    /// The seed's estimate `min_e L_e / c_e` (`L_e = V/A_max`) and the cell that sets it.
+    pub fn element_dt_estimate(&self) -> (f64, usize) {
+        let mut best = (f64::INFINITY, 0);
+        for (c, r) in self.reference.iter().enumerate() {
+            let dt = r.characteristic_length / self.wave_speed(c);
+            if dt < best.0 {
+                best = (dt, c);
+            }
+        }
+        best
+    }
+
+    /// The critical step: the smaller of the seed's estimate `min_e L_e/c` and `2/ω_max`,
+    /// the exact stability limit of the undamped central difference for the linearised
+    /// mesh (power iteration on `M⁻¹K`, 200 iterations, at rest). On regular hexahedral
+    /// meshes `2/ω_max` is 0.86–0.89 of `L_e/c` (measured; a 3D mesh has modes above the
+    /// 1D bound `2c/h`), so the seed's formula alone would let a 0.9 safety factor blow up.
+    /// Computed once and cached.
+    pub fn critical_step(&self) -> Result<CriticalStep> {
+        if let Some(c) = self.critical.get() {
+            return Ok(*c);
+        }
+        let (estimate, cell) = self.element_dt_estimate();
+        let model = crate::solver::Model::<f64>::new(self, estimate);
+        let omega = model.max_frequency(200)?;
+        let power = if omega > 0.0 { 2.0 / omega } else { f64::INFINITY };
+        let c = CriticalStep {
+            dt_critical_s: estimate.min(power),
+            dt_element_estimate_s: estimate,
+            dt_power_iteration_s: power,
+            limiting_cell: cell,
+        };
+        let _ = self.critical.set(c);
+        Ok(c)
+    }
+
+    /// Critical step and limiting cell (see [`Problem::critical_step`]).
+    pub fn critical_dt(&self) -> Result<(f64, usize)> {
+        let c = self.critical_step()?;
+        Ok((c.dt_critical_s, c.limiting_cell))
+    }
+
+    /// The time step the scene asks for, refusing one above critical unless forced.
+    pub fn time_step(&self) -> Result<(f64, f64)> {
+        let (dt_crit, cell) = self.critical_dt()?;
+        let dt = match self.solver.dt {
+            Some(dt) => {
+                if !(dt > 0.0) {
+                    bail!("[solver] dt must be positive, got {dt}");
+                }
+                if dt > dt_crit && !self.solver.force_dt {
+                    bail!(
+                        "[solver] dt = {dt:.4e} s exceeds the critical step {dt_crit:.4e} s (set by cell {cell}, L_e = {:.3e} m): the explicit scheme would be unstable; lower dt or set force_dt = true",
+                        self.reference[cell].characteristic_length
+                    );
+                }
+                dt
+            }
+            None => {
+                if self.solver.dt_safety > 1.0 && !self.solver.force_dt {
+                    bail!(
+                        "[solver] dt_safety = {} > 1 gives a step above critical ({dt_crit:.4e} s); set force_dt = true to run it anyway",
+                        self.solver.dt_safety
+                    );
+                }
+                self.solver.dt_safety * dt_crit
+            }
+        };
+        Ok((dt, dt_crit))
+    }
+
+    /// Number of steps the scene runs.
+    pub fn steps(&self, dt: f64) -> u64 {
+        match (self.solver.steps, self.solver.duration) {
+            (Some(n), _) => n,
+            (None, Some(d)) => (d / dt).ceil() as u64,
+            (None, None) => (1.0 / dt).ceil() as u64,
+        }
+    }
+}

@@ -1,0 +1,235 @@
+//! Scene files (TOML, SI units): mesh, materials, boundary conditions, loads and solver
+//! settings. Every key is documented in the README; unknown keys are errors.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+/// A whole scene as read from a file (or built in code for the built-in scene).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    pub mesh: MeshSpec,
+    #[serde(default, rename = "material", deserialize_with = "one_or_many")]
+    pub materials: Vec<MaterialSpec>,
+    #[serde(default)]
+    pub fixed: Vec<FixedSpec>,
+    #[serde(default)]
+    pub prescribed: Vec<PrescribedSpec>,
+    #[serde(default)]
+    pub load: Vec<LoadSpec>,
+    #[serde(default)]
+    pub gravity: Option<GravitySpec>,
+    #[serde(default)]
+    pub solver: SolverSpec,
+}
+
+/// `[mesh]`: one of `file`, `generate` or `builtin`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshSpec {
+    /// Gmsh MSH 4.1 or legacy VTK hexahedra, relative to the scene file.
+    pub file: Option<PathBuf>,
+    pub generate: Option<GenerateSpec>,
+    /// Built-in anatomy: "uterus".
+    pub builtin: Option<String>,
+    /// Level of the built-in anatomy: "coarse" (~300), "medium" (~2000), "fine" (~20000).
+    pub level: Option<String>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GenerateSpec {
+    /// "box": spans from the origin to `size`.
+    pub kind: String,
+    pub size: [f64; 3],
+    pub cells: [usize; 3],
+}
+
+/// A region by physical-group tag or name.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(untagged)]
+pub enum RegionRef {
+    Tag(i32),
+    Name(String),
+}
+
+impl std::fmt::Display for RegionRef {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RegionRef::Tag(t) => write!(f, "{t}"),
+            RegionRef::Name(n) => write!(f, "\"{n}\""),
+        }
+    }
+}
+
+/// `[material]` or `[[material]]` (with `region`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialSpec {
+    /// Physical group this material applies to; omitted: every cell not otherwise covered.
+    pub region: Option<RegionRef>,
+    /// "neo-hookean" | "neo-hookean-decoupled" | "mooney-rivlin"
+    pub law: String,
+    pub youngs_modulus: Option<f64>,
+    pub poisson_ratio: Option<f64>,
+    pub c10: Option<f64>,
+    pub c01: Option<f64>,
+    pub bulk_modulus: Option<f64>,
+    /// "quadratic" | "log" (Mooney-Rivlin volumetric energy)
+    pub volumetric: Option<String>,
+    pub density: f64,
+}
+
+/// Which nodes a boundary condition or load applies to: the union of a box, a sphere and a
+/// named node set (the keys `box`, `sphere`, `set` of `[[fixed]]`, `[[prescribed]]`, `[[load]]`).
+#[derive(Clone, Copy, Debug)]
+pub struct Selector<'a> {
+    pub box_: Option<&'a [[f64; 3]; 2]>,
+    pub sphere: Option<&'a SphereSpec>,
+    pub set: Option<&'a str>,
+}
+
+macro_rules! selector {
+    ($t:ty) => {
+        impl $t {
+            pub fn selector(&self) -> Selector<'_> {
+                Selector {
+                    box_: self.box_.as_ref(),
+                    sphere: self.sphere.as_ref(),
+                    set: self.set.as_deref(),
+                }
+            }
+        }
+    };
+}
+selector!(FixedSpec);
+selector!(PrescribedSpec);
+selector!(LoadSpec);
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SphereSpec {
+    pub center: [f64; 3],
+    pub radius: f64,
+}
+
+/// `[[fixed]]`: clamped nodes.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FixedSpec {
+    #[serde(rename = "box")]
+    pub box_: Option<[[f64; 3]; 2]>,
+    pub sphere: Option<SphereSpec>,
+    pub set: Option<String>,
+}
+
+/// `[[prescribed]]`: nodes moved along a displacement path, piecewise linear in time
+/// through `path = [[t, ux, uy, uz], ...]` and held at the last point afterwards.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PrescribedSpec {
+    #[serde(rename = "box")]
+    pub box_: Option<[[f64; 3]; 2]>,
+    pub sphere: Option<SphereSpec>,
+    pub set: Option<String>,
+    pub path: Vec<[f64; 4]>,
+}
+
+/// `[[load]]`: a total force (N) split equally over the selected nodes, scaled in time by
+/// the optional piecewise-linear `ramp = [[t, factor], ...]` (default: constant 1).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoadSpec {
+    #[serde(rename = "box")]
+    pub box_: Option<[[f64; 3]; 2]>,
+    pub sphere: Option<SphereSpec>,
+    pub set: Option<String>,
+    pub force: [f64; 3],
+    pub ramp: Option<Vec<[f64; 2]>>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GravitySpec {
+    pub acceleration: [f64; 3],
+}
+
+/// `[solver]`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SolverSpec {
+    /// "f64" | "f32"
+    pub precision: String,
+    /// "reduced" | "full"
+    pub integration: String,
+    /// Hourglass coefficient κ_hg (reduced integration only).
+    pub hourglass: f64,
+    /// Mass-proportional damping α (1/s).
+    pub damping: f64,
+    /// dt = dt_safety × dt_critical, unless `dt` is given.
+    pub dt_safety: f64,
+    /// Explicit time step (s); refused above the critical step unless `force_dt = true`.
+    pub dt: Option<f64>,
+    pub force_dt: bool,
+    /// Inertia (not gravity) scaled by this factor; raises the critical step by its root.
+    pub mass_scaling: f64,
+    /// Simulated seconds (or `steps`).
+    pub duration: Option<f64>,
+    pub steps: Option<u64>,
+    /// Speed above which a node is reported as unstable (m/s); the tissue moves at most
+    /// ~0.1 m/s, so the default 100 m/s only trips on a blow-up.
+    pub speed_limit: f64,
+    /// Seconds of simulated time between ParaView frames (with --vtk).
+    pub output_interval: f64,
+}
+
+impl Default for SolverSpec {
+    fn default() -> Self {
+        SolverSpec {
+            precision: "f64".into(),
+            integration: "reduced".into(),
+            hourglass: 0.1,
+            damping: 0.0,
+            dt_safety: 0.9,
+            dt: None,
+            force_dt: false,
+            mass_scaling: 1.0,
+            duration: None,
+            steps: None,
+            speed_limit: 100.0,
+            output_interval: 0.04,
+        }
+    }
+}
+
+fn one_or_many<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<MaterialSpec>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum OneOrMany {
+        One(Box<MaterialSpec>),
+        Many(Vec<MaterialSpec>),
+    }
+    Ok(match OneOrMany::deserialize(d)? {
+        OneOrMany::One(m) => vec![*m],
+        OneOrMany::Many(v) => v,
+    })
+}
+
+impl Scene {
+    /// Reads and parses a scene file; errors name the file and (from the TOML parser) the line.
+    pub fn from_file(path: &Path) -> anyhow::Result<Scene> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| anyhow::anyhow!("cannot read scene file {}: {e}", path.display()))?;
+        Self::from_toml(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+    }
+
+    pub fn from_toml(text: &str) -> anyhow::Result<Scene> {
+        let scene: Scene = toml::from_str(text).map_err(|e| anyhow::anyhow!("{e}"))?;
+        Ok(scene)
+    }
+
+    pub fn to_toml(&self) -> anyhow::Result<String> {
+        Ok(toml::to_string_pretty(self)?)
+    }
+}

@@ -1,0 +1,100 @@
+//! Turns a scene's `[mesh]` into a mesh plus the named node sets it provides, and builds the
+//! built-in scene (the seed's Figure 3: uterus with both fallopian tubes, held at the cervix,
+//! a blunt probe pushing one tube).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Result};
+
+use crate::builtin::{self, Level};
+use crate::mesh::Mesh;
+use crate::scene::*;
+
+pub fn load(spec: &MeshSpec, scene_dir: &Path) -> Result<(Mesh, BTreeMap<String, Vec<u32>>)> {
+    let given = [spec.file.is_some(), spec.generate.is_some(), spec.builtin.is_some()];
+    if given.iter().filter(|g| **g).count() != 1 {
+        bail!("[mesh] needs exactly one of `file`, `generate`, `builtin`");
+    }
+    if let Some(f) = &spec.file {
+        let path = scene_dir.join(f);
+        return Ok((crate::mesh_io::load_mesh(&path)?, BTreeMap::new()));
+    }
+    if let Some(g) = &spec.generate {
+        if g.kind != "box" {
+            bail!("[mesh] generate.kind = \"{}\": only \"box\" is known", g.kind);
+        }
+        if g.cells.iter().any(|&c| c == 0) || g.size.iter().any(|&s| !(s > 0.0)) {
+            bail!("[mesh] generate: size and cells must be positive");
+        }
+        return Ok((crate::mesh_io::generate_box(g.size, g.cells), BTreeMap::new()));
+    }
+    let name = spec.builtin.as_deref().unwrap_or_default();
+    if name != "uterus" {
+        bail!("[mesh] builtin = \"{name}\": only \"uterus\" is built in");
+    }
+    let level: Level = spec.level.as_deref().unwrap_or("medium").parse().map_err(|e| anyhow!("[mesh] level: {e}"))?;
+    let a = builtin::generate(level);
+    let mut sets = BTreeMap::new();
+    sets.insert("cervix".to_string(), a.cervix_nodes.clone());
+    sets.insert("probe".to_string(), probe_nodes(&a));
+    Ok((a.mesh, sets))
+}
+
+/// Probe tip radius (m): a blunt 5 mm laparoscopic probe.
+pub const PROBE_TIP_RADIUS_M: f64 = 0.0025;
+/// How far the probe pushes the tube (m) and over what time (s).
+pub const PROBE_PUSH_M: f64 = 0.008;
+pub const PROBE_PUSH_S: f64 = 0.5;
+
+/// Tube surface nodes under the probe tip: within the tip radius of the contact point
+/// (until contact exists, the probe is a prescribed displacement of these nodes).
+fn probe_nodes(a: &builtin::Anatomy) -> Vec<u32> {
+    let c = a.probe.contact_point;
+    let mut r = PROBE_TIP_RADIUS_M;
+    loop {
+        let v: Vec<u32> = (0..a.mesh.nodes.len() as u32)
+            .filter(|&n| {
+                let p = a.mesh.nodes[n as usize];
+                (0..3).map(|i| (p[i] - c[i]).powi(2)).sum::<f64>() <= r * r
+            })
+            .collect();
+        if !v.is_empty() {
+            return v;
+        }
+        r *= 1.5;
+    }
+}
+
+/// The built-in scene at a mesh level.
+pub fn builtin_scene(level: &str) -> Result<Scene> {
+    let lv: Level = level.parse().map_err(|e| anyhow!("--level: {e}"))?;
+    let probe = builtin::generate(lv).probe;
+    let d = probe.push_direction.map(|v| v * PROBE_PUSH_M);
+    let mat = |region: Option<&str>, e: f64| MaterialSpec {
+        region: region.map(|r| RegionRef::Name(r.into())),
+        law: "neo-hookean".into(),
+        youngs_modulus: Some(e),
+        poisson_ratio: Some(0.45),
+        c10: None,
+        c01: None,
+        bulk_modulus: None,
+        volumetric: None,
+        density: 1000.0,
+    };
+    Ok(Scene {
+        mesh: MeshSpec { file: None, generate: None, builtin: Some("uterus".into()), level: Some(level.into()) },
+        // Uterine wall ~ 10 kPa; the oviducts are softer (3 kPa).
+        materials: vec![mat(None, 10.0e3), mat(Some("left_oviduct"), 3.0e3), mat(Some("right_oviduct"), 3.0e3)],
+        fixed: vec![FixedSpec { box_: None, sphere: None, set: Some("cervix".into()) }],
+        prescribed: vec![PrescribedSpec {
+            box_: None,
+            sphere: None,
+            set: Some("probe".into()),
+            path: vec![[0.0, 0.0, 0.0, 0.0], [PROBE_PUSH_S, d[0], d[1], d[2]]],
+        }],
+        load: vec![],
+        gravity: Some(GravitySpec { acceleration: [0.0, 0.0, -9.81] }),
+        solver: SolverSpec { damping: 20.0, duration: Some(0.6), ..SolverSpec::default() },
+    })
+}
