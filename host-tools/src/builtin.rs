@@ -11,24 +11,35 @@
 //! # Frame and geometry (millimetres here; the mesh itself is in metres)
 //!
 //! * x runs along the body from the fundus (x = −30) to the cervix, y is lateral (the tubes
-//!   lie along ±y), z is antero-posterior; the vagina bends towards −z.
+//!   lie along ±y), z is antero-posterior; the vagina bends towards −z. Same frame as the
+//!   reference mesh.
 //! * **Wall.** The uterine wall is one thick hollow shell: a closed cap (the fundus) on a
 //!   tapering tube that continues through the cervix into the vagina. Its midline is the
 //!   x axis from x = 0 to x = 69.8, then a 35 mm radius arc turning 70° towards −z, then a
-//!   straight 61.1 mm segment, ending at centre (123.6, 0, −80.5). Cross-sections are
-//!   perpendicular to this midline, elliptical, outer half-axes (y, z) / lumen half-axes
-//!   (y, z): (40, 30) / (20, 15) at the fundus base, (33, 26.5) / (14, 10.5) at mid-body
-//!   (s = 45 mm), (27.5, 19.5) / (4.5, 3.5) at the start of the bend, (25, 16) / (3, 3) at
-//!   the cervix (s = 84.5 mm, the body/vagina boundary, 24° into the bend), narrowing to a
-//!   6.3 / 5 mm radius tube at the vaginal end. The fundus is a half-ellipsoidal cap, outer
-//!   semi-axes (30, 40, 30), lumen semi-axes (15, 20, 15); the lumen is closed there.
-//!   Wall thickness: 15–20 mm over the fundus and body, about 22 mm at the cervix, 1.3 mm at
-//!   the vaginal end.
+//!   straight 61.2 mm segment, ending at centre (123.6, 0, −80.5); 173.7 mm of midline in
+//!   all. Cross-sections are perpendicular to the midline and elliptical; the half-axes are
+//!   read off the reference mesh's rings (piecewise linear in between):
+//!
+//!   | s (mm along midline) | outer half-axes y, z | lumen half-axes y, z | wall y, z |
+//!   |---|---|---|---|
+//!   | 0 (fundus base) | 39, 30 | 24.5, 18.4 | 14.5, 11.6 |
+//!   | 28.5 | 34.8, 28.5 | 19.3, 14.5 | 15.5, 14 |
+//!   | 42.4 (mid-body) | 32.4, 26.5 | 14.3, 10.6 | 18.1, 15.9 |
+//!   | 70 (start of bend) | 27.5, 19 | 4.1, 2.9 | 23.4, 16.1 |
+//!   | 84.5 (cervix: body/vagina boundary, 24° into the bend) | 25, 15 | 3.4, 2.2 | 21.6, 12.8 |
+//!   | 106 | 21.9, 13.5 | 17.5, 10.8 | 4.4, 2.7 |
+//!   | 150 | 9.5, 7.7 | 7.6, 6.2 | 1.9, 1.5 |
+//!   | 173.7 (vaginal end) | 6.2, 6.2 | 5, 5 | 1.2, 1.2 |
+//!
+//!   The fundus is a half-ellipsoidal cap on the s = 0 section, outer semi-axis 30 along
+//!   the midline (pole at x = −30), lumen semi-axis 15 (the cavity ends at x = −15), so the
+//!   wall is 15 mm thick at the pole.
 //! * **Tubes.** Straight hollow cylinders along ±y, outer diameter 3.5 mm, lumen diameter
-//!   1.75 mm, from the side of the fundus (axis at x ≈ 2 mm, z = 0, root at |y| ≈ 40 mm) to
-//!   |y| = 140 mm: 100 mm long. The first 14 mm flare out to the 12 mm square patch of the
-//!   body surface they grow from (a smooth quadratic blend), like the flared root of the
-//!   reference tubes. The tube lumen ends blind at the body surface.
+//!   1.75 mm, from the side of the fundus/body junction (axis at x = 2 mm (1.2 mm at the fine
+//!   level), z = 0; root at |y| ≈ 38 mm) to |y| = 140 mm, so a tube region is about 103 mm
+//!   long. The first 14 mm flare out (a smooth quadratic blend) to the 12 mm square patch of
+//!   body surface the tube grows from, like the flared roots of the reference tubes. The
+//!   tube lumen ends blind at the body surface (the intramural part is not modelled).
 //!
 //! # Mesh structure
 //!
@@ -37,7 +48,10 @@
 //! 2(m_u + m_v) quads around the midline; the side rows above the equator are mapped onto
 //! the fundus ellipsoid with the equiangular cube-to-sphere map, the rows below are placed
 //! on the swept cross-sections. Each surface quad is extruded through the wall in `n_w`
-//! straight layers between the lumen surface and the outer surface.
+//! straight layers between the lumen surface and the outer surface. Around the narrow
+//! cervical canal (s = 42..100 mm) the lumen nodes drift from the outer surface's graded ring
+//! angles towards uniform angles, so the narrow columns described below do not become
+//! 0.3 mm edges on the 4 mm wide canal (they would set the explicit time step).
 //!
 //! Each tube is an O-grid-like ring: a P × P block of quads (P = 3, or 5 at the fine level)
 //! with the centre quad left out as the lumen, mapped to an annulus (8 or 24 cells per
@@ -53,28 +67,35 @@
 //!
 //! # Levels
 //!
-//! | level | cells | nodes | min scaled Jacobian |
-//! |---|---|---|---|
-//! | coarse | 319 | 518 | 0.48 |
-//! | medium | 2032 | 2722 | 0.49 |
-//! | fine | 19928 | 23618 | 0.32 |
+//! | level | cells | nodes | wall layers | tube cells per section | min scaled Jacobian | min edge |
+//! |---|---|---|---|---|---|---|
+//! | coarse | 319 | 656 | 1 | 8 | 0.46 | 0.67 mm |
+//! | medium | 2032 | 3186 | 2 | 8 | 0.49 | 0.53 mm |
+//! | fine | 19928 | 25670 | 4 | 24 | 0.31 | 0.22 mm |
 //!
-//! # Comparison with the reference mesh (`uterus_scaffold_hex2k.msh`)
+//! The worst cells are in the tubes: the four corner cells of the square-ring cross-section
+//! have one corner on the round outer surface with an angle of 180° − 360°/(outer nodes),
+//! i.e. 150° (12 nodes, scaled Jacobian 0.5) or 162° (20 nodes, 0.31). The wall itself stays
+//! above 0.48. The reference meshes have 0.34 / 0.42 / 0.48 and minimum edges of
+//! 0.67 / 0.34 / 0.17 mm.
 //!
-//! | quantity (mm) | reference | generated |
+//! # Comparison with the reference mesh (`uterus_scaffold_hex2k.msh` / `_hex20k.msh`)
+//!
+//! | quantity | reference | generated (fine) |
 //! |---|---|---|
-//! | overall extent x × y × z | 159.5 × 280 × 112.7 | 159.5 × 280 × 112.7 |
-//! | fundus + body length (pole to cervix centre) | ~118 | ~114 |
-//! | body width × thickness at mid-body | 64.8 × 53 | 66 × 53 |
-//! | fundus region extent in x | 30.5 | 30 |
-//! | tube length (y extent of region) | 99.5 | ~100 |
-//! | tube diameter (outer / lumen) | 3.5 / 1.75 | 3.5 / 1.75 |
-//! | tube root flare (x × z extent) | 11 × 13 | ~12 × 12 |
-//! | wall thickness at mid-body (y / z) | 18 / 16 | 19 / 16 |
-//! | vaginal end radius (outer / lumen) | 6.3 / 5 | 6.3 / 5 |
+//! | overall extent x × y × z (mm) | 159.5 × 280 × 112.7 | 159.4 × 280 × 112.6 |
+//! | body_of_uterus extent x, z (mm) | 97.5, 60 | 90.2, 60 |
+//! | fundus extent x × y × z (mm) | 30.5 × 89.7 × 59.8 | 30 × 77.9 × 60 |
+//! | vagina extent x × y × z (mm) | 48 × 50 × 94 | 51.5 × 50 × 93.3 |
+//! | tube region length (mm) | 99.5 | 102.8 |
+//! | tube outer / lumen diameter (mm) | 3.5 / 1.75 | 3.5 / 1.75 |
+//! | volume body / fundus / vagina (cm³) | 170.3 / 51.5 / 26.5 | 165.8 / 59.1 / 27.3 |
+//! | volume per tube (cm³) | 1.06 | 1.27 (the longer flare) |
+//! | total volume (cm³) | 250.4 | 254.7 (coarse 238.2, medium 250.4) |
 //!
-//! Region volumes differ more than the extents (the reference body has a thicker wall
-//! near the fundus); see the tests in `tests/builtin_anatomy.rs`.
+//! (The reference fundus's y extent includes the bulges around the tube roots; the
+//! reference body region reaches 4 mm into the fundus side and its cervical face is
+//! tilted, hence its larger x extent.)
 //!
 //! Cervix clamp: [`Anatomy::cervix_nodes`] are all nodes (every wall layer) of the last
 //! cross-section, the lower (vaginal) end of the wall. Probe: [`ProbeSite`] is the top (+z)
@@ -359,6 +380,20 @@ fn profile(s: f64) -> [f64; 4] {
     [last[1], last[2], last[3], last[4]]
 }
 
+/// How far (0..1) the lumen nodes of the swept part move from the graded ring angles of the
+/// outer surface to uniform angles, as a function of arc length: 1 around the narrow
+/// cervical canal (s = 70..86 mm, lumen 2–4 mm across), so that the narrow columns made for
+/// the tube roots do not turn into 0.3 mm edges there (the stable time step); 0 where the
+/// lumen is wide relative to the wall (fundus, upper body, thin-walled vagina), so the
+/// through-wall edges stay radial.
+fn lumen_uniformity(s: f64) -> f64 {
+    let smooth = |t: f64| {
+        let t = t.clamp(0.0, 1.0);
+        t * t * (3.0 - 2.0 * t)
+    };
+    smooth((s - 42.0) / 28.0) * (1.0 - smooth((s - 86.0) / 14.0))
+}
+
 /// `n` cell sizes summing to `total`, growing geometrically (ratio 1.25) from `first` up to
 /// a cap, or uniform if the cells cannot be larger than `first`.
 fn graded(first: f64, n: usize, total: f64) -> Vec<f64> {
@@ -565,10 +600,16 @@ pub fn generate(level: Level) -> Anatomy {
                 let s = g.s[r - p.n_cap];
                 let (c, nz) = mid.frame(s);
                 let a = profile(s);
-                let l = (ry * ry + rz * rz).sqrt();
-                let (cy, cz) = (ry / l, rz / l);
-                let at = |hy: f64, hz: f64| add(c, add([0.0, hy * cy, 0.0], scale(nz, hz * cz)));
-                (at(a[0], a[1]), at(a[2], a[3]))
+                // Outer nodes at the graded ring angles; lumen nodes drift towards uniform
+                // angles where the lumen is narrow (see `lumen_uniformity`).
+                let th_out = rz.atan2(ry);
+                let th_unif = 2.0 * PI * (i as f64 - p.m_v as f64 / 2.0) / g.ring as f64;
+                let diff = (th_unif - th_out + PI).rem_euclid(2.0 * PI) - PI;
+                let th_in = th_out + lumen_uniformity(s) * diff;
+                let at = |hy: f64, hz: f64, th: f64| {
+                    add(c, add([0.0, hy * th.cos(), 0.0], scale(nz, hz * th.sin())))
+                };
+                (at(a[0], a[1], th_out), at(a[2], a[3], th_in))
             };
         }
     }

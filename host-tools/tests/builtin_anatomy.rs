@@ -154,16 +154,23 @@ fn cell_counts_near_nominal() {
 }
 
 /// Element validity: every cell's signed volume (6-tet split) and every corner Jacobian must
-/// be positive (an inverted or folded hexahedron breaks the explicit FEM), and the scaled
+/// be positive (an inverted or folded hexahedron breaks the explicit FEM), the scaled
 /// Jacobian must stay ≥ 0.2 everywhere (no slivers, which would ruin accuracy and the
-/// stable time step).
+/// stable time step), and no edge may be shorter than 0.15 mm (the reference's finest mesh
+/// has 0.17 mm; the shortest edge sets the explicit time step).
 #[test]
 fn cells_positive_and_well_shaped() {
     for (level, a) in anatomies() {
         let m = &a.mesh;
         let mut min_sj = f64::INFINITY;
+        let mut min_edge = f64::INFINITY;
         for c in 0..m.cells.len() {
             let x = m.cell_coords(c);
+            for (k, n) in CORNERS.iter().enumerate() {
+                for &j in n {
+                    min_edge = min_edge.min(norm(sub(x[j], x[k])));
+                }
+            }
             let v = hex_volume(&x);
             assert!(v > 0.0, "{level}: cell {c} volume {v}");
             for (k, (j, sj)) in corner_jacobians(&x).iter().enumerate() {
@@ -171,8 +178,12 @@ fn cells_positive_and_well_shaped() {
                 min_sj = min_sj.min(*sj);
             }
         }
-        println!("{level}: min scaled Jacobian {min_sj:.3}");
+        println!(
+            "{level}: min scaled Jacobian {min_sj:.3}, min edge {:.3} mm",
+            min_edge * 1e3
+        );
         assert!(min_sj >= 0.2, "{level}: min scaled Jacobian {min_sj}");
+        assert!(min_edge >= 0.15e-3, "{level}: min edge {min_edge} m");
         let lib = host_tools::builtin::min_scaled_jacobian(m);
         assert!(
             (lib - min_sj).abs() < 1e-12,
