@@ -535,9 +535,15 @@ fn probe_site_on_tube() {
             "{level}: not on surface"
         );
         assert!(dot(radial, d) < 0.0, "{level}: push points outward");
-        // Near the surface nodes (the outermost nodes of the tube).
+        // Near the tube's outer-surface nodes (those at the tube radius from the axis).
+        let on_surface = |q: &V3| {
+            let rel = sub(*q, c_mid);
+            let radial = sub(rel, axis.map(|x| x * dot(rel, axis)));
+            (norm(radial) - p.tube_radius_m).abs() < 1e-5
+        };
         let nearest = tube
             .iter()
+            .filter(|q| on_surface(q))
             .map(|q| norm(sub(*q, p.contact_point)))
             .fold(f64::INFINITY, f64::min);
         println!(
