@@ -123,11 +123,11 @@ pub const REGION_VAGINA: i32 = 5;
 /// Mesh resolution of the built-in anatomy.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Level {
-    /// About 300 hexahedra.
+    /// About 300 hexahedra (319 cells, 656 nodes).
     Coarse,
-    /// About 2000 hexahedra.
+    /// About 2000 hexahedra (2032 cells, 3186 nodes).
     Medium,
-    /// About 20000 hexahedra.
+    /// About 20000 hexahedra (19928 cells, 25670 nodes).
     Fine,
 }
 
