@@ -38,19 +38,43 @@ pub fn load(spec: &MeshSpec, scene_dir: &Path) -> Result<(Mesh, BTreeMap<String,
     let mut sets = BTreeMap::new();
     sets.insert("cervix".to_string(), a.cervix_nodes.clone());
     sets.insert("probe".to_string(), probe_nodes(&a));
+    for (region, name) in [
+        (builtin::REGION_LEFT_OVIDUCT, "left_tube_end"),
+        (builtin::REGION_RIGHT_OVIDUCT, "right_tube_end"),
+    ] {
+        sets.insert(name.to_string(), tube_end_nodes(&a.mesh, region));
+    }
     Ok((a.mesh, sets))
+}
+
+/// Nodes of the last cross-section of a tube (the one farthest from the body along y).
+fn tube_end_nodes(mesh: &Mesh, region: i32) -> Vec<u32> {
+    let mut nodes: Vec<u32> = mesh
+        .cells
+        .iter()
+        .zip(&mesh.cell_regions)
+        .filter(|(_, r)| **r == region)
+        .flat_map(|(c, _)| c.iter().copied())
+        .collect();
+    nodes.sort_unstable();
+    nodes.dedup();
+    let far = nodes.iter().map(|&n| mesh.nodes[n as usize][1].abs()).fold(0.0, f64::max);
+    nodes.retain(|&n| mesh.nodes[n as usize][1].abs() > far - 1e-4);
+    nodes
 }
 
 /// Probe tip radius (m): a blunt 5 mm laparoscopic probe.
 pub const PROBE_TIP_RADIUS_M: f64 = 0.0025;
 /// How far the probe pushes the tube (m) and over what time (s).
-pub const PROBE_PUSH_M: f64 = 0.008;
+pub const PROBE_PUSH_M: f64 = 0.005;
 pub const PROBE_PUSH_S: f64 = 0.5;
 
-/// Tube surface nodes under the probe tip: within the tip radius of the contact point
-/// (until contact exists, the probe is a prescribed displacement of these nodes).
+/// The tube's nodes under the probe tip: every node of the tube's cross-section within the
+/// tip radius of the tube axis point below the contact point (until contact exists, the
+/// probe is a prescribed displacement of these nodes, so the whole section moves with it).
 fn probe_nodes(a: &builtin::Anatomy) -> Vec<u32> {
-    let c = a.probe.contact_point;
+    let p = &a.probe;
+    let c: [f64; 3] = core::array::from_fn(|i| p.contact_point[i] + p.tube_radius_m * p.push_direction[i]);
     let mut r = PROBE_TIP_RADIUS_M;
     loop {
         let v: Vec<u32> = (0..a.mesh.nodes.len() as u32)
@@ -86,7 +110,10 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
         mesh: MeshSpec { file: None, generate: None, builtin: Some("uterus".into()), level: Some(level.into()) },
         // Uterine wall ~ 10 kPa; the oviducts are softer (3 kPa).
         materials: vec![mat(None, 10.0e3), mat(Some("left_oviduct"), 3.0e3), mat(Some("right_oviduct"), 3.0e3)],
-        fixed: vec![FixedSpec { box_: None, sphere: None, set: Some("cervix".into()) }],
+        // Held at the cervix; the tubes' far ends are held by their ligaments.
+        fixed: ["cervix", "left_tube_end", "right_tube_end"]
+            .map(|s| FixedSpec { box_: None, sphere: None, set: Some(s.into()) })
+            .to_vec(),
         prescribed: vec![PrescribedSpec {
             box_: None,
             sphere: None,
@@ -94,7 +121,9 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
             path: vec![[0.0, 0.0, 0.0, 0.0], [PROBE_PUSH_S, d[0], d[1], d[2]]],
         }],
         load: vec![],
-        gravity: Some(GravitySpec { acceleration: [0.0, 0.0, -9.81] }),
+        // The organs rest on their neighbours in the pelvis, which carry their weight; a
+        // 3 kPa tube 3.5 mm across could not carry its own over 10 cm, so gravity is off.
+        gravity: None,
         solver: SolverSpec { damping: 20.0, duration: Some(0.6), ..SolverSpec::default() },
     })
 }
