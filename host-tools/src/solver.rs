@@ -27,7 +27,7 @@ impl<T: Real> Elements<T> {
             Elements::Reduced(
                 cells
                     .map(|((c, r), m)| {
-                        let modulus = p.laws[*m as usize].dilatational_modulus();
+                        let modulus = p.laws[*m as usize].hourglass_modulus();
                         r.reduced(*c, *m, modulus, p.solver.hourglass)
                     })
                     .collect(),
@@ -370,5 +370,38 @@ impl<'p, T: Real> Model<'p, T> {
             v = w;
         }
         Ok(lambda.max(0.0).sqrt())
+    }
+}
+
+/// Energy terms at the time of the previous state `u_prev` (where the central velocity of
+/// the last step is known), J.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Energies {
+    pub kinetic: f64,
+    pub stored: f64,
+    /// `−Σ m g·u`.
+    pub gravity: f64,
+}
+
+impl Energies {
+    pub fn total(&self) -> f64 {
+        self.kinetic + self.stored + self.gravity
+    }
+}
+
+impl<'p, T: Real> Model<'p, T> {
+    /// Energies at `t_{n}` after the step that produced `u_{n+1}`: the kinetic energy of
+    /// the central velocity and the stored and gravity energy of `u_n`.
+    pub fn energies(&self) -> Result<Energies> {
+        let stored =
+            self.elements.stored_energy(&self.laws, &self.u_prev).map_err(|e| anyhow!("{e}"))?;
+        let g = self.problem.gravity;
+        let gravity = self
+            .u_prev
+            .iter()
+            .zip(&self.problem.mass)
+            .map(|(u, m)| -m * (0..3).map(|i| g[i] * u[i].to_f64()).sum::<f64>())
+            .sum();
+        Ok(Energies { kinetic: self.kinetic_energy, stored, gravity })
     }
 }

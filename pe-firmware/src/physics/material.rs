@@ -99,6 +99,12 @@ impl MaterialLaw<f64> {
         }
     }
 
+    /// Modulus `G = 2μ` that scales the hourglass stiffness (equal to `λ + 2μ` at ν = 0,
+    /// and finite as ν → 0.5, so the hourglass control does not lock).
+    pub fn hourglass_modulus(&self) -> f64 {
+        2.0 * self.shear_modulus()
+    }
+
     /// P-wave (dilatational) modulus `M = κ + 4μ/3 = λ + 2μ` (Pa): sets the wave speed
     /// `c = √(M/ρ)` and the hourglass stiffness.
     pub fn dilatational_modulus(&self) -> f64 {
