@@ -1,3 +1,4 @@
 //! Host side of the soft-tissue simulator: scenes, meshes, the serial reference solver and
 //! the tools behind the `pe` command line.
 pub mod mesh;
+pub mod mesh_io;

@@ -1,0 +1,815 @@
+//! Mesh import (Gmsh MSH 4.1 ASCII, legacy VTK unstructured grids) and a structured box
+//! generator, all producing the common [`Mesh`].
+//!
+//! The MSH reader is a hand-written parser for the ASCII MSH 4.1 subset that volume meshes
+//! use (`$MeshFormat`, `$PhysicalNames`, `$Entities`, `$Nodes`, `$Elements`; other sections
+//! are skipped). It is used instead of the `mshio` crate because `mshio` 0.4 drops the
+//! per-block node tags when the global tag range is dense (so a permuted tag order would be
+//! silently misread), does not read `$PhysicalNames`, and reports errors without line
+//! numbers. Every error names the file and, where it has one, the line and the element or
+//! node tag.
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+
+use crate::mesh::Mesh;
+pub use crate::mesh::MeshError;
+
+/// Gmsh element type of the 8-node hexahedron.
+const GMSH_HEX8: u32 = 5;
+/// `VTK_HEXAHEDRON`.
+const VTK_HEXAHEDRON: u8 = 12;
+
+/// Load a hexahedral mesh, choosing the reader by extension: `.msh` (Gmsh MSH 4.1 ASCII) or
+/// `.vtk` (legacy VTK unstructured grid of `VTK_HEXAHEDRON` cells). The result has passed
+/// [`Mesh::validate`].
+pub fn load_mesh(path: &Path) -> Result<Mesh, MeshError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+        .unwrap_or_default();
+    if ext != "msh" && ext != "vtk" {
+        return Err(MeshError::UnsupportedExtension {
+            path: path.to_path_buf(),
+            ext,
+        });
+    }
+    if !path.exists() {
+        return Err(MeshError::NotFound {
+            path: path.to_path_buf(),
+        });
+    }
+    let mesh = if ext == "msh" {
+        let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        parse_msh(path, &bytes)?
+    } else {
+        load_vtk(path)?
+    };
+    mesh.validate()?;
+    Ok(mesh)
+}
+
+/// A structured box of `cells[0] x cells[1] x cells[2]` hexahedra spanning from the origin to
+/// `size` (metres). Nodes are numbered x fastest, then y, then z; node tags are 1-based;
+/// every cell is in region 1, named "box". With positive `size` every cell has a positive
+/// Jacobian. A zero cell count in any direction gives a mesh without cells.
+pub fn generate_box(size: [f64; 3], cells: [usize; 3]) -> Mesh {
+    let [nx, ny, nz] = cells;
+    let (px, py) = (nx + 1, ny + 1);
+    let node = |i: usize, j: usize, k: usize| (i + px * (j + py * k)) as u32;
+    let mut mesh = Mesh {
+        source: format!("generate_box(size = {size:?}, cells = {cells:?})"),
+        ..Mesh::default()
+    };
+    if nx == 0 || ny == 0 || nz == 0 {
+        return mesh;
+    }
+    for k in 0..=nz {
+        for j in 0..=ny {
+            for i in 0..=nx {
+                mesh.nodes.push([
+                    size[0] * i as f64 / nx as f64,
+                    size[1] * j as f64 / ny as f64,
+                    size[2] * k as f64 / nz as f64,
+                ]);
+            }
+        }
+    }
+    mesh.node_tags = (1..=mesh.nodes.len() as u64).collect();
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                mesh.cells.push([
+                    node(i, j, k),
+                    node(i + 1, j, k),
+                    node(i + 1, j + 1, k),
+                    node(i, j + 1, k),
+                    node(i, j, k + 1),
+                    node(i + 1, j, k + 1),
+                    node(i + 1, j + 1, k + 1),
+                    node(i, j + 1, k + 1),
+                ]);
+            }
+        }
+    }
+    mesh.cell_regions = vec![1; mesh.cells.len()];
+    mesh.region_names.insert(1, "box".to_string());
+    mesh
+}
+
+// ---------------------------------------------------------------------------------------
+// Gmsh MSH 4.1 ASCII
+// ---------------------------------------------------------------------------------------
+
+/// Token reader over the text of a MSH file that keeps track of line numbers.
+struct Reader<'a> {
+    path: &'a Path,
+    lines: std::iter::Enumerate<std::str::Lines<'a>>,
+    /// 1-based number of the current line and what is left of it.
+    cur: Option<(usize, &'a str)>,
+    /// Number of the last line read, for end-of-file errors.
+    last_line: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn new(path: &'a Path, text: &'a str) -> Self {
+        Reader {
+            path,
+            lines: text.lines().enumerate(),
+            cur: None,
+            last_line: 0,
+        }
+    }
+
+    fn err(&self, line: Option<usize>, msg: impl Into<String>) -> MeshError {
+        MeshError::Parse {
+            path: self.path.to_path_buf(),
+            line,
+            msg: msg.into(),
+        }
+    }
+
+    /// The next whole line that is not blank (after the rest of the current one).
+    fn next_line(&mut self) -> Option<(usize, &'a str)> {
+        self.cur = None;
+        for (i, l) in self.lines.by_ref() {
+            self.last_line = i + 1;
+            if !l.trim().is_empty() {
+                return Some((i + 1, l.trim()));
+            }
+        }
+        None
+    }
+
+    /// The next whitespace-separated token inside a section, with its line number.
+    fn token(&mut self, what: &str) -> Result<(&'a str, usize), MeshError> {
+        loop {
+            if let Some((line, rest)) = self.cur {
+                let rest = rest.trim_start();
+                if !rest.is_empty() {
+                    let end = rest.find(char::is_whitespace).unwrap_or(rest.len());
+                    self.cur = Some((line, &rest[end..]));
+                    return Ok((&rest[..end], line));
+                }
+            }
+            match self.next_line() {
+                Some((line, l)) if l.starts_with('$') => {
+                    return Err(self.err(
+                        Some(line),
+                        format!("expected {what}, found section marker {l:?} (section too short)"),
+                    ))
+                }
+                Some((line, l)) => self.cur = Some((line, l)),
+                None => {
+                    return Err(self.err(
+                        Some(self.last_line),
+                        format!("unexpected end of file while reading {what} (file truncated?)"),
+                    ))
+                }
+            }
+        }
+    }
+
+    fn parse<T: std::str::FromStr>(&mut self, what: &str) -> Result<(T, usize), MeshError> {
+        let (tok, line) = self.token(what)?;
+        match tok.parse() {
+            Ok(v) => Ok((v, line)),
+            Err(_) => Err(self.err(Some(line), format!("expected {what}, found {tok:?}"))),
+        }
+    }
+
+    fn num<T: std::str::FromStr>(&mut self, what: &str) -> Result<T, MeshError> {
+        self.parse(what).map(|(v, _)| v)
+    }
+
+    /// What is left of the current line, or the next line if the current one is used up.
+    fn rest_of_line(&mut self, what: &str) -> Result<(&'a str, usize), MeshError> {
+        match self.cur.take() {
+            Some((line, rest)) if !rest.trim().is_empty() => Ok((rest.trim(), line)),
+            Some((line, _)) => Err(self.err(Some(line), format!("expected {what} on this line"))),
+            None => Err(self.err(Some(self.last_line), format!("expected {what}"))),
+        }
+    }
+
+    /// Require the section end marker `end` after the section body.
+    fn expect_end(&mut self, end: &str) -> Result<(), MeshError> {
+        if let Some((line, rest)) = self.cur {
+            if let Some(extra) = rest.split_whitespace().next() {
+                return Err(self.err(
+                    Some(line),
+                    format!("unexpected extra value {extra:?} where {end} was expected"),
+                ));
+            }
+        }
+        match self.next_line() {
+            Some((_, l)) if l == end => Ok(()),
+            Some((line, l)) => Err(self.err(
+                Some(line),
+                format!("expected {end}, found {:?}", truncate(l)),
+            )),
+            None => Err(self.err(
+                Some(self.last_line),
+                format!("unexpected end of file, {end} missing (file truncated?)"),
+            )),
+        }
+    }
+}
+
+fn truncate(s: &str) -> String {
+    if s.len() > 60 {
+        let mut end = 60;
+        while !s.is_char_boundary(end) {
+            end -= 1;
+        }
+        format!("{}...", &s[..end])
+    } else {
+        s.to_string()
+    }
+}
+
+/// Number of nodes of a Gmsh element type (the common ones; enough to skip any element
+/// block a volume mesh has).
+fn gmsh_nodes_per_element(t: u32) -> Option<usize> {
+    Some(match t {
+        1 => 2,
+        2 => 3,
+        3 => 4,
+        4 => 4,
+        5 => 8,
+        6 => 6,
+        7 => 5,
+        8 => 3,
+        9 => 6,
+        10 => 9,
+        11 => 10,
+        12 => 27,
+        13 => 18,
+        14 => 14,
+        15 => 1,
+        16 => 8,
+        17 => 20,
+        18 => 15,
+        19 => 13,
+        20 => 9,
+        21 => 10,
+        22 => 12,
+        23 => 15,
+        24 => 15,
+        25 => 21,
+        26 => 4,
+        27 => 5,
+        28 => 6,
+        29 => 20,
+        30 => 35,
+        31 => 56,
+        92 => 64,
+        93 => 125,
+        _ => return None,
+    })
+}
+
+/// Cap for `Vec::with_capacity` on counts read from a file, so a corrupt count cannot
+/// request an absurd allocation before the data runs out.
+fn cap(n: usize) -> usize {
+    n.min(1 << 20)
+}
+
+/// Parse the bytes of a Gmsh MSH 4.1 ASCII file. `path` is used for error messages only.
+pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
+    let text = match std::str::from_utf8(bytes) {
+        Ok(t) => t,
+        Err(e) => {
+            let good = &bytes[..e.valid_up_to()];
+            let line = good.iter().filter(|&&b| b == b'\n').count() + 1;
+            let prefix = String::from_utf8_lossy(good);
+            let binary = prefix
+                .lines()
+                .skip_while(|l| l.trim() != "$MeshFormat")
+                .nth(1)
+                .and_then(|l| l.split_whitespace().nth(1))
+                == Some("1");
+            let msg = if binary {
+                "binary MSH files are not supported; export ASCII MSH 4.1 \
+                 (gmsh: -format msh41 without -bin)"
+                    .to_string()
+            } else {
+                "invalid UTF-8 text (not an ASCII MSH file?)".to_string()
+            };
+            return Err(MeshError::Parse {
+                path: path.to_path_buf(),
+                line: Some(line),
+                msg,
+            });
+        }
+    };
+    let mut r = Reader::new(path, text);
+
+    let mut seen_format = false;
+    let mut region_names = BTreeMap::new();
+    // Volume entity tag -> physical group tag.
+    let mut volume_region: HashMap<i32, i32> = HashMap::new();
+    let mut nodes: Vec<[f64; 3]> = Vec::new();
+    let mut node_tags: Vec<u64> = Vec::new();
+    let mut node_index: HashMap<u64, u32> = HashMap::new();
+    let mut seen_nodes = false;
+    let mut cells: Vec<[u32; 8]> = Vec::new();
+    let mut cell_regions: Vec<i32> = Vec::new();
+    let mut seen_elements = false;
+    // Element type -> count, for the "no hexahedra" message.
+    let mut other_types: BTreeMap<u32, usize> = BTreeMap::new();
+
+    while let Some((line, header)) = r.next_line() {
+        if !header.starts_with('$') {
+            return Err(r.err(
+                Some(line),
+                format!(
+                    "expected a section header such as $Nodes, found {:?}",
+                    truncate(header)
+                ),
+            ));
+        }
+        if !seen_format && header != "$MeshFormat" {
+            return Err(r.err(
+                Some(line),
+                format!(
+                    "expected $MeshFormat as the first section, found {:?}",
+                    truncate(header)
+                ),
+            ));
+        }
+        match header {
+            "$MeshFormat" => {
+                let (version, vline) = r.token("MSH format version")?;
+                if version != "4.1" {
+                    return Err(r.err(
+                        Some(vline),
+                        format!(
+                            "MSH format version {version} is not supported, only 4.1 \
+                             (gmsh: -format msh41)"
+                        ),
+                    ));
+                }
+                let (file_type, fline) = r.parse::<u32>("MSH file type (0 = ASCII)")?;
+                if file_type != 0 {
+                    return Err(r.err(
+                        Some(fline),
+                        "binary MSH files are not supported; export ASCII MSH 4.1 \
+                         (gmsh: -format msh41 without -bin)",
+                    ));
+                }
+                let _data_size: u32 = r.num("MSH data size")?;
+                r.expect_end("$EndMeshFormat")?;
+                seen_format = true;
+            }
+            "$PhysicalNames" => {
+                let n: usize = r.num("number of physical names")?;
+                for _ in 0..n {
+                    let dim: i32 = r.num("physical name dimension")?;
+                    let tag: i32 = r.num("physical tag")?;
+                    let (name, nline) = r.rest_of_line("physical name")?;
+                    let name = name
+                        .strip_prefix('"')
+                        .and_then(|s| s.strip_suffix('"'))
+                        .ok_or_else(|| {
+                            r.err(Some(nline), format!("physical name {name:?} is not quoted"))
+                        })?;
+                    if dim == 3 {
+                        region_names.insert(tag, name.to_string());
+                    }
+                }
+                r.expect_end("$EndPhysicalNames")?;
+            }
+            "$Entities" => {
+                let np: usize = r.num("number of point entities")?;
+                let nc: usize = r.num("number of curve entities")?;
+                let ns: usize = r.num("number of surface entities")?;
+                let nv: usize = r.num("number of volume entities")?;
+                for (dim, count) in [(0, np), (1, nc), (2, ns), (3, nv)] {
+                    for _ in 0..count {
+                        let tag: i32 = r.num("entity tag")?;
+                        let coords = if dim == 0 { 3 } else { 6 };
+                        for _ in 0..coords {
+                            let _: f64 = r.num("entity bounding box coordinate")?;
+                        }
+                        let nphys: usize = r.num("number of physical tags")?;
+                        let mut first = None;
+                        for _ in 0..nphys {
+                            let p: i32 = r.num("physical tag")?;
+                            first.get_or_insert(p);
+                        }
+                        if dim > 0 {
+                            let nb: usize = r.num("number of bounding entities")?;
+                            for _ in 0..nb {
+                                let _: i32 = r.num("bounding entity tag")?;
+                            }
+                        }
+                        if dim == 3 {
+                            volume_region.insert(tag, first.unwrap_or(0));
+                        }
+                    }
+                }
+                r.expect_end("$EndEntities")?;
+            }
+            "$Nodes" => {
+                if seen_nodes {
+                    return Err(r.err(Some(line), "more than one $Nodes section"));
+                }
+                seen_nodes = true;
+                let nblocks: usize = r.num("number of node blocks")?;
+                let (total, tline) = r.parse::<usize>("number of nodes")?;
+                let _min: u64 = r.num("minimum node tag")?;
+                let _max: u64 = r.num("maximum node tag")?;
+                nodes.reserve(cap(total));
+                node_tags.reserve(cap(total));
+                for _ in 0..nblocks {
+                    let dim: usize = r.num("node block entity dimension")?;
+                    let _entity: i32 = r.num("node block entity tag")?;
+                    let (parametric, pline) = r.parse::<u32>("node block parametric flag")?;
+                    if parametric > 1 {
+                        return Err(r.err(
+                            Some(pline),
+                            format!(
+                                "node block parametric flag must be 0 or 1, found {parametric}"
+                            ),
+                        ));
+                    }
+                    let n: usize = r.num("number of nodes in block")?;
+                    let first = node_tags.len();
+                    for _ in 0..n {
+                        let (tag, l) = r.parse::<u64>("node tag")?;
+                        if node_index.insert(tag, node_tags.len() as u32).is_some() {
+                            return Err(r.err(Some(l), format!("node tag {tag} defined twice")));
+                        }
+                        node_tags.push(tag);
+                    }
+                    let extra = if parametric == 1 { dim } else { 0 };
+                    for i in 0..n {
+                        let tag = node_tags[first + i];
+                        let what = format!("coordinate of node {tag}");
+                        let p = [r.num(&what)?, r.num(&what)?, r.num(&what)?];
+                        for _ in 0..extra {
+                            let _: f64 = r.num(&format!("parametric coordinate of node {tag}"))?;
+                        }
+                        if !p.iter().all(|x: &f64| x.is_finite()) {
+                            return Err(MeshError::NonFiniteCoordinate {
+                                path: path.to_path_buf(),
+                                node: tag,
+                                coords: p,
+                            });
+                        }
+                        nodes.push(p);
+                    }
+                }
+                if nodes.len() != total {
+                    return Err(r.err(
+                        Some(tline),
+                        format!(
+                            "$Nodes header announces {total} nodes, blocks hold {}",
+                            nodes.len()
+                        ),
+                    ));
+                }
+                if nodes.len() > u32::MAX as usize {
+                    return Err(r.err(Some(tline), "more than 2^32 nodes"));
+                }
+                r.expect_end("$EndNodes")?;
+            }
+            "$Elements" => {
+                if seen_elements {
+                    return Err(r.err(Some(line), "more than one $Elements section"));
+                }
+                if !seen_nodes {
+                    return Err(r.err(Some(line), "$Elements before $Nodes"));
+                }
+                seen_elements = true;
+                let nblocks: usize = r.num("number of element blocks")?;
+                let (total, tline) = r.parse::<usize>("number of elements")?;
+                let _min: u64 = r.num("minimum element tag")?;
+                let _max: u64 = r.num("maximum element tag")?;
+                let mut read = 0usize;
+                for _ in 0..nblocks {
+                    let dim: i32 = r.num("element block entity dimension")?;
+                    let entity: i32 = r.num("element block entity tag")?;
+                    let (etype, eline) = r.parse::<u32>("element type")?;
+                    let n: usize = r.num("number of elements in block")?;
+                    let nn = gmsh_nodes_per_element(etype).ok_or_else(|| {
+                        r.err(Some(eline), format!("unknown Gmsh element type {etype}"))
+                    })?;
+                    read += n;
+                    if etype != GMSH_HEX8 {
+                        *other_types.entry(etype).or_insert(0) += n;
+                        for _ in 0..n * (nn + 1) {
+                            r.token("element data")?;
+                        }
+                        continue;
+                    }
+                    let region = if dim == 3 {
+                        volume_region.get(&entity).copied().unwrap_or(0)
+                    } else {
+                        0
+                    };
+                    cells.reserve(cap(n));
+                    for _ in 0..n {
+                        let (etag, _) = r.parse::<u64>("element tag")?;
+                        let mut cell = [0u32; 8];
+                        let what = format!("node tag of element {etag}");
+                        for a in 0..8 {
+                            let (ntag, l) = r.parse::<u64>(&what)?;
+                            let idx = *node_index.get(&ntag).ok_or(MeshError::UnknownNode {
+                                path: path.to_path_buf(),
+                                line: Some(l),
+                                element: etag,
+                                node: ntag,
+                            })?;
+                            if cell[..a].contains(&idx) {
+                                return Err(MeshError::RepeatedNode {
+                                    path: path.to_path_buf(),
+                                    item: format!("element {etag} (line {l})"),
+                                    node: ntag,
+                                });
+                            }
+                            cell[a] = idx;
+                        }
+                        cells.push(cell);
+                        cell_regions.push(region);
+                    }
+                }
+                if read != total {
+                    return Err(r.err(
+                        Some(tline),
+                        format!("$Elements header announces {total} elements, blocks hold {read}"),
+                    ));
+                }
+                r.expect_end("$EndElements")?;
+            }
+            _ => {
+                // Skip an unknown section up to its end marker.
+                let name = &header[1..];
+                let end = format!("$End{name}");
+                loop {
+                    match r.next_line() {
+                        Some((_, l)) if l == end => break,
+                        Some(_) => {}
+                        None => {
+                            return Err(r.err(
+                                Some(line),
+                                format!("section {header} is never closed by {end}"),
+                            ))
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    if !seen_format {
+        return Err(r.err(None, "empty file: no $MeshFormat header"));
+    }
+    if !seen_nodes {
+        return Err(r.err(None, "no $Nodes section"));
+    }
+    if cells.is_empty() {
+        let detail = if !seen_elements {
+            "the file has no $Elements section".to_string()
+        } else if other_types.is_empty() {
+            "the $Elements section is empty".to_string()
+        } else {
+            let types: Vec<String> = other_types
+                .iter()
+                .map(|(t, n)| format!("{n} of Gmsh type {t}"))
+                .collect();
+            format!("elements are {} (hexahedron is type 5)", types.join(", "))
+        };
+        return Err(MeshError::NoHexahedra {
+            path: path.to_path_buf(),
+            detail,
+        });
+    }
+
+    Ok(Mesh {
+        nodes,
+        node_tags,
+        cells,
+        cell_regions,
+        region_names,
+        source: path.display().to_string(),
+    })
+}
+
+// ---------------------------------------------------------------------------------------
+// Legacy VTK (via vtkio)
+// ---------------------------------------------------------------------------------------
+
+/// Names of cell data arrays taken as the region tag, in order of preference; otherwise the
+/// first one-component integer cell array is used.
+const REGION_ARRAY_NAMES: [&str; 5] = [
+    "region",
+    "Region",
+    "gmsh:physical",
+    "PhysicalGroup",
+    "CellEntityIds",
+];
+
+fn load_vtk(path: &Path) -> Result<Mesh, MeshError> {
+    use vtkio::model::{Attribute, CellType, DataSet, IOBuffer, Piece};
+
+    let perr = |line: Option<usize>, msg: String| MeshError::Parse {
+        path: path.to_path_buf(),
+        line,
+        msg,
+    };
+    let vtk = vtkio::Vtk::import(path).map_err(|e| match e {
+        vtkio::Error::IO(source) => MeshError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+        other => perr(
+            None,
+            format!("not a readable legacy VTK file (vtkio: {other}); expected ASCII or binary VTK 4.2 UNSTRUCTURED_GRID"),
+        ),
+    })?;
+    let pieces = match vtk.data {
+        DataSet::UnstructuredGrid { pieces, .. } => pieces,
+        _ => {
+            return Err(perr(
+                None,
+                "dataset is not an UNSTRUCTURED_GRID".to_string(),
+            ))
+        }
+    };
+    if pieces.len() != 1 {
+        return Err(perr(
+            None,
+            format!(
+                "expected one unstructured grid piece, found {}",
+                pieces.len()
+            ),
+        ));
+    }
+    let piece = match pieces.into_iter().next() {
+        Some(Piece::Inline(p)) => *p,
+        _ => {
+            return Err(perr(
+                None,
+                "unstructured grid data is not inline".to_string(),
+            ))
+        }
+    };
+
+    let coords: Vec<f64> = match piece.points {
+        IOBuffer::F64(v) => v,
+        IOBuffer::F32(v) => v.into_iter().map(f64::from).collect(),
+        other => other
+            .cast_into::<f64>()
+            .ok_or_else(|| perr(None, "POINTS have an unsupported number type".to_string()))?,
+    };
+    if !coords.chunks_exact(3).remainder().is_empty() {
+        return Err(perr(
+            None,
+            format!("POINTS hold {} numbers, not a multiple of 3", coords.len()),
+        ));
+    }
+    let nodes: Vec<[f64; 3]> = coords.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let node_tags: Vec<u64> = (1..=nodes.len() as u64).collect();
+    for (i, p) in nodes.iter().enumerate() {
+        if !p.iter().all(|x| x.is_finite()) {
+            return Err(MeshError::NonFiniteCoordinate {
+                path: path.to_path_buf(),
+                node: node_tags[i],
+                coords: *p,
+            });
+        }
+    }
+
+    let types = piece.cells.types;
+    let (connectivity, offsets) = piece.cells.cell_verts.into_xml();
+    if offsets.len() != types.len() {
+        return Err(perr(
+            None,
+            format!("{} cells but {} CELL_TYPES", offsets.len(), types.len()),
+        ));
+    }
+    if types.is_empty() {
+        return Err(MeshError::NoHexahedra {
+            path: path.to_path_buf(),
+            detail: "the file has no cells".to_string(),
+        });
+    }
+    let mut cells = Vec::with_capacity(types.len());
+    let mut start = 0usize;
+    for (ci, (&ty, &end)) in types.iter().zip(&offsets).enumerate() {
+        if ty != CellType::Hexahedron {
+            return Err(MeshError::NonHexCell {
+                path: path.to_path_buf(),
+                cell: ci,
+                cell_type: format!("{} ({ty:?})", ty as u8),
+            });
+        }
+        let end = end as usize;
+        let verts = connectivity.get(start..end).ok_or_else(|| {
+            perr(
+                None,
+                format!("cell {ci}: connectivity offsets out of range"),
+            )
+        })?;
+        if verts.len() != 8 {
+            return Err(perr(
+                None,
+                format!(
+                    "cell {ci} is VTK_HEXAHEDRON ({VTK_HEXAHEDRON}) but has {} points",
+                    verts.len()
+                ),
+            ));
+        }
+        let mut cell = [0u32; 8];
+        for (a, &v) in verts.iter().enumerate() {
+            if v as usize >= nodes.len() {
+                return Err(MeshError::NodeIndexOutOfRange {
+                    path: path.to_path_buf(),
+                    cell: ci,
+                    index: u32::try_from(v).unwrap_or(u32::MAX),
+                    nodes: nodes.len(),
+                });
+            }
+            if cell[..a].contains(&(v as u32)) {
+                return Err(MeshError::RepeatedNode {
+                    path: path.to_path_buf(),
+                    item: format!("cell {ci}"),
+                    node: v + 1,
+                });
+            }
+            cell[a] = v as u32;
+        }
+        cells.push(cell);
+        start = end;
+    }
+
+    // Region tags from an integer cell data array.
+    let arrays: Vec<_> = piece
+        .data
+        .cell
+        .into_iter()
+        .filter_map(|a| match a {
+            Attribute::DataArray(d) => Some(d),
+            Attribute::Field { .. } => None,
+        })
+        .collect();
+    let is_int = |b: &IOBuffer| {
+        matches!(
+            b,
+            IOBuffer::I8(_)
+                | IOBuffer::U8(_)
+                | IOBuffer::I16(_)
+                | IOBuffer::U16(_)
+                | IOBuffer::I32(_)
+                | IOBuffer::U32(_)
+                | IOBuffer::I64(_)
+                | IOBuffer::U64(_)
+        )
+    };
+    let chosen = REGION_ARRAY_NAMES
+        .iter()
+        .find_map(|n| arrays.iter().find(|a| a.name == *n))
+        .or_else(|| {
+            arrays
+                .iter()
+                .find(|a| is_int(&a.data) && a.data.len() == cells.len())
+        });
+    let cell_regions = match chosen {
+        None => vec![0; cells.len()],
+        Some(a) => {
+            let name = a.name.clone();
+            let vals = a
+                .data
+                .clone()
+                .cast_into::<i64>()
+                .ok_or_else(|| perr(None, format!("cell data {name:?} is not numeric")))?;
+            if vals.len() != cells.len() {
+                return Err(MeshError::LengthMismatch {
+                    path: path.to_path_buf(),
+                    what: format!("cell data {name:?}"),
+                    expected: cells.len(),
+                    got: vals.len(),
+                });
+            }
+            vals.into_iter()
+                .map(|v| {
+                    i32::try_from(v).map_err(|_| perr(None, format!("region {v} out of i32 range")))
+                })
+                .collect::<Result<Vec<i32>, _>>()?
+        }
+    };
+
+    Ok(Mesh {
+        nodes,
+        node_tags,
+        cells,
+        cell_regions,
+        region_names: BTreeMap::new(),
+        source: path.display().to_string(),
+    })
+}
