@@ -2,3 +2,4 @@
 //! the tools behind the `pe` command line.
 pub mod mesh;
 pub mod mesh_io;
+pub mod vtk_out;
