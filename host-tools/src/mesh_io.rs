@@ -40,17 +40,15 @@ pub fn load_mesh(path: &Path) -> Result<Mesh, MeshError> {
             path: path.to_path_buf(),
         });
     }
-    let mesh = if ext == "msh" {
-        let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        parse_msh(path, &bytes)?
+    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    if ext == "msh" {
+        parse_msh(path, &bytes)
     } else {
-        load_vtk(path)?
-    };
-    mesh.validate()?;
-    Ok(mesh)
+        parse_vtk(path, &bytes)
+    }
 }
 
 /// A structured box of `cells[0] x cells[1] x cells[2]` hexahedra spanning from the origin to
@@ -279,6 +277,10 @@ fn cap(n: usize) -> usize {
 }
 
 /// Parse the bytes of a Gmsh MSH 4.1 ASCII file. `path` is used for error messages only.
+/// Takes the 8-node hexahedra (type 5); lower-dimensional elements are ignored. A cell's
+/// region is the first physical tag of its volume entity (0 if it has none), region names
+/// come from the dimension-3 `$PhysicalNames`. Nodes keep file order, their tags in
+/// `node_tags`.
 pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
     let text = match std::str::from_utf8(bytes) {
         Ok(t) => t,
@@ -590,14 +592,16 @@ pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
         });
     }
 
-    Ok(Mesh {
+    let mesh = Mesh {
         nodes,
         node_tags,
         cells,
         cell_regions,
         region_names,
         source: path.display().to_string(),
-    })
+    };
+    mesh.validate()?;
+    Ok(mesh)
 }
 
 // ---------------------------------------------------------------------------------------
@@ -614,7 +618,12 @@ const REGION_ARRAY_NAMES: [&str; 5] = [
     "CellEntityIds",
 ];
 
-fn load_vtk(path: &Path) -> Result<Mesh, MeshError> {
+/// Parse the bytes of a legacy VTK unstructured grid of `VTK_HEXAHEDRON` cells (ASCII or
+/// big-endian binary, as the format prescribes). `path` is used for error messages only.
+/// Region tags come from the integer cell array named `region` (or `Region`,
+/// `gmsh:physical`, `PhysicalGroup`, `CellEntityIds`, else the first one-component integer
+/// cell array); without one every cell is in region 0. Node tags are 1-based indices.
+pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
     use vtkio::model::{Attribute, CellType, DataSet, IOBuffer, Piece};
 
     let perr = |line: Option<usize>, msg: String| MeshError::Parse {
@@ -622,14 +631,21 @@ fn load_vtk(path: &Path) -> Result<Mesh, MeshError> {
         line,
         msg,
     };
-    let vtk = vtkio::Vtk::import(path).map_err(|e| match e {
-        vtkio::Error::IO(source) => MeshError::Io {
-            path: path.to_path_buf(),
-            source,
-        },
-        other => perr(
-            None,
-            format!("not a readable legacy VTK file (vtkio: {other}); expected ASCII or binary VTK 4.2 UNSTRUCTURED_GRID"),
+    // vtkio reports neither where nor what went wrong, and silently drops a cell data array
+    // cut short by a truncated file, so walk the ASCII structure first: it finds those faults
+    // with a line number.
+    if let Ok(text) = std::str::from_utf8(bytes) {
+        walk_vtk(&mut Reader::new(path, text))?;
+    }
+    let vtk = vtkio::Vtk::parse_legacy_be(bytes).map_err(|e| MeshError::Parse {
+        path: path.to_path_buf(),
+        line: None,
+        msg: format!(
+            "not a readable legacy VTK unstructured grid (vtkio: {})",
+            match e {
+                vtkio::Error::Unknown => "incomplete input".to_string(),
+                other => other.to_string(),
+            }
         ),
     })?;
     let pieces = match vtk.data {
@@ -804,12 +820,147 @@ fn load_vtk(path: &Path) -> Result<Mesh, MeshError> {
         }
     };
 
-    Ok(Mesh {
+    let mesh = Mesh {
         nodes,
         node_tags,
         cells,
         cell_regions,
         region_names: BTreeMap::new(),
         source: path.display().to_string(),
-    })
+    };
+    mesh.validate()?;
+    Ok(mesh)
+}
+
+/// Walk the sections of an ASCII legacy VTK file (POINTS, CELLS, CELL_TYPES,
+/// CELL_DATA/POINT_DATA with SCALARS, VECTORS, NORMALS, FIELD), checking the counts and that
+/// every value is a number. Stops without error at the first keyword it does not know.
+fn walk_vtk(r: &mut Reader<'_>) -> Result<(), MeshError> {
+    let (l, head) = r.next_line().ok_or_else(|| r.err(Some(1), "empty file"))?;
+    if !head.starts_with("# vtk DataFile Version") {
+        return Err(r.err(
+            Some(l),
+            format!(
+                "expected \"# vtk DataFile Version x.y\", found {:?}",
+                truncate(head)
+            ),
+        ));
+    }
+    // The title line may be blank, so take it raw.
+    r.lines.next();
+    let (l, enc) = r
+        .next_line()
+        .ok_or_else(|| r.err(Some(r.last_line), "file ends after the title"))?;
+    if enc != "ASCII" {
+        return Err(r.err(
+            Some(l),
+            format!("expected ASCII, found {:?}", truncate(enc)),
+        ));
+    }
+    let (l, ds) = r
+        .next_line()
+        .ok_or_else(|| r.err(Some(r.last_line), "no DATASET line"))?;
+    if ds.split_whitespace().collect::<Vec<_>>() != ["DATASET", "UNSTRUCTURED_GRID"] {
+        return Err(r.err(
+            Some(l),
+            format!(
+                "expected DATASET UNSTRUCTURED_GRID, found {:?}",
+                truncate(ds)
+            ),
+        ));
+    }
+    let mut attr_count = 0usize;
+    loop {
+        let (kw, l) = match r.token("keyword") {
+            Ok(t) => t,
+            Err(_) => return Ok(()),
+        };
+        match kw {
+            "POINTS" => {
+                let n: usize = r.num("number of points")?;
+                r.token("POINTS number type")?;
+                for i in 0..3 * n {
+                    let _: f64 = r.num(&format!("coordinate {} of point {}", i % 3, i / 3))?;
+                }
+            }
+            "CELLS" => {
+                let n: usize = r.num("number of cells")?;
+                let size: usize = r.num("CELLS list size")?;
+                let mut read = 0usize;
+                for c in 0..n {
+                    let (tok, tl) = r.token(&format!("point count of cell {c}"))?;
+                    if c == 0 && tok == "OFFSETS" {
+                        // VTK 5.x offsets/connectivity layout: beyond this check.
+                        return Ok(());
+                    }
+                    let k: usize = tok.parse().map_err(|_| {
+                        r.err(
+                            Some(tl),
+                            format!("expected point count of cell {c}, found {tok:?}"),
+                        )
+                    })?;
+                    for _ in 0..k {
+                        let _: u64 = r.num(&format!("point index of cell {c}"))?;
+                    }
+                    read += k + 1;
+                }
+                if read != size {
+                    return Err(r.err(
+                        Some(l),
+                        format!("CELLS announces list size {size}, the cells hold {read}"),
+                    ));
+                }
+            }
+            "CELL_TYPES" => {
+                let n: usize = r.num("number of cell types")?;
+                for c in 0..n {
+                    let _: u8 = r.num(&format!("type of cell {c}"))?;
+                }
+            }
+            "CELL_DATA" | "POINT_DATA" => attr_count = r.num("number of data values")?,
+            "SCALARS" => {
+                let (name, _) = r.token("SCALARS name")?;
+                r.token("SCALARS type")?;
+                let comps = match r.rest_of_line("") {
+                    Ok((rest, _)) => rest.parse::<usize>().map_err(|_| {
+                        r.err(
+                            Some(l),
+                            format!("expected SCALARS component count, found {rest:?}"),
+                        )
+                    })?,
+                    Err(_) => 1,
+                };
+                let (lt, _) = r.token("LOOKUP_TABLE")?;
+                if lt != "LOOKUP_TABLE" {
+                    return Err(r.err(Some(l), format!("expected LOOKUP_TABLE, found {lt:?}")));
+                }
+                r.token("lookup table name")?;
+                for i in 0..attr_count * comps {
+                    let _: f64 = r.num(&format!("value {i} of SCALARS {name:?}"))?;
+                }
+            }
+            "VECTORS" | "NORMALS" => {
+                let (name, _) = r.token("array name")?;
+                r.token("array type")?;
+                for i in 0..3 * attr_count {
+                    let _: f64 = r.num(&format!("value {i} of {kw} {name:?}"))?;
+                }
+            }
+            "FIELD" => {
+                r.token("FIELD name")?;
+                let arrays: usize = r.num("number of FIELD arrays")?;
+                for _ in 0..arrays {
+                    let (name, _) = r.token("FIELD array name")?;
+                    let comps: usize = r.num("FIELD array component count")?;
+                    let tuples: usize = r.num("FIELD array tuple count")?;
+                    r.token("FIELD array type")?;
+                    for i in 0..comps * tuples {
+                        let _: f64 = r.num(&format!("value {i} of FIELD array {name:?}"))?;
+                    }
+                }
+            }
+            // Anything else (METADATA, TENSORS, ...) is beyond this check: stop here.
+            _ => return Ok(()),
+        }
+    }
 }

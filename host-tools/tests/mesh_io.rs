@@ -35,8 +35,24 @@ fn load_shared(name: &str) -> Mesh {
     }
 }
 
-/// A fresh, empty directory under the system temp dir, unique per test and process.
-fn temp_dir(tag: &str) -> PathBuf {
+/// A fresh, empty directory under the system temp dir, unique per test and process, removed
+/// when dropped.
+struct TempDir(PathBuf);
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn temp_dir(tag: &str) -> TempDir {
     static N: AtomicUsize = AtomicUsize::new(0);
     let dir = std::env::temp_dir().join(format!(
         "host-tools-mesh-io-{}-{}-{tag}",
@@ -45,13 +61,15 @@ fn temp_dir(tag: &str) -> PathBuf {
     ));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    dir
+    TempDir(dir)
 }
 
-fn write_temp(tag: &str, file: &str, text: &str) -> PathBuf {
-    let path = temp_dir(tag).join(file);
+/// Write `text` to `file` in a fresh temp dir; keep the returned guard alive while using it.
+fn write_temp(tag: &str, file: &str, text: &str) -> (TempDir, PathBuf) {
+    let dir = temp_dir(tag);
+    let path = dir.join(file);
     std::fs::write(&path, text).unwrap();
-    path
+    (dir, path)
 }
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -114,6 +132,7 @@ fn total_volume(mesh: &Mesh) -> f64 {
 /// Checks every imported mesh must pass: counts, consistency, positive cells, every node used,
 /// and a closed outward boundary enclosing the mesh volume.
 fn check_mesh(mesh: &Mesh, cells: usize, nodes: usize) {
+    assert!(!mesh.source.is_empty(), "the mesh says where it came from");
     assert_eq!(mesh.cells.len(), cells, "{}: cell count", mesh.source);
     assert_eq!(mesh.nodes.len(), nodes, "{}: node count", mesh.source);
     assert_eq!(mesh.node_tags.len(), nodes);
@@ -205,6 +224,15 @@ fn msh_parser_agrees_with_mshio() {
     assert_eq!(ours.cells, cells);
 }
 
+/// Number of cells per region.
+fn region_counts(m: &Mesh) -> BTreeMap<i32, usize> {
+    let mut c = BTreeMap::new();
+    for &r in &m.cell_regions {
+        *c.entry(r).or_insert(0) += 1;
+    }
+    c
+}
+
 /// Sorted (cell, region) pairs: the .msh and .vtk list the same cells in different orders.
 fn sorted_cells(m: &Mesh) -> Vec<([u32; 8], i32)> {
     let mut v: Vec<_> = m
@@ -227,8 +255,9 @@ fn uterus_hex2k_msh_and_vtk_agree() {
     check_mesh(&vtk, 2560, 3945);
     assert_eq!(msh.nodes, vtk.nodes);
     assert_eq!(sorted_cells(&msh), sorted_cells(&vtk));
-    let used: BTreeSet<i32> = vtk.cell_regions.iter().copied().collect();
-    assert_eq!(used, (1..=5).collect(), "the .vtk region data was read");
+    // Cells per region, cross-checked independently with meshio 5.3.5's reader.
+    let expect: BTreeMap<i32, usize> = [(1, 1024), (2, 256), (3, 320), (4, 320), (5, 640)].into();
+    assert_eq!(region_counts(&vtk), expect, "the .vtk region data was read");
     let msj = msh.min_scaled_jacobian();
     assert!(
         (msj - 0.42).abs() < 0.01,
@@ -409,7 +438,7 @@ fn cube_msh(tags: [u64; 8], element_nodes: &str) -> String {
 /// A minimal valid file: one hex in region 7 with its name (spaces kept), the quad ignored.
 #[test]
 fn msh_minimal_cube() {
-    let path = write_temp(
+    let (_tmp, path) = write_temp(
         "cube",
         "cube.msh",
         &cube_msh([1, 2, 3, 4, 5, 6, 7, 8], "1 2 3 4 5 6 7 8"),
@@ -435,7 +464,7 @@ fn msh_minimal_cube() {
 #[test]
 fn msh_permuted_node_tags() {
     let tags = [8, 7, 6, 5, 4, 3, 2, 1];
-    let path = write_temp("perm", "perm.msh", &cube_msh(tags, "1 2 3 4 5 6 7 8"));
+    let (_tmp, path) = write_temp("perm", "perm.msh", &cube_msh(tags, "1 2 3 4 5 6 7 8"));
     let m = load_mesh(&path).unwrap();
     assert_eq!(m.node_tags, tags.to_vec());
     assert_eq!(m.cells, vec![[7, 6, 5, 4, 3, 2, 1, 0]]);
@@ -447,14 +476,18 @@ fn msh_permuted_node_tags() {
 fn err_text(path: &Path) -> String {
     match load_mesh(path) {
         Ok(_) => panic!("{} loaded but should have failed", path.display()),
-        Err(e) => e.to_string(),
+        Err(e) => {
+            eprintln!("{e}");
+            e.to_string()
+        }
     }
 }
 
 /// A missing file is reported as such, with its name.
 #[test]
 fn error_missing_file() {
-    let path = temp_dir("missing").join("no_such_mesh.msh");
+    let dir = temp_dir("missing");
+    let path = dir.join("no_such_mesh.msh");
     let e = load_mesh(&path).unwrap_err();
     assert!(matches!(e, MeshError::NotFound { .. }));
     assert!(e.to_string().contains("no_such_mesh.msh"), "{e}");
@@ -464,7 +497,7 @@ fn error_missing_file() {
 /// An unknown extension is rejected before reading, naming the file and the extension.
 #[test]
 fn error_unsupported_extension() {
-    let path = write_temp("ext", "organ.stl", "solid x\nendsolid x\n");
+    let (_tmp, path) = write_temp("ext", "organ.stl", "solid x\nendsolid x\n");
     let e = err_text(&path);
     assert!(e.contains("organ.stl") && e.contains("\"stl\""), "{e}");
 }
@@ -474,7 +507,7 @@ fn error_unsupported_extension() {
 fn error_truncated_msh() {
     let full = cube_msh([1, 2, 3, 4, 5, 6, 7, 8], "1 2 3 4 5 6 7 8");
     let cut: String = full.lines().take(24).map(|l| format!("{l}\n")).collect();
-    let path = write_temp("trunc", "truncated.msh", &cut);
+    let (_tmp, path) = write_temp("trunc", "truncated.msh", &cut);
     let e = err_text(&path);
     assert!(e.contains("truncated.msh:24:"), "file and line: {e}");
     assert!(e.contains("end of file"), "{e}");
@@ -484,7 +517,7 @@ fn error_truncated_msh() {
 /// An element referring to an undefined node tag names the element, the node and the line.
 #[test]
 fn error_unknown_node() {
-    let path = write_temp(
+    let (_tmp, path) = write_temp(
         "unknown",
         "unknown_node.msh",
         &cube_msh([1, 2, 3, 4, 5, 6, 7, 8], "1 2 3 4 5 6 7 99"),
@@ -497,7 +530,7 @@ fn error_unknown_node() {
 /// A collapsed hexahedron (node used twice) names the element and the node.
 #[test]
 fn error_repeated_node() {
-    let path = write_temp(
+    let (_tmp, path) = write_temp(
         "repeat",
         "repeated.msh",
         &cube_msh([1, 2, 3, 4, 5, 6, 7, 8], "1 2 3 4 5 6 3 8"),
@@ -512,7 +545,7 @@ fn error_repeated_node() {
 fn error_nan_coordinate() {
     let text =
         cube_msh([1, 2, 3, 4, 5, 6, 7, 8], "1 2 3 4 5 6 7 8").replace("\n1 1 1\n", "\n1 nan 1\n");
-    let path = write_temp("nan", "nan.msh", &text);
+    let (_tmp, path) = write_temp("nan", "nan.msh", &text);
     let e = err_text(&path);
     assert!(e.contains("nan.msh") && e.contains("node 7"), "{e}");
 }
@@ -523,7 +556,7 @@ fn error_garbage_number() {
     let text =
         cube_msh([1, 2, 3, 4, 5, 6, 7, 8], "1 2 3 4 5 6 7 8").replace("\n1 0 1\n", "\n1 zero 1\n");
     let line = text.lines().position(|l| l == "1 zero 1").unwrap() + 1;
-    let path = write_temp("garbage", "garbage.msh", &text);
+    let (_tmp, path) = write_temp("garbage", "garbage.msh", &text);
     let e = err_text(&path);
     assert!(e.contains(&format!("garbage.msh:{line}:")), "{e}");
     assert!(e.contains("\"zero\"") && e.contains("node 6"), "{e}");
@@ -535,7 +568,7 @@ fn error_no_hexahedra() {
     let text = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n\
                 0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 1 1 1\n3 1 4 1\n1 1 2 3 4\n\
                 $EndElements\n";
-    let path = write_temp("tet", "tet.msh", text);
+    let (_tmp, path) = write_temp("tet", "tet.msh", text);
     let e = load_mesh(&path).unwrap_err();
     assert!(matches!(e, MeshError::NoHexahedra { .. }));
     let e = e.to_string();
@@ -546,7 +579,7 @@ fn error_no_hexahedra() {
 #[test]
 fn error_old_msh_version() {
     let text = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n";
-    let path = write_temp("v22", "old.msh", text);
+    let (_tmp, path) = write_temp("v22", "old.msh", text);
     let e = err_text(&path);
     assert!(
         e.contains("old.msh:2:") && e.contains("2.2") && e.contains("4.1"),
@@ -569,7 +602,7 @@ fn cube_vtk(cell_type: u32, extra_cell_data: &str) -> String {
 /// A one-cell VTK file with an int cell array "region" gives that region.
 #[test]
 fn vtk_minimal_cube_with_region() {
-    let path = write_temp(
+    let (_tmp, path) = write_temp(
         "vtkcube",
         "cube.vtk",
         &cube_vtk(
@@ -586,7 +619,7 @@ fn vtk_minimal_cube_with_region() {
 /// A VTK cell that is not a hexahedron names the cell index and its type.
 #[test]
 fn error_vtk_non_hex_cell() {
-    let path = write_temp("vtkwedge", "wedge.vtk", &cube_vtk(11, ""));
+    let (_tmp, path) = write_temp("vtkwedge", "wedge.vtk", &cube_vtk(11, ""));
     let e = load_mesh(&path).unwrap_err();
     assert!(matches!(e, MeshError::NonHexCell { cell: 0, .. }), "{e}");
     let e = e.to_string();
@@ -596,17 +629,18 @@ fn error_vtk_non_hex_cell() {
     );
 }
 
-/// Unreadable VTK content is a parse error naming the file.
+/// Unreadable VTK content is a parse error naming the file, the line and the bad token.
 #[test]
 fn error_vtk_garbage() {
-    let path = write_temp(
+    let (_tmp, path) = write_temp(
         "vtkbad",
         "bad.vtk",
         "# vtk DataFile Version 4.2\nx\nASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS two double\n",
     );
     let e = load_mesh(&path).unwrap_err();
     assert!(matches!(e, MeshError::Parse { .. }), "{e}");
-    assert!(e.to_string().contains("bad.vtk"), "{e}");
+    let e = e.to_string();
+    assert!(e.contains("bad.vtk:5:") && e.contains("\"two\""), "{e}");
 }
 
 // ---------------------------------------------------------------------------------------
@@ -707,7 +741,8 @@ fn vtu_series_round_trip() {
 #[test]
 fn vtu_rejects_wrong_displacement_length() {
     let mesh = generate_box([1.0; 3], [1, 1, 1]);
-    let mut w = VtkSeriesWriter::new(&temp_dir("vtulen"), &mesh).unwrap();
+    let dir = temp_dir("vtulen");
+    let mut w = VtkSeriesWriter::new(&dir, &mesh).unwrap();
     let e = w.write_frame(0.0, &[[0.0; 3]; 7]).unwrap_err().to_string();
     assert!(
         e.contains("displacement") && e.contains('7') && e.contains('8'),
@@ -739,4 +774,41 @@ fn vtu_real_mesh_round_trip() {
         mesh.nodes.iter().flatten().copied().collect::<Vec<_>>()
     );
     assert_eq!(p.cells.types.len(), 320);
+}
+
+/// A VTK file cut off inside POINTS is located: file, line, and what was being read.
+#[test]
+fn error_vtk_truncated() {
+    let full = cube_vtk(12, "");
+    let cut: String = full.lines().take(8).map(|l| format!("{l}\n")).collect();
+    let (_tmp, path) = write_temp("vtktrunc", "cut.vtk", &cut);
+    let e = err_text(&path);
+    assert!(e.contains("cut.vtk:8:"), "{e}");
+    assert!(e.contains("end of file") && e.contains("point 3"), "{e}");
+}
+
+/// A CELLS header whose list size disagrees with the cells is located at the CELLS line.
+#[test]
+fn error_vtk_bad_cells_size() {
+    let text = cube_vtk(12, "").replace("CELLS 1 9", "CELLS 1 10");
+    let (_tmp, path) = write_temp("vtksize", "size.vtk", &text);
+    let e = err_text(&path);
+    assert!(
+        e.contains("size.vtk:14:") && e.contains("10") && e.contains('9'),
+        "{e}"
+    );
+}
+
+/// A file cut off inside the region cell data must not load with the regions silently
+/// dropped (vtkio alone would return the mesh without them): it is an error at that line.
+#[test]
+fn error_vtk_truncated_cell_data() {
+    let text = cube_vtk(
+        12,
+        "CELL_DATA 1\nSCALARS region int 1\nLOOKUP_TABLE default\n",
+    );
+    let (_tmp, path) = write_temp("vtkcd", "cd.vtk", &text);
+    let e = err_text(&path);
+    assert!(e.contains("cd.vtk:20:") && e.contains("end of file"), "{e}");
+    assert!(e.contains("value 0 of SCALARS \"region\""), "{e}");
 }
