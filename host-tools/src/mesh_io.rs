@@ -16,7 +16,7 @@ use crate::mesh::Mesh;
 pub use crate::mesh::MeshError;
 
 /// Gmsh element type of the 8-node hexahedron.
-const GMSH_HEX8: u32 = 5;
+const GMSH_HEX8: i32 = 5;
 /// `VTK_HEXAHEDRON`.
 const VTK_HEXAHEDRON: u8 = 12;
 
@@ -100,26 +100,40 @@ pub fn generate_box(size: [f64; 3], cells: [usize; 3]) -> Mesh {
 }
 
 // ---------------------------------------------------------------------------------------
-// Gmsh MSH 4.1 ASCII
+// Gmsh MSH 4.1 (ASCII and binary)
 // ---------------------------------------------------------------------------------------
 
-/// Token reader over the text of a MSH file that keeps track of line numbers.
+/// Byte order of the numbers in a binary MSH file.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Endian {
+    Little,
+    Big,
+}
+
+/// Cursor over the bytes of a mesh file that keeps track of line numbers. Reads
+/// whitespace-separated text tokens, and, while `bin` is set (inside the binary sections of a
+/// binary MSH file), fixed-size binary numbers.
 struct Reader<'a> {
     path: &'a Path,
-    lines: std::iter::Enumerate<std::str::Lines<'a>>,
-    /// 1-based number of the current line and what is left of it.
-    cur: Option<(usize, &'a str)>,
-    /// Number of the last line read, for end-of-file errors.
-    last_line: usize,
+    b: &'a [u8],
+    pos: usize,
+    /// 1-based line number at `pos`.
+    line: usize,
+    /// Line of the last token read, for errors about that item.
+    tok_line: usize,
+    /// Byte order while reading binary numbers; `None` in text mode.
+    bin: Option<Endian>,
 }
 
 impl<'a> Reader<'a> {
-    fn new(path: &'a Path, text: &'a str) -> Self {
+    fn new(path: &'a Path, b: &'a [u8]) -> Self {
         Reader {
             path,
-            lines: text.lines().enumerate(),
-            cur: None,
-            last_line: 0,
+            b,
+            pos: 0,
+            line: 1,
+            tok_line: 1,
+            bin: None,
         }
     }
 
@@ -131,47 +145,118 @@ impl<'a> Reader<'a> {
         }
     }
 
-    /// The next whole line that is not blank (after the rest of the current one).
+    /// An error about the item just read: its line in text mode, the byte offset in binary.
+    fn err_item(&self, msg: impl Into<String>) -> MeshError {
+        match self.bin {
+            None => self.err(Some(self.tok_line), msg),
+            Some(_) => self.err(None, format!("{} (at byte {})", msg.into(), self.pos)),
+        }
+    }
+
+    /// Line of the item just read (text mode only).
+    fn item_line(&self) -> Option<usize> {
+        self.bin.is_none().then_some(self.tok_line)
+    }
+
+    /// Line number to report for an unexpected end of file: the last line of the file.
+    fn eof_line(&self) -> usize {
+        if self.b.last() == Some(&b'\n') {
+            self.line.saturating_sub(1).max(1)
+        } else {
+            self.line
+        }
+    }
+
+    fn skip_ws(&mut self) {
+        while let Some(&c) = self.b.get(self.pos) {
+            if !c.is_ascii_whitespace() {
+                break;
+            }
+            if c == b'\n' {
+                self.line += 1;
+            }
+            self.pos += 1;
+        }
+    }
+
+    /// Skip spaces and tabs (and `\r`), not newlines.
+    fn skip_blank(&mut self) {
+        while matches!(self.b.get(self.pos), Some(b' ' | b'\t' | b'\r')) {
+            self.pos += 1;
+        }
+    }
+
+    /// The rest of the current line (newline consumed, not returned).
+    fn raw_line(&mut self) -> Option<&'a [u8]> {
+        if self.pos >= self.b.len() {
+            return None;
+        }
+        let rest = &self.b[self.pos..];
+        let (line, used) = match rest.iter().position(|&c| c == b'\n') {
+            Some(i) => {
+                self.line += 1;
+                (&rest[..i], i + 1)
+            }
+            None => (rest, rest.len()),
+        };
+        self.pos += used;
+        Some(line.strip_suffix(b"\r").unwrap_or(line))
+    }
+
+    /// The next line that is not blank, trimmed, with its number.
     fn next_line(&mut self) -> Option<(usize, &'a str)> {
-        self.cur = None;
-        for (i, l) in self.lines.by_ref() {
-            self.last_line = i + 1;
-            if !l.trim().is_empty() {
-                return Some((i + 1, l.trim()));
-            }
-        }
-        None
+        self.skip_ws();
+        let l = self.line;
+        let raw = self.raw_line()?;
+        Some((
+            l,
+            std::str::from_utf8(raw)
+                .map(str::trim)
+                .unwrap_or("<binary data>"),
+        ))
     }
 
-    /// The next whitespace-separated token inside a section, with its line number.
+    /// The next whitespace-separated text token, with its line number.
     fn token(&mut self, what: &str) -> Result<(&'a str, usize), MeshError> {
-        loop {
-            if let Some((line, rest)) = self.cur {
-                let rest = rest.trim_start();
-                if !rest.is_empty() {
-                    let end = rest.find(char::is_whitespace).unwrap_or(rest.len());
-                    self.cur = Some((line, &rest[end..]));
-                    return Ok((&rest[..end], line));
-                }
+        self.skip_ws();
+        let l = self.line;
+        self.tok_line = l;
+        match self.b.get(self.pos) {
+            None => {
+                return Err(self.err(
+                    Some(self.eof_line()),
+                    format!("unexpected end of file while reading {what} (file truncated?)"),
+                ))
             }
-            match self.next_line() {
-                Some((line, l)) if l.starts_with('$') => {
-                    return Err(self.err(
-                        Some(line),
-                        format!("expected {what}, found section marker {l:?} (section too short)"),
-                    ))
-                }
-                Some((line, l)) => self.cur = Some((line, l)),
-                None => {
-                    return Err(self.err(
-                        Some(self.last_line),
-                        format!("unexpected end of file while reading {what} (file truncated?)"),
-                    ))
-                }
+            Some(b'$') => {
+                let marker = self.b[self.pos..]
+                    .split(|c| c.is_ascii_whitespace())
+                    .next()
+                    .unwrap_or_default();
+                return Err(self.err(
+                    Some(l),
+                    format!(
+                        "expected {what}, found section marker {:?} (section too short)",
+                        String::from_utf8_lossy(marker)
+                    ),
+                ));
             }
+            Some(_) => {}
         }
+        let start = self.pos;
+        while self
+            .b
+            .get(self.pos)
+            .is_some_and(|c| !c.is_ascii_whitespace())
+        {
+            self.pos += 1;
+        }
+        let tok = std::str::from_utf8(&self.b[start..self.pos])
+            .map_err(|_| self.err(Some(l), format!("expected {what}, found non-text bytes")))?;
+        Ok((tok, l))
     }
 
+    /// The next text token parsed as `T`.
     fn parse<T: std::str::FromStr>(&mut self, what: &str) -> Result<(T, usize), MeshError> {
         let (tok, line) = self.token(what)?;
         match tok.parse() {
@@ -184,33 +269,96 @@ impl<'a> Reader<'a> {
         self.parse(what).map(|(v, _)| v)
     }
 
-    /// What is left of the current line, or the next line if the current one is used up.
-    fn rest_of_line(&mut self, what: &str) -> Result<(&'a str, usize), MeshError> {
-        match self.cur.take() {
-            Some((line, rest)) if !rest.trim().is_empty() => Ok((rest.trim(), line)),
-            Some((line, _)) => Err(self.err(Some(line), format!("expected {what} on this line"))),
-            None => Err(self.err(Some(self.last_line), format!("expected {what}"))),
+    fn take<const N: usize>(&mut self, what: &str) -> Result<[u8; N], MeshError> {
+        match self.b.get(self.pos..self.pos + N) {
+            Some(s) => {
+                self.pos += N;
+                let mut out = [0u8; N];
+                out.copy_from_slice(s);
+                Ok(out)
+            }
+            None => Err(self.err_item(format!(
+                "unexpected end of file while reading {what} (file truncated?)"
+            ))),
         }
     }
 
-    /// Require the section end marker `end` after the section body.
+    /// A `size_t` (8 bytes in binary mode).
+    fn size(&mut self, what: &str) -> Result<u64, MeshError> {
+        match self.bin {
+            None => self.num(what),
+            Some(Endian::Little) => Ok(u64::from_le_bytes(self.take(what)?)),
+            Some(Endian::Big) => Ok(u64::from_be_bytes(self.take(what)?)),
+        }
+    }
+
+    /// A `size_t` used as a count.
+    fn count(&mut self, what: &str) -> Result<usize, MeshError> {
+        let v = self.size(what)?;
+        usize::try_from(v).map_err(|_| self.err_item(format!("{what} {v} is too large")))
+    }
+
+    /// An `int` (4 bytes in binary mode).
+    fn int(&mut self, what: &str) -> Result<i32, MeshError> {
+        match self.bin {
+            None => self.num(what),
+            Some(Endian::Little) => Ok(i32::from_le_bytes(self.take(what)?)),
+            Some(Endian::Big) => Ok(i32::from_be_bytes(self.take(what)?)),
+        }
+    }
+
+    /// A `double` (8 bytes in binary mode).
+    fn float(&mut self, what: &str) -> Result<f64, MeshError> {
+        match self.bin {
+            None => self.num(what),
+            Some(Endian::Little) => Ok(f64::from_le_bytes(self.take(what)?)),
+            Some(Endian::Big) => Ok(f64::from_be_bytes(self.take(what)?)),
+        }
+    }
+
+    /// What is left of the current line, trimmed; an error if it is empty.
+    fn rest_of_line(&mut self, what: &str) -> Result<(&'a str, usize), MeshError> {
+        self.skip_blank();
+        let l = self.line;
+        let raw = self.raw_line().unwrap_or_default();
+        match std::str::from_utf8(raw).map(str::trim) {
+            Ok(s) if !s.is_empty() => Ok((s, l)),
+            _ => Err(self.err(Some(l), format!("expected {what} on this line"))),
+        }
+    }
+
+    /// Require the section end marker `end` after the section body (leaves binary mode).
     fn expect_end(&mut self, end: &str) -> Result<(), MeshError> {
-        if let Some((line, rest)) = self.cur {
-            if let Some(extra) = rest.split_whitespace().next() {
-                return Err(self.err(
-                    Some(line),
-                    format!("unexpected extra value {extra:?} where {end} was expected"),
-                ));
+        let binary = self.bin.take().is_some();
+        let at = |r: &Self, line: usize, msg: String| {
+            if binary {
+                r.err(
+                    None,
+                    format!("{msg} (at byte {}; binary section size wrong?)", r.pos),
+                )
+            } else {
+                r.err(Some(line), msg)
             }
+        };
+        let mid_line = self.pos > 0 && self.b[self.pos - 1] != b'\n';
+        self.skip_blank();
+        if !binary && mid_line && self.b.get(self.pos).is_some_and(|&c| c != b'\n') {
+            let (extra, l) = self.token("")?;
+            return Err(self.err(
+                Some(l),
+                format!("unexpected extra value {extra:?} where {end} was expected"),
+            ));
         }
         match self.next_line() {
             Some((_, l)) if l == end => Ok(()),
-            Some((line, l)) => Err(self.err(
-                Some(line),
+            Some((line, l)) => Err(at(
+                self,
+                line,
                 format!("expected {end}, found {:?}", truncate(l)),
             )),
-            None => Err(self.err(
-                Some(self.last_line),
+            None => Err(at(
+                self,
+                self.eof_line(),
                 format!("unexpected end of file, {end} missing (file truncated?)"),
             )),
         }
@@ -276,44 +424,20 @@ fn cap(n: usize) -> usize {
     n.min(1 << 20)
 }
 
-/// Parse the bytes of a Gmsh MSH 4.1 ASCII file. `path` is used for error messages only.
-/// Takes the 8-node hexahedra (type 5); lower-dimensional elements are ignored. A cell's
-/// region is the first physical tag of its volume entity (0 if it has none), region names
-/// come from the dimension-3 `$PhysicalNames`. Nodes keep file order, their tags in
-/// `node_tags`.
+/// Parse the bytes of a Gmsh MSH 4.1 file, ASCII or binary. `path` is used for error
+/// messages only. Takes the 8-node hexahedra (type 5); lower-dimensional elements are
+/// ignored. A cell's region is the first physical tag of its volume entity (0 if it has
+/// none), region names come from the dimension-3 `$PhysicalNames`. Nodes keep file order,
+/// their tags in `node_tags`. Errors give the line (ASCII) or byte offset (binary).
 pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
-    let text = match std::str::from_utf8(bytes) {
-        Ok(t) => t,
-        Err(e) => {
-            let good = &bytes[..e.valid_up_to()];
-            let line = good.iter().filter(|&&b| b == b'\n').count() + 1;
-            let prefix = String::from_utf8_lossy(good);
-            let binary = prefix
-                .lines()
-                .skip_while(|l| l.trim() != "$MeshFormat")
-                .nth(1)
-                .and_then(|l| l.split_whitespace().nth(1))
-                == Some("1");
-            let msg = if binary {
-                "binary MSH files are not supported; export ASCII MSH 4.1 \
-                 (gmsh: -format msh41 without -bin)"
-                    .to_string()
-            } else {
-                "invalid UTF-8 text (not an ASCII MSH file?)".to_string()
-            };
-            return Err(MeshError::Parse {
-                path: path.to_path_buf(),
-                line: Some(line),
-                msg,
-            });
-        }
-    };
-    let mut r = Reader::new(path, text);
+    let mut r = Reader::new(path, bytes);
 
     let mut seen_format = false;
+    let mut endian: Option<Endian> = None;
     let mut region_names = BTreeMap::new();
     // Volume entity tag -> physical group tag.
     let mut volume_region: HashMap<i32, i32> = HashMap::new();
+    let mut seen_entities = false;
     let mut nodes: Vec<[f64; 3]> = Vec::new();
     let mut node_tags: Vec<u64> = Vec::new();
     let mut node_index: HashMap<u64, u32> = HashMap::new();
@@ -322,7 +446,7 @@ pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
     let mut cell_regions: Vec<i32> = Vec::new();
     let mut seen_elements = false;
     // Element type -> count, for the "no hexahedra" message.
-    let mut other_types: BTreeMap<u32, usize> = BTreeMap::new();
+    let mut other_types: BTreeMap<i32, usize> = BTreeMap::new();
 
     while let Some((line, header)) = r.next_line() {
         if !header.starts_with('$') {
@@ -355,19 +479,46 @@ pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
                         ),
                     ));
                 }
-                let (file_type, fline) = r.parse::<u32>("MSH file type (0 = ASCII)")?;
-                if file_type != 0 {
-                    return Err(r.err(
-                        Some(fline),
-                        "binary MSH files are not supported; export ASCII MSH 4.1 \
-                         (gmsh: -format msh41 without -bin)",
-                    ));
+                let (file_type, fline) = r.parse::<u32>("MSH file type (0 ASCII, 1 binary)")?;
+                let (data_size, dline) = r.parse::<u32>("MSH data size")?;
+                match file_type {
+                    0 => {}
+                    1 => {
+                        if data_size != 8 {
+                            return Err(r.err(
+                                Some(dline),
+                                format!("binary MSH with {data_size}-byte size_t is not supported (only 8)"),
+                            ));
+                        }
+                        r.skip_blank();
+                        if r.b.get(r.pos) == Some(&b'\n') {
+                            r.pos += 1;
+                            r.line += 1;
+                        }
+                        r.bin = Some(Endian::Little);
+                        let one = r.take::<4>("binary endianness marker")?;
+                        endian = if i32::from_le_bytes(one) == 1 {
+                            Some(Endian::Little)
+                        } else if i32::from_be_bytes(one) == 1 {
+                            Some(Endian::Big)
+                        } else {
+                            return Err(r.err_item(format!(
+                                "binary endianness marker is {one:?}, expected the int 1"
+                            )));
+                        };
+                    }
+                    other => {
+                        return Err(r.err(
+                            Some(fline),
+                            format!("MSH file type must be 0 (ASCII) or 1 (binary), found {other}"),
+                        ))
+                    }
                 }
-                let _data_size: u32 = r.num("MSH data size")?;
                 r.expect_end("$EndMeshFormat")?;
                 seen_format = true;
             }
             "$PhysicalNames" => {
+                // Text even in binary files.
                 let n: usize = r.num("number of physical names")?;
                 for _ in 0..n {
                     let dim: i32 = r.num("physical name dimension")?;
@@ -386,27 +537,29 @@ pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
                 r.expect_end("$EndPhysicalNames")?;
             }
             "$Entities" => {
-                let np: usize = r.num("number of point entities")?;
-                let nc: usize = r.num("number of curve entities")?;
-                let ns: usize = r.num("number of surface entities")?;
-                let nv: usize = r.num("number of volume entities")?;
+                seen_entities = true;
+                r.bin = endian;
+                let np = r.count("number of point entities")?;
+                let nc = r.count("number of curve entities")?;
+                let ns = r.count("number of surface entities")?;
+                let nv = r.count("number of volume entities")?;
                 for (dim, count) in [(0, np), (1, nc), (2, ns), (3, nv)] {
                     for _ in 0..count {
-                        let tag: i32 = r.num("entity tag")?;
+                        let tag = r.int("entity tag")?;
                         let coords = if dim == 0 { 3 } else { 6 };
                         for _ in 0..coords {
-                            let _: f64 = r.num("entity bounding box coordinate")?;
+                            r.float("entity bounding box coordinate")?;
                         }
-                        let nphys: usize = r.num("number of physical tags")?;
+                        let nphys = r.count("number of physical tags")?;
                         let mut first = None;
                         for _ in 0..nphys {
-                            let p: i32 = r.num("physical tag")?;
+                            let p = r.int("physical tag")?;
                             first.get_or_insert(p);
                         }
                         if dim > 0 {
-                            let nb: usize = r.num("number of bounding entities")?;
+                            let nb = r.count("number of bounding entities")?;
                             for _ in 0..nb {
-                                let _: i32 = r.num("bounding entity tag")?;
+                                r.int("bounding entity tag")?;
                             }
                         }
                         if dim == 3 {
@@ -421,30 +574,30 @@ pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
                     return Err(r.err(Some(line), "more than one $Nodes section"));
                 }
                 seen_nodes = true;
-                let nblocks: usize = r.num("number of node blocks")?;
-                let (total, tline) = r.parse::<usize>("number of nodes")?;
-                let _min: u64 = r.num("minimum node tag")?;
-                let _max: u64 = r.num("maximum node tag")?;
+                r.bin = endian;
+                let nblocks = r.count("number of node blocks")?;
+                let total = r.count("number of nodes")?;
+                let total_line = r.item_line();
+                r.size("minimum node tag")?;
+                r.size("maximum node tag")?;
                 nodes.reserve(cap(total));
                 node_tags.reserve(cap(total));
                 for _ in 0..nblocks {
-                    let dim: usize = r.num("node block entity dimension")?;
-                    let _entity: i32 = r.num("node block entity tag")?;
-                    let (parametric, pline) = r.parse::<u32>("node block parametric flag")?;
-                    if parametric > 1 {
-                        return Err(r.err(
-                            Some(pline),
-                            format!(
-                                "node block parametric flag must be 0 or 1, found {parametric}"
-                            ),
-                        ));
+                    let dim = r.int("node block entity dimension")?;
+                    r.int("node block entity tag")?;
+                    let parametric = r.int("node block parametric flag")?;
+                    if !(0..=1).contains(&parametric) || !(0..=3).contains(&dim) {
+                        return Err(r.err_item(format!(
+                            "node block with dimension {dim} and parametric flag {parametric} \
+                             (expected 0..3 and 0 or 1)"
+                        )));
                     }
-                    let n: usize = r.num("number of nodes in block")?;
+                    let n = r.count("number of nodes in block")?;
                     let first = node_tags.len();
                     for _ in 0..n {
-                        let (tag, l) = r.parse::<u64>("node tag")?;
+                        let tag = r.size("node tag")?;
                         if node_index.insert(tag, node_tags.len() as u32).is_some() {
-                            return Err(r.err(Some(l), format!("node tag {tag} defined twice")));
+                            return Err(r.err_item(format!("node tag {tag} defined twice")));
                         }
                         node_tags.push(tag);
                     }
@@ -452,11 +605,11 @@ pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
                     for i in 0..n {
                         let tag = node_tags[first + i];
                         let what = format!("coordinate of node {tag}");
-                        let p = [r.num(&what)?, r.num(&what)?, r.num(&what)?];
+                        let p = [r.float(&what)?, r.float(&what)?, r.float(&what)?];
                         for _ in 0..extra {
-                            let _: f64 = r.num(&format!("parametric coordinate of node {tag}"))?;
+                            r.float(&format!("parametric coordinate of node {tag}"))?;
                         }
-                        if !p.iter().all(|x: &f64| x.is_finite()) {
+                        if !p.iter().all(|x| x.is_finite()) {
                             return Err(MeshError::NonFiniteCoordinate {
                                 path: path.to_path_buf(),
                                 node: tag,
@@ -465,18 +618,16 @@ pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
                         }
                         nodes.push(p);
                     }
+                    if node_tags.len() > u32::MAX as usize {
+                        return Err(r.err_item("more than 2^32 nodes"));
+                    }
                 }
                 if nodes.len() != total {
-                    return Err(r.err(
-                        Some(tline),
-                        format!(
-                            "$Nodes header announces {total} nodes, blocks hold {}",
-                            nodes.len()
-                        ),
-                    ));
-                }
-                if nodes.len() > u32::MAX as usize {
-                    return Err(r.err(Some(tline), "more than 2^32 nodes"));
+                    let msg = format!(
+                        "$Nodes header announces {total} nodes, blocks hold {}",
+                        nodes.len()
+                    );
+                    return Err(r.err(total_line, msg));
                 }
                 r.expect_end("$EndNodes")?;
             }
@@ -488,49 +639,64 @@ pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
                     return Err(r.err(Some(line), "$Elements before $Nodes"));
                 }
                 seen_elements = true;
-                let nblocks: usize = r.num("number of element blocks")?;
-                let (total, tline) = r.parse::<usize>("number of elements")?;
-                let _min: u64 = r.num("minimum element tag")?;
-                let _max: u64 = r.num("maximum element tag")?;
+                r.bin = endian;
+                let nblocks = r.count("number of element blocks")?;
+                let total = r.count("number of elements")?;
+                let total_line = r.item_line();
+                r.size("minimum element tag")?;
+                r.size("maximum element tag")?;
                 let mut read = 0usize;
                 for _ in 0..nblocks {
-                    let dim: i32 = r.num("element block entity dimension")?;
-                    let entity: i32 = r.num("element block entity tag")?;
-                    let (etype, eline) = r.parse::<u32>("element type")?;
-                    let n: usize = r.num("number of elements in block")?;
-                    let nn = gmsh_nodes_per_element(etype).ok_or_else(|| {
-                        r.err(Some(eline), format!("unknown Gmsh element type {etype}"))
-                    })?;
+                    let dim = r.int("element block entity dimension")?;
+                    let entity = r.int("element block entity tag")?;
+                    let etype = r.int("element type")?;
+                    let nn = u32::try_from(etype)
+                        .ok()
+                        .and_then(gmsh_nodes_per_element)
+                        .ok_or_else(|| r.err_item(format!("unknown Gmsh element type {etype}")))?;
+                    let n = r.count("number of elements in block")?;
                     read += n;
                     if etype != GMSH_HEX8 {
                         *other_types.entry(etype).or_insert(0) += n;
                         for _ in 0..n * (nn + 1) {
-                            r.token("element data")?;
+                            r.size("element data")?;
                         }
                         continue;
                     }
-                    let region = if dim == 3 {
-                        volume_region.get(&entity).copied().unwrap_or(0)
-                    } else {
-                        0
+                    // Without $Entities there is no physical group information: region 0.
+                    // With it, a block on an unlisted volume is an inconsistent file (meshio 5
+                    // writes such files) and guessing would mislabel tissue.
+                    let region = match volume_region.get(&entity) {
+                        _ if dim != 3 || !seen_entities => 0,
+                        Some(&p) => p,
+                        None => {
+                            return Err(r.err_item(format!(
+                                "hexahedron block on volume entity {entity}, which $Entities \
+                                 does not list (so its physical group is unknown)"
+                            )))
+                        }
                     };
                     cells.reserve(cap(n));
                     for _ in 0..n {
-                        let (etag, _) = r.parse::<u64>("element tag")?;
+                        let etag = r.size("element tag")?;
                         let mut cell = [0u32; 8];
                         let what = format!("node tag of element {etag}");
                         for a in 0..8 {
-                            let (ntag, l) = r.parse::<u64>(&what)?;
+                            let ntag = r.size(&what)?;
                             let idx = *node_index.get(&ntag).ok_or(MeshError::UnknownNode {
                                 path: path.to_path_buf(),
-                                line: Some(l),
+                                line: r.item_line(),
                                 element: etag,
                                 node: ntag,
                             })?;
                             if cell[..a].contains(&idx) {
+                                let at = match r.item_line() {
+                                    Some(l) => format!("element {etag} (line {l})"),
+                                    None => format!("element {etag}"),
+                                };
                                 return Err(MeshError::RepeatedNode {
                                     path: path.to_path_buf(),
-                                    item: format!("element {etag} (line {l})"),
+                                    item: at,
                                     node: ntag,
                                 });
                             }
@@ -541,10 +707,9 @@ pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
                     }
                 }
                 if read != total {
-                    return Err(r.err(
-                        Some(tline),
-                        format!("$Elements header announces {total} elements, blocks hold {read}"),
-                    ));
+                    let msg =
+                        format!("$Elements header announces {total} elements, blocks hold {read}");
+                    return Err(r.err(total_line, msg));
                 }
                 r.expect_end("$EndElements")?;
             }
@@ -634,8 +799,8 @@ pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
     // vtkio reports neither where nor what went wrong, and silently drops a cell data array
     // cut short by a truncated file, so walk the ASCII structure first: it finds those faults
     // with a line number.
-    if let Ok(text) = std::str::from_utf8(bytes) {
-        walk_vtk(&mut Reader::new(path, text))?;
+    if std::str::from_utf8(bytes).is_ok() {
+        walk_vtk(&mut Reader::new(path, bytes))?;
     }
     let vtk = vtkio::Vtk::parse_legacy_be(bytes).map_err(|e| MeshError::Parse {
         path: path.to_path_buf(),
@@ -847,10 +1012,10 @@ fn walk_vtk(r: &mut Reader<'_>) -> Result<(), MeshError> {
         ));
     }
     // The title line may be blank, so take it raw.
-    r.lines.next();
+    r.raw_line();
     let (l, enc) = r
         .next_line()
-        .ok_or_else(|| r.err(Some(r.last_line), "file ends after the title"))?;
+        .ok_or_else(|| r.err(Some(r.eof_line()), "file ends after the title"))?;
     if enc != "ASCII" {
         return Err(r.err(
             Some(l),
@@ -859,7 +1024,7 @@ fn walk_vtk(r: &mut Reader<'_>) -> Result<(), MeshError> {
     }
     let (l, ds) = r
         .next_line()
-        .ok_or_else(|| r.err(Some(r.last_line), "no DATASET line"))?;
+        .ok_or_else(|| r.err(Some(r.eof_line()), "no DATASET line"))?;
     if ds.split_whitespace().collect::<Vec<_>>() != ["DATASET", "UNSTRUCTURED_GRID"] {
         return Err(r.err(
             Some(l),
