@@ -1,13 +1,19 @@
-//! Mesh import (Gmsh MSH 4.1 ASCII, legacy VTK unstructured grids) and a structured box
+//! Mesh import (Gmsh MSH 4.1, legacy VTK unstructured grids) and a structured box
 //! generator, all producing the common [`Mesh`].
 //!
-//! The MSH reader is a hand-written parser for the ASCII MSH 4.1 subset that volume meshes
-//! use (`$MeshFormat`, `$PhysicalNames`, `$Entities`, `$Nodes`, `$Elements`; other sections
-//! are skipped). It is used instead of the `mshio` crate because `mshio` 0.4 drops the
-//! per-block node tags when the global tag range is dense (so a permuted tag order would be
-//! silently misread), does not read `$PhysicalNames`, and reports errors without line
-//! numbers. Every error names the file and, where it has one, the line and the element or
-//! node tag.
+//! The MSH reader is a hand-written parser for the MSH 4.1 sections volume meshes use
+//! (`$MeshFormat`, `$PhysicalNames`, `$Entities`, `$Nodes`, `$Elements`; other sections are
+//! skipped), ASCII or binary. It is used instead of the `mshio` crate because `mshio` 0.4
+//! drops the per-block node tags when the global tag range is dense (so a permuted tag order
+//! would be silently misread), does not read `$PhysicalNames`, and reports errors without
+//! line numbers. (The tests still compare the two on a real file.)
+//!
+//! Legacy VTK files are read with `vtkio`, after a structural walk of the ASCII text that
+//! locates faults by line (vtkio's own errors carry no position, and it silently drops a
+//! cell data array cut short by truncation).
+//!
+//! Every error names the file and, where it has one, the line (or byte offset in binary
+//! data) and the element or node tag.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -20,9 +26,9 @@ const GMSH_HEX8: i32 = 5;
 /// `VTK_HEXAHEDRON`.
 const VTK_HEXAHEDRON: u8 = 12;
 
-/// Load a hexahedral mesh, choosing the reader by extension: `.msh` (Gmsh MSH 4.1 ASCII) or
-/// `.vtk` (legacy VTK unstructured grid of `VTK_HEXAHEDRON` cells). The result has passed
-/// [`Mesh::validate`].
+/// Load a hexahedral mesh, choosing the reader by extension (case-insensitive): `.msh`
+/// (Gmsh MSH 4.1, see [`parse_msh`]) or `.vtk` (legacy VTK unstructured grid of
+/// `VTK_HEXAHEDRON` cells, see [`parse_vtk`]). The result has passed [`Mesh::validate`].
 pub fn load_mesh(path: &Path) -> Result<Mesh, MeshError> {
     let ext = path
         .extension()
@@ -35,14 +41,14 @@ pub fn load_mesh(path: &Path) -> Result<Mesh, MeshError> {
             ext,
         });
     }
-    if !path.exists() {
-        return Err(MeshError::NotFound {
+    let bytes = std::fs::read(path).map_err(|source| match source.kind() {
+        std::io::ErrorKind::NotFound => MeshError::NotFound {
             path: path.to_path_buf(),
-        });
-    }
-    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
-        path: path.to_path_buf(),
-        source,
+        },
+        _ => MeshError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
     })?;
     if ext == "msh" {
         parse_msh(path, &bytes)
@@ -54,7 +60,8 @@ pub fn load_mesh(path: &Path) -> Result<Mesh, MeshError> {
 /// A structured box of `cells[0] x cells[1] x cells[2]` hexahedra spanning from the origin to
 /// `size` (metres). Nodes are numbered x fastest, then y, then z; node tags are 1-based;
 /// every cell is in region 1, named "box". With positive `size` every cell has a positive
-/// Jacobian. A zero cell count in any direction gives a mesh without cells.
+/// Jacobian. A zero cell count in any direction gives an empty mesh. (Node indices are
+/// `u32`: counts past 2^32 nodes are beyond this generator, and beyond memory anyway.)
 pub fn generate_box(size: [f64; 3], cells: [usize; 3]) -> Mesh {
     let [nx, ny, nz] = cells;
     let (px, py) = (nx + 1, ny + 1);

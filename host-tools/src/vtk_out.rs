@@ -29,9 +29,9 @@ impl PointField<'_> {
     }
 }
 
-/// Writes `DIR/frame_00000.vtu`, `DIR/frame_00001.vtu`, ... and, on [`finish`], `DIR/series.pvd`.
-///
-/// [`finish`]: VtkSeriesWriter::finish
+/// Writes `DIR/frame_00000.vtu`, `DIR/frame_00001.vtu`, ... and, on
+/// [`finish`](VtkSeriesWriter::finish) (or [`write_pvd`](VtkSeriesWriter::write_pvd)),
+/// `DIR/series.pvd`. Existing files of those names in `DIR` are overwritten.
 #[derive(Debug)]
 pub struct VtkSeriesWriter {
     dir: PathBuf,
@@ -231,8 +231,10 @@ impl VtkSeriesWriter {
         Ok(path)
     }
 
-    /// Write `DIR/series.pvd` listing every frame with its time; returns its path.
-    pub fn finish(self) -> Result<PathBuf, MeshError> {
+    /// Write (or rewrite) `DIR/series.pvd` listing the frames written so far with their
+    /// times; returns its path. Call it now and then during a long run to be able to open
+    /// the series before the run ends.
+    pub fn write_pvd(&self) -> Result<PathBuf, MeshError> {
         let path = self.dir.join("series.pvd");
         let mut s = String::new();
         s.push_str("<?xml version=\"1.0\"?>\n");
@@ -246,6 +248,12 @@ impl VtkSeriesWriter {
         s.push_str("  </Collection>\n</VTKFile>\n");
         fs::write(&path, s).map_err(io_err(&path))?;
         Ok(path)
+    }
+
+    /// Write `DIR/series.pvd` listing every frame with its time and close the series;
+    /// returns the `.pvd` path (the file to open in ParaView).
+    pub fn finish(self) -> Result<PathBuf, MeshError> {
+        self.write_pvd()
     }
 }
 

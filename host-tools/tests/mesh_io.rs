@@ -961,3 +961,18 @@ fn error_unlisted_volume_entity() {
         "{e}"
     );
 }
+
+/// `write_pvd` during a run lists the frames so far, so a partial series can be opened.
+#[test]
+fn pvd_can_be_written_mid_run() {
+    let mesh = generate_box([1.0; 3], [1, 1, 1]);
+    let dir = temp_dir("pvdmid");
+    let mut w = VtkSeriesWriter::new(&dir, &mesh).unwrap();
+    w.write_frame(0.5, &[[0.0; 3]; 8]).unwrap();
+    let text = std::fs::read_to_string(w.write_pvd().unwrap()).unwrap();
+    assert_eq!(text.matches("<DataSet ").count(), 1);
+    w.write_frame(1.0, &[[0.0; 3]; 8]).unwrap();
+    let text = std::fs::read_to_string(w.finish().unwrap()).unwrap();
+    assert_eq!(text.matches("<DataSet ").count(), 2);
+    assert!(text.contains("timestep=\"1e0\" group=\"\" part=\"0\" file=\"frame_00001.vtu\""));
+}
