@@ -231,6 +231,57 @@ impl Mesh {
         out
     }
 
+    /// Indices of nodes that no cell uses (ascending). An explicit solver gives such nodes
+    /// zero lumped mass, so they must be removed (see [`Mesh::remove_unused_nodes`]) or
+    /// handled before time stepping. Assumes [`Mesh::validate`] passed.
+    pub fn unused_nodes(&self) -> Vec<u32> {
+        let mut used = vec![false; self.nodes.len()];
+        for &i in self.cells.iter().flatten() {
+            used[i as usize] = true;
+        }
+        (0..self.nodes.len() as u32)
+            .filter(|&i| !used[i as usize])
+            .collect()
+    }
+
+    /// Drop the nodes no cell uses, keeping the order (and tags) of the others and
+    /// renumbering the cells. Returns how many nodes were removed. Assumes
+    /// [`Mesh::validate`] passed.
+    pub fn remove_unused_nodes(&mut self) -> usize {
+        let unused = self.unused_nodes();
+        if unused.is_empty() {
+            return 0;
+        }
+        let mut new_index = vec![u32::MAX; self.nodes.len()];
+        let mut next = 0u32;
+        let mut drop = unused.iter().peekable();
+        for (i, slot) in new_index.iter_mut().enumerate() {
+            if drop.peek() == Some(&&(i as u32)) {
+                drop.next();
+            } else {
+                *slot = next;
+                next += 1;
+            }
+        }
+        let keep = |i: usize| new_index[i] != u32::MAX;
+        let mut k = 0;
+        self.nodes.retain(|_| {
+            k += 1;
+            keep(k - 1)
+        });
+        let mut k = 0;
+        self.node_tags.retain(|_| {
+            k += 1;
+            keep(k - 1)
+        });
+        for c in &mut self.cells {
+            for i in c.iter_mut() {
+                *i = new_index[*i as usize];
+            }
+        }
+        unused.len()
+    }
+
     /// Sorted, de-duplicated indices of the nodes on [`Mesh::boundary_faces`].
     pub fn boundary_nodes(&self) -> Vec<u32> {
         let mut v: Vec<u32> = self.boundary_faces().into_iter().flatten().collect();

@@ -976,3 +976,34 @@ fn pvd_can_be_written_mid_run() {
     assert_eq!(text.matches("<DataSet ").count(), 2);
     assert!(text.contains("timestep=\"1e0\" group=\"\" part=\"0\" file=\"frame_00001.vtu\""));
 }
+
+/// A node no cell uses (it would get zero lumped mass) is found, and removing it keeps the
+/// geometry of every cell and the tags of the remaining nodes.
+#[test]
+fn unused_nodes_found_and_removed() {
+    let mut m = generate_box([1.0; 3], [2, 1, 1]);
+    assert!(m.unused_nodes().is_empty());
+    // Insert a stray node at index 3 and shift the cell indices past it.
+    m.nodes.insert(3, [9.0; 3]);
+    m.node_tags.insert(3, 1000);
+    for c in &mut m.cells {
+        for i in c.iter_mut() {
+            if *i >= 3 {
+                *i += 1;
+            }
+        }
+    }
+    m.validate().unwrap();
+    assert_eq!(m.unused_nodes(), vec![3]);
+    let before: Vec<_> = (0..m.cells.len()).map(|c| m.cell_coords(c)).collect();
+    assert_eq!(m.remove_unused_nodes(), 1);
+    m.validate().unwrap();
+    assert_eq!(
+        m,
+        generate_box([1.0; 3], [2, 1, 1]),
+        "back to the original box"
+    );
+    let after: Vec<_> = (0..m.cells.len()).map(|c| m.cell_coords(c)).collect();
+    assert_eq!(before, after);
+    assert!(!m.node_tags.contains(&1000));
+}
