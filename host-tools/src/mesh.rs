@@ -48,8 +48,9 @@ pub enum MeshError {
         cell: usize,
         cell_type: String,
     },
-    /// A cell uses the same node twice (a collapsed hexahedron).
-    /// `item` is "element <tag>" for Gmsh files and "cell <0-based index>" otherwise.
+    /// A cell uses the same node twice (a collapsed hexahedron). `item` is
+    /// "element <tag> (line <n>)" for Gmsh files and "cell <0-based index>" otherwise;
+    /// `node` is the node's tag.
     #[error("{}: {item} uses node {node} more than once", .path.display())]
     RepeatedNode {
         path: PathBuf,
@@ -71,6 +72,9 @@ pub enum MeshError {
         index: u32,
         nodes: usize,
     },
+    /// An argument is unusable (e.g. a non-finite frame time for the VTK writer).
+    #[error("{}: {msg}", .path.display())]
+    InvalidInput { path: PathBuf, msg: String },
     /// Two per-item arrays that must have the same length do not.
     #[error("{}: {what} has {got} entries, expected {expected}", .path.display())]
     LengthMismatch {

@@ -164,9 +164,8 @@ impl VtkSeriesWriter {
             }
         }
         if !time_s.is_finite() {
-            return Err(MeshError::Parse {
+            return Err(MeshError::InvalidInput {
                 path,
-                line: None,
                 msg: format!("frame time {time_s} is not finite"),
             });
         }

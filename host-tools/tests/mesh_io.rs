@@ -737,7 +737,8 @@ fn vtu_series_round_trip() {
     }
 }
 
-/// A displacement array of the wrong length is refused (and no frame is counted).
+/// A displacement array of the wrong length, or a NaN time, is refused (and no frame is
+/// counted, so the numbering stays contiguous).
 #[test]
 fn vtu_rejects_wrong_displacement_length() {
     let mesh = generate_box([1.0; 3], [1, 1, 1]);
@@ -748,6 +749,8 @@ fn vtu_rejects_wrong_displacement_length() {
         e.contains("displacement") && e.contains('7') && e.contains('8'),
         "{e}"
     );
+    let e = w.write_frame(f64::NAN, &[[0.0; 3]; 8]).unwrap_err();
+    assert!(matches!(e, MeshError::InvalidInput { .. }), "{e}");
     assert_eq!(w.frame_count(), 0);
 }
 
