@@ -1,7 +1,120 @@
 //! Hexahedral volume meshes on the host: the common in-memory form every importer and
 //! generator produces.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
+use std::path::PathBuf;
+
+/// Everything that can go wrong when reading, checking or writing a mesh.
+///
+/// Every variant names the file (or the mesh's `source`) and, where there is one, the
+/// offending item: a line number, an element tag, a node tag or a cell index.
+#[derive(Debug, thiserror::Error)]
+pub enum MeshError {
+    /// The mesh file does not exist.
+    #[error("{}: mesh file not found", .path.display())]
+    NotFound { path: PathBuf },
+    /// Reading or writing failed at the operating-system level.
+    #[error("{}: {source}", .path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file name's extension is not one the importer knows.
+    #[error("{}: unsupported mesh file extension {ext:?} (expected .msh or .vtk)", .path.display())]
+    UnsupportedExtension { path: PathBuf, ext: String },
+    /// The file does not follow its format.
+    #[error("{}{}: {msg}", .path.display(), line_suffix(*.line))]
+    Parse {
+        path: PathBuf,
+        line: Option<usize>,
+        msg: String,
+    },
+    /// An element refers to a node tag that the file never defines.
+    #[error("{}{}: element {element} references unknown node tag {node}", .path.display(), line_suffix(*.line))]
+    UnknownNode {
+        path: PathBuf,
+        line: Option<usize>,
+        element: u64,
+        node: u64,
+    },
+    /// The file holds no 8-node hexahedra at all.
+    #[error("{}: no hexahedra (8-node hex cells) found: {detail}", .path.display())]
+    NoHexahedra { path: PathBuf, detail: String },
+    /// A VTK cell that is not `VTK_HEXAHEDRON` (12).
+    #[error("{}: cell {cell} has VTK type {cell_type}, only VTK_HEXAHEDRON (12) is supported", .path.display())]
+    NonHexCell {
+        path: PathBuf,
+        cell: usize,
+        cell_type: String,
+    },
+    /// A cell uses the same node twice (a collapsed hexahedron). `item` is
+    /// "element <tag> (line <n>)" for Gmsh files and "cell <0-based index>" otherwise;
+    /// `node` is the node's tag.
+    #[error("{}: {item} uses node {node} more than once", .path.display())]
+    RepeatedNode {
+        path: PathBuf,
+        item: String,
+        node: u64,
+    },
+    /// A node coordinate is NaN or infinite.
+    #[error("{}: node {node} has a non-finite coordinate {coords:?}", .path.display())]
+    NonFiniteCoordinate {
+        path: PathBuf,
+        node: u64,
+        coords: [f64; 3],
+    },
+    /// A cell refers to a node index past the end of the node list.
+    #[error("{}: cell {cell} refers to node index {index}, but the mesh has {nodes} nodes", .path.display())]
+    NodeIndexOutOfRange {
+        path: PathBuf,
+        cell: usize,
+        index: u32,
+        nodes: usize,
+    },
+    /// An argument is unusable (e.g. a non-finite frame time for the VTK writer).
+    #[error("{}: {msg}", .path.display())]
+    InvalidInput { path: PathBuf, msg: String },
+    /// Two per-item arrays that must have the same length do not.
+    #[error("{}: {what} has {got} entries, expected {expected}", .path.display())]
+    LengthMismatch {
+        path: PathBuf,
+        what: String,
+        expected: usize,
+        got: usize,
+    },
+}
+
+fn line_suffix(line: Option<usize>) -> String {
+    match line {
+        Some(l) => format!(":{l}"),
+        None => String::new(),
+    }
+}
+
+/// Outward faces of a hexahedron in Gmsh/VTK order, each counter-clockwise seen from
+/// outside (so the right-hand normal points out of the cell when its Jacobian is positive).
+pub const HEX_FACES: [[usize; 4]; 6] = [
+    [0, 3, 2, 1], // bottom (-zeta)
+    [4, 5, 6, 7], // top (+zeta)
+    [0, 1, 5, 4], // front (-eta)
+    [1, 2, 6, 5], // right (+xi)
+    [2, 3, 7, 6], // back (+eta)
+    [3, 0, 4, 7], // left (-xi)
+];
+
+/// For each hexahedron corner, its three edge neighbours in right-handed order
+/// (the corner's local xi, eta, zeta directions), as used by the scaled Jacobian.
+const HEX_CORNER_NEIGHBOURS: [[usize; 3]; 8] = [
+    [1, 3, 4],
+    [2, 0, 5],
+    [3, 1, 6],
+    [0, 2, 7],
+    [7, 5, 0],
+    [4, 6, 1],
+    [5, 7, 2],
+    [6, 4, 3],
+];
 
 /// A linear hexahedral mesh in metres.
 ///
@@ -41,4 +154,187 @@ impl Mesh {
         }
         (lo, hi)
     }
+
+    /// Topological sanity: node indices in range, no node repeated within a cell, one region
+    /// per cell, one tag per node and finite coordinates. Geometry (inverted cells) is not
+    /// checked here; see [`Mesh::min_scaled_jacobian`].
+    pub fn validate(&self) -> Result<(), MeshError> {
+        let path = PathBuf::from(&self.source);
+        if self.node_tags.len() != self.nodes.len() {
+            return Err(MeshError::LengthMismatch {
+                path,
+                what: "node_tags".into(),
+                expected: self.nodes.len(),
+                got: self.node_tags.len(),
+            });
+        }
+        if self.cell_regions.len() != self.cells.len() {
+            return Err(MeshError::LengthMismatch {
+                path,
+                what: "cell_regions".into(),
+                expected: self.cells.len(),
+                got: self.cell_regions.len(),
+            });
+        }
+        for (i, p) in self.nodes.iter().enumerate() {
+            if !p.iter().all(|x| x.is_finite()) {
+                return Err(MeshError::NonFiniteCoordinate {
+                    path,
+                    node: self.node_tags[i],
+                    coords: *p,
+                });
+            }
+        }
+        let n = self.nodes.len();
+        for (ci, cell) in self.cells.iter().enumerate() {
+            for (a, &idx) in cell.iter().enumerate() {
+                if idx as usize >= n {
+                    return Err(MeshError::NodeIndexOutOfRange {
+                        path,
+                        cell: ci,
+                        index: idx,
+                        nodes: n,
+                    });
+                }
+                if cell[..a].contains(&idx) {
+                    return Err(MeshError::RepeatedNode {
+                        path,
+                        item: format!("cell {ci}"),
+                        node: self.node_tags[idx as usize],
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Quadrilateral faces that belong to exactly one cell, oriented outward (counter-clockwise
+    /// seen from outside, for cells with positive Jacobian). Order: by cell, then by
+    /// [`HEX_FACES`] order. Assumes [`Mesh::validate`] passed.
+    pub fn boundary_faces(&self) -> Vec<[u32; 4]> {
+        let key = |f: [u32; 4]| {
+            let mut k = f;
+            k.sort_unstable();
+            k
+        };
+        let faces = |c: &[u32; 8]| HEX_FACES.map(|f| f.map(|a| c[a]));
+        let mut count: HashMap<[u32; 4], u32> = HashMap::with_capacity(self.cells.len() * 4);
+        for c in &self.cells {
+            for f in faces(c) {
+                *count.entry(key(f)).or_insert(0) += 1;
+            }
+        }
+        let mut out = Vec::new();
+        for c in &self.cells {
+            for f in faces(c) {
+                if count.get(&key(f)) == Some(&1) {
+                    out.push(f);
+                }
+            }
+        }
+        out
+    }
+
+    /// Indices of nodes that no cell uses (ascending). An explicit solver gives such nodes
+    /// zero lumped mass, so they must be removed (see [`Mesh::remove_unused_nodes`]) or
+    /// handled before time stepping. Assumes [`Mesh::validate`] passed.
+    pub fn unused_nodes(&self) -> Vec<u32> {
+        let mut used = vec![false; self.nodes.len()];
+        for &i in self.cells.iter().flatten() {
+            used[i as usize] = true;
+        }
+        (0..self.nodes.len() as u32)
+            .filter(|&i| !used[i as usize])
+            .collect()
+    }
+
+    /// Drop the nodes no cell uses, keeping the order (and tags) of the others and
+    /// renumbering the cells. Returns how many nodes were removed. Assumes
+    /// [`Mesh::validate`] passed.
+    pub fn remove_unused_nodes(&mut self) -> usize {
+        let unused = self.unused_nodes();
+        if unused.is_empty() {
+            return 0;
+        }
+        let mut new_index = vec![u32::MAX; self.nodes.len()];
+        let mut next = 0u32;
+        let mut drop = unused.iter().peekable();
+        for (i, slot) in new_index.iter_mut().enumerate() {
+            if drop.peek() == Some(&&(i as u32)) {
+                drop.next();
+            } else {
+                *slot = next;
+                next += 1;
+            }
+        }
+        let keep = |i: usize| new_index[i] != u32::MAX;
+        let mut k = 0;
+        self.nodes.retain(|_| {
+            k += 1;
+            keep(k - 1)
+        });
+        let mut k = 0;
+        self.node_tags.retain(|_| {
+            k += 1;
+            keep(k - 1)
+        });
+        for c in &mut self.cells {
+            for i in c.iter_mut() {
+                *i = new_index[*i as usize];
+            }
+        }
+        unused.len()
+    }
+
+    /// Sorted, de-duplicated indices of the nodes on [`Mesh::boundary_faces`].
+    pub fn boundary_nodes(&self) -> Vec<u32> {
+        let mut v: Vec<u32> = self.boundary_faces().into_iter().flatten().collect();
+        v.sort_unstable();
+        v.dedup();
+        v
+    }
+
+    /// Scaled Jacobian of one cell: the minimum over the eight corners of
+    /// `det[e1 e2 e3] / (|e1| |e2| |e3|)` with `e` the corner's three edges. 1 for a cube,
+    /// <= 0 for an inverted or degenerate corner.
+    pub fn scaled_jacobian(&self, cell: usize) -> f64 {
+        let x = self.cell_coords(cell);
+        let mut min = f64::INFINITY;
+        for (a, nb) in HEX_CORNER_NEIGHBOURS.iter().enumerate() {
+            let e = nb.map(|b| sub(x[b], x[a]));
+            let det = dot(e[0], cross(e[1], e[2]));
+            let len = norm(e[0]) * norm(e[1]) * norm(e[2]);
+            let sj = if len > 0.0 { det / len } else { 0.0 };
+            min = min.min(sj);
+        }
+        min
+    }
+
+    /// Minimum [`Mesh::scaled_jacobian`] over all cells (`+inf` for a mesh without cells).
+    /// A cheap quality check; the physics does its own inversion checks.
+    pub fn min_scaled_jacobian(&self) -> f64 {
+        (0..self.cells.len())
+            .map(|c| self.scaled_jacobian(c))
+            .fold(f64::INFINITY, f64::min)
+    }
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn norm(a: [f64; 3]) -> f64 {
+    dot(a, a).sqrt()
 }

@@ -53,6 +53,7 @@ impl FrameWriter {
     }
 
     pub fn finish(self) -> Result<()> {
-        self.writer.finish()
+        self.writer.finish()?;
+        Ok(())
     }
 }

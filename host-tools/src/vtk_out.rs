@@ -1,18 +1,279 @@
-//! PLACEHOLDER until the mesh-io branch lands (replaced wholesale by the merge).
-use std::path::Path;
+//! ParaView output: a time series of XML unstructured-grid files (`frame_NNNNN.vtu`, ASCII)
+//! plus a `series.pvd` collection that lists every frame with its time.
+//!
+//! Each frame holds the deformed points (initial positions + displacement), the hexahedra
+//! (`VTK_HEXAHEDRON` = 12), the point vector "displacement", any extra point fields, the
+//! cell data "region" and the time as field data "TimeValue". Open `series.pvd` in ParaView.
 
-use crate::mesh::Mesh;
+use std::fmt::Write as _;
+use std::fs;
+use std::path::{Path, PathBuf};
 
-pub struct VtkSeriesWriter;
+use crate::mesh::{Mesh, MeshError};
+
+/// Extra per-node data for a frame.
+#[derive(Clone, Copy, Debug)]
+pub enum PointField<'a> {
+    /// One value per node.
+    Scalar(&'a [f64]),
+    /// One 3-vector per node.
+    Vector(&'a [[f64; 3]]),
+}
+
+impl PointField<'_> {
+    fn len(&self) -> usize {
+        match self {
+            PointField::Scalar(v) => v.len(),
+            PointField::Vector(v) => v.len(),
+        }
+    }
+}
+
+/// Writes `DIR/frame_00000.vtu`, `DIR/frame_00001.vtu`, ... and, on
+/// [`finish`](VtkSeriesWriter::finish) (or [`write_pvd`](VtkSeriesWriter::write_pvd)),
+/// `DIR/series.pvd`. Existing files of those names in `DIR` are overwritten.
+#[derive(Debug)]
+pub struct VtkSeriesWriter {
+    dir: PathBuf,
+    nodes: Vec<[f64; 3]>,
+    /// Connectivity, offsets, types and region sections, the same in every frame.
+    cells_xml: String,
+    n_cells: usize,
+    frames: Vec<(f64, String)>,
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> MeshError + '_ {
+    move |source| MeshError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// `f64` in a form that reads back to the same value (`{:e}` is shortest round-trip).
+fn num(out: &mut String, x: f64) {
+    // Writing to a String cannot fail.
+    let _ = write!(out, "{x:e}");
+}
+
+/// Escape the characters that may not appear in an XML attribute value.
+fn xml_attr(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
 
 impl VtkSeriesWriter {
-    pub fn new(_dir: &Path, _mesh: &Mesh) -> anyhow::Result<Self> {
-        Ok(VtkSeriesWriter)
+    /// Create `dir` (and parents) if needed and prepare to write frames of `mesh`.
+    /// The mesh must pass [`Mesh::validate`].
+    pub fn new(dir: &Path, mesh: &Mesh) -> Result<Self, MeshError> {
+        mesh.validate()?;
+        fs::create_dir_all(dir).map_err(io_err(dir))?;
+        let mut c = String::new();
+        let _ = writeln!(c, "      <Cells>");
+        let _ = writeln!(
+            c,
+            "        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">"
+        );
+        for cell in &mesh.cells {
+            let line: Vec<String> = cell.iter().map(|i| i.to_string()).collect();
+            let _ = writeln!(c, "          {}", line.join(" "));
+        }
+        let _ = writeln!(c, "        </DataArray>");
+        let _ = writeln!(
+            c,
+            "        <DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">"
+        );
+        for chunk in (1..=mesh.cells.len()).collect::<Vec<_>>().chunks(16) {
+            let line: Vec<String> = chunk.iter().map(|i| (8 * i).to_string()).collect();
+            let _ = writeln!(c, "          {}", line.join(" "));
+        }
+        let _ = writeln!(c, "        </DataArray>");
+        let _ = writeln!(
+            c,
+            "        <DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">"
+        );
+        for chunk in mesh.cells.chunks(32) {
+            let line = vec!["12"; chunk.len()];
+            let _ = writeln!(c, "          {}", line.join(" "));
+        }
+        let _ = writeln!(c, "        </DataArray>");
+        let _ = writeln!(c, "      </Cells>");
+        let _ = writeln!(c, "      <CellData Scalars=\"region\">");
+        let _ = writeln!(
+            c,
+            "        <DataArray type=\"Int32\" Name=\"region\" format=\"ascii\">"
+        );
+        for chunk in mesh.cell_regions.chunks(32) {
+            let line: Vec<String> = chunk.iter().map(|r| r.to_string()).collect();
+            let _ = writeln!(c, "          {}", line.join(" "));
+        }
+        let _ = writeln!(c, "        </DataArray>");
+        let _ = writeln!(c, "      </CellData>");
+        Ok(VtkSeriesWriter {
+            dir: dir.to_path_buf(),
+            nodes: mesh.nodes.clone(),
+            cells_xml: c,
+            n_cells: mesh.cells.len(),
+            frames: Vec::new(),
+        })
     }
-    pub fn write_frame(&mut self, _time_s: f64, _displacement: &[[f64; 3]]) -> anyhow::Result<()> {
-        Ok(())
+
+    /// Number of frames written so far.
+    pub fn frame_count(&self) -> usize {
+        self.frames.len()
     }
-    pub fn finish(self) -> anyhow::Result<()> {
-        Ok(())
+
+    /// Write the next frame: points at initial position + `displacement` (one per node).
+    /// Returns the path of the written `.vtu`.
+    pub fn write_frame(
+        &mut self,
+        time_s: f64,
+        displacement: &[[f64; 3]],
+    ) -> Result<PathBuf, MeshError> {
+        self.write_frame_with(time_s, displacement, &[])
     }
+
+    /// Like [`write_frame`](Self::write_frame) with extra named point data (one value or
+    /// vector per node each), e.g. `("von_mises", PointField::Scalar(&s))`.
+    pub fn write_frame_with(
+        &mut self,
+        time_s: f64,
+        displacement: &[[f64; 3]],
+        extra: &[(&str, PointField<'_>)],
+    ) -> Result<PathBuf, MeshError> {
+        let name = format!("frame_{:05}.vtu", self.frames.len());
+        let path = self.dir.join(&name);
+        let n = self.nodes.len();
+        if displacement.len() != n {
+            return Err(MeshError::LengthMismatch {
+                path,
+                what: "displacement".into(),
+                expected: n,
+                got: displacement.len(),
+            });
+        }
+        for (fname, field) in extra {
+            if field.len() != n {
+                return Err(MeshError::LengthMismatch {
+                    path,
+                    what: format!("point data {fname:?}"),
+                    expected: n,
+                    got: field.len(),
+                });
+            }
+        }
+        if !time_s.is_finite() {
+            return Err(MeshError::InvalidInput {
+                path,
+                msg: format!("frame time {time_s} is not finite"),
+            });
+        }
+
+        let mut s = String::with_capacity(128 * n + self.cells_xml.len() + 1024);
+        s.push_str("<?xml version=\"1.0\"?>\n");
+        s.push_str(
+            "<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n",
+        );
+        s.push_str("  <UnstructuredGrid>\n");
+        s.push_str("    <FieldData>\n");
+        s.push_str(
+            "      <DataArray type=\"Float64\" Name=\"TimeValue\" NumberOfTuples=\"1\" \
+             format=\"ascii\">\n        ",
+        );
+        num(&mut s, time_s);
+        s.push_str("\n      </DataArray>\n    </FieldData>\n");
+        let _ = writeln!(
+            s,
+            "    <Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{}\">",
+            self.n_cells
+        );
+        s.push_str("      <Points>\n");
+        s.push_str(
+            "        <DataArray type=\"Float64\" Name=\"Points\" NumberOfComponents=\"3\" \
+             format=\"ascii\">\n",
+        );
+        for (p, u) in self.nodes.iter().zip(displacement) {
+            vec3_line(&mut s, [p[0] + u[0], p[1] + u[1], p[2] + u[2]]);
+        }
+        s.push_str("        </DataArray>\n      </Points>\n");
+        s.push_str(&self.cells_xml);
+        s.push_str("      <PointData Vectors=\"displacement\">\n");
+        write_vectors(&mut s, "displacement", displacement);
+        for (fname, field) in extra {
+            match field {
+                PointField::Vector(v) => write_vectors(&mut s, fname, v),
+                PointField::Scalar(v) => {
+                    let _ = writeln!(
+                        s,
+                        "        <DataArray type=\"Float64\" Name=\"{}\" format=\"ascii\">",
+                        xml_attr(fname)
+                    );
+                    for chunk in v.chunks(8) {
+                        s.push_str("          ");
+                        for (i, x) in chunk.iter().enumerate() {
+                            if i > 0 {
+                                s.push(' ');
+                            }
+                            num(&mut s, *x);
+                        }
+                        s.push('\n');
+                    }
+                    s.push_str("        </DataArray>\n");
+                }
+            }
+        }
+        s.push_str("      </PointData>\n");
+        s.push_str("    </Piece>\n  </UnstructuredGrid>\n</VTKFile>\n");
+        fs::write(&path, s).map_err(io_err(&path))?;
+        self.frames.push((time_s, name));
+        Ok(path)
+    }
+
+    /// Write (or rewrite) `DIR/series.pvd` listing the frames written so far with their
+    /// times; returns its path. Call it now and then during a long run to be able to open
+    /// the series before the run ends.
+    pub fn write_pvd(&self) -> Result<PathBuf, MeshError> {
+        let path = self.dir.join("series.pvd");
+        let mut s = String::new();
+        s.push_str("<?xml version=\"1.0\"?>\n");
+        s.push_str("<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n");
+        s.push_str("  <Collection>\n");
+        for (t, file) in &self.frames {
+            s.push_str("    <DataSet timestep=\"");
+            num(&mut s, *t);
+            let _ = writeln!(s, "\" group=\"\" part=\"0\" file=\"{}\"/>", xml_attr(file));
+        }
+        s.push_str("  </Collection>\n</VTKFile>\n");
+        fs::write(&path, s).map_err(io_err(&path))?;
+        Ok(path)
+    }
+
+    /// Write `DIR/series.pvd` listing every frame with its time and close the series;
+    /// returns the `.pvd` path (the file to open in ParaView).
+    pub fn finish(self) -> Result<PathBuf, MeshError> {
+        self.write_pvd()
+    }
+}
+
+fn vec3_line(s: &mut String, v: [f64; 3]) {
+    s.push_str("          ");
+    num(s, v[0]);
+    s.push(' ');
+    num(s, v[1]);
+    s.push(' ');
+    num(s, v[2]);
+    s.push('\n');
+}
+
+fn write_vectors(s: &mut String, name: &str, v: &[[f64; 3]]) {
+    let _ = writeln!(
+        s,
+        "        <DataArray type=\"Float64\" Name=\"{}\" NumberOfComponents=\"3\" format=\"ascii\">",
+        xml_attr(name)
+    );
+    for u in v {
+        vec3_line(s, *u);
+    }
+    s.push_str("        </DataArray>\n");
 }
