@@ -43,7 +43,12 @@ fn bump(k: usize) {
 pub fn take_flops() -> FlopCount {
     FLOPS.with(|c| {
         let v = c.replace([0; 4]);
-        FlopCount { add: v[0], mul: v[1], div: v[2], special: v[3] }
+        FlopCount {
+            add: v[0],
+            mul: v[1],
+            div: v[2],
+            special: v[3],
+        }
     })
 }
 
@@ -150,8 +155,9 @@ pub fn element_step_flops(integration: &str) -> Result<(FlopCount, FlopCount)> {
     let p = Problem::from_scene(&scene, std::path::Path::new("."))?;
     let elements = Elements::<Counted>::build(&p);
     let law = p.laws[0].cast::<Counted>();
-    let u: [[Counted; 3]; 8] =
-        core::array::from_fn(|a| core::array::from_fn(|i| Counted(1e-4 * ((a * 3 + i) as f64).sin())));
+    let u: [[Counted; 3]; 8] = core::array::from_fn(|a| {
+        core::array::from_fn(|i| Counted(1e-4 * ((a * 3 + i) as f64).sin()))
+    });
     take_flops();
     let _ = match &elements {
         Elements::Reduced(v) => v[0].internal_forces(&law, &u),
@@ -165,7 +171,12 @@ pub fn element_step_flops(integration: &str) -> Result<(FlopCount, FlopCount)> {
 }
 
 /// ns per element-step of a whole serial step (forces, assembly, update) for one config.
-pub fn ns_per_element_step(elements: usize, steps: u64, integration: &str, precision: &str) -> Result<(usize, f64)> {
+pub fn ns_per_element_step(
+    elements: usize,
+    steps: u64,
+    integration: &str,
+    precision: &str,
+) -> Result<(usize, f64)> {
     let scene = bench_scene(elements, integration, precision)?;
     let p = Problem::from_scene(&scene, std::path::Path::new("."))?;
     let (dt, _) = p.time_step()?;
@@ -180,14 +191,21 @@ pub fn ns_per_element_step(elements: usize, steps: u64, integration: &str, preci
         }
         Ok(t.elapsed().as_secs_f64())
     }
-    let secs = if precision == "f32" { time::<f32>(&p, dt, steps)? } else { time::<f64>(&p, dt, steps)? };
+    let secs = if precision == "f32" {
+        time::<f32>(&p, dt, steps)?
+    } else {
+        time::<f64>(&p, dt, steps)?
+    };
     let n = p.mesh.cells.len();
     Ok((n, secs * 1e9 / (n as f64 * steps as f64)))
 }
 
 pub fn run_cli(elements: usize, steps: u64) -> Result<()> {
     println!("host cost of one element-step (whole serial step / elements), one thread:");
-    println!("{:<10} {:<6} {:>9} {:>14}", "integr.", "prec.", "elements", "ns/elem-step");
+    println!(
+        "{:<10} {:<6} {:>9} {:>14}",
+        "integr.", "prec.", "elements", "ns/elem-step"
+    );
     for integ in ["reduced", "full"] {
         for prec in ["f64", "f32"] {
             let (n, ns) = ns_per_element_step(elements, steps, integ, prec)?;
@@ -199,7 +217,12 @@ pub fn run_cli(elements: usize, steps: u64) -> Result<()> {
         let (e, node) = element_step_flops(integ)?;
         println!(
             "{integ:<8} element: {} (add {}, mul {}, div {}, sqrt/ln/cbrt {}); node update: {}",
-            e.total(), e.add, e.mul, e.div, e.special, node.total()
+            e.total(),
+            e.add,
+            e.mul,
+            e.div,
+            e.special,
+            node.total()
         );
     }
     println!("seed's budget: ~700 flops per element-step (reduced integration)");

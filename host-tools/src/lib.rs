@@ -1,5 +1,9 @@
 //! Host side of the soft-tissue simulator: scenes, meshes, the serial reference solver and
 //! the tools behind the `pe` command line.
+// `!(x > y)` is deliberate: it is also true for NaN, which must be refused.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+// Index loops mirror the tensor formulas in the doc comments.
+#![allow(clippy::needless_range_loop)]
 pub mod bench;
 pub mod builtin;
 pub mod mesh;

@@ -20,8 +20,10 @@ pub fn write_nodes_csv(path: &Path, mesh: &Mesh, u: &[[f64; 3]]) -> Result<()> {
             p[0], p[1], p[2], d[0], d[1], d[2]
         ));
     }
-    let mut f = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    f.write_all(out.as_bytes()).with_context(|| format!("writing {}", path.display()))?;
+    let mut f =
+        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    f.write_all(out.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }
 
@@ -36,7 +38,10 @@ impl FrameWriter {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         let mut writer = VtkSeriesWriter::new(dir, mesh)?;
         writer.write_frame(0.0, &vec![[0.0; 3]; mesh.nodes.len()])?;
-        Ok(FrameWriter { writer, every_steps: ((interval_s / dt_s).round() as u64).max(1) })
+        Ok(FrameWriter {
+            writer,
+            every_steps: ((interval_s / dt_s).round() as u64).max(1),
+        })
     }
 
     pub fn maybe_write(
@@ -46,7 +51,7 @@ impl FrameWriter {
         total: u64,
         u: &dyn Fn() -> Vec<[f64; 3]>,
     ) -> Result<()> {
-        if step % self.every_steps == 0 || step == total {
+        if step.is_multiple_of(self.every_steps) || step == total {
             self.writer.write_frame(time_s, &u())?;
         }
         Ok(())

@@ -107,7 +107,10 @@ fn law_from_spec(m: &MaterialSpec, what: &str) -> Result<MaterialLaw<f64>> {
             Ok(if m.law == "neo-hookean" {
                 MaterialLaw::NeoHookean(l)
             } else {
-                MaterialLaw::NeoHookeanDecoupled { mu: l.mu, kappa: l.bulk_modulus() }
+                MaterialLaw::NeoHookeanDecoupled {
+                    mu: l.mu,
+                    kappa: l.bulk_modulus(),
+                }
             })
         }
         "mooney-rivlin" => {
@@ -122,7 +125,12 @@ fn law_from_spec(m: &MaterialSpec, what: &str) -> Result<MaterialLaw<f64>> {
                 "log" => Volumetric::Log,
                 other => bail!("{what}: unknown volumetric \"{other}\" (quadratic | log)"),
             };
-            Ok(MaterialLaw::MooneyRivlin { c10, c01, kappa, volumetric })
+            Ok(MaterialLaw::MooneyRivlin {
+                c10,
+                c01,
+                kappa,
+                volumetric,
+            })
         }
         other => bail!(
             "{what}: unknown law \"{other}\" (neo-hookean | neo-hookean-decoupled | mooney-rivlin)"
@@ -133,7 +141,11 @@ fn law_from_spec(m: &MaterialSpec, what: &str) -> Result<MaterialLaw<f64>> {
 fn region_tag(mesh: &Mesh, r: &RegionRef) -> Option<i32> {
     match r {
         RegionRef::Tag(t) => Some(*t),
-        RegionRef::Name(n) => mesh.region_names.iter().find(|(_, v)| *v == n).map(|(k, _)| *k),
+        RegionRef::Name(n) => mesh
+            .region_names
+            .iter()
+            .find(|(_, v)| *v == n)
+            .map(|(k, _)| *k),
     }
 }
 
@@ -173,7 +185,11 @@ impl Problem {
                 }
                 Some(r) => {
                     let tag = region_tag(&mesh, r).ok_or_else(|| {
-                        anyhow!("{what}: mesh {} has no region {r} (regions: {:?})", mesh.source, mesh.region_names)
+                        anyhow!(
+                            "{what}: mesh {} has no region {r} (regions: {:?})",
+                            mesh.source,
+                            mesh.region_names
+                        )
                     })?;
                     let mut hit = 0;
                     for (c, reg) in mesh.cell_regions.iter().enumerate() {
@@ -204,7 +220,15 @@ impl Problem {
         let mut reference = Vec::with_capacity(n_cells);
         for c in 0..n_cells {
             let r = ReferenceHex::new(&mesh.cell_coords(c)).map_err(|e| {
-                anyhow!("mesh {}: cell {c} (nodes {:?}): {e}", mesh.source, mesh.cells[c].map(|n| mesh.node_tags.get(n as usize).copied().unwrap_or(n as u64)))
+                anyhow!(
+                    "mesh {}: cell {c} (nodes {:?}): {e}",
+                    mesh.source,
+                    mesh.cells[c].map(|n| mesh
+                        .node_tags
+                        .get(n as usize)
+                        .copied()
+                        .unwrap_or(n as u64))
+                )
             })?;
             reference.push(r);
         }
@@ -223,16 +247,22 @@ impl Problem {
             let mut in_set = vec![false; n_nodes];
             if let Some(name) = s.set {
                 let set = node_sets.get(name).ok_or_else(|| {
-                    anyhow!("{what}: the mesh provides no node set \"{name}\" (it has {:?})", node_sets.keys().collect::<Vec<_>>())
+                    anyhow!(
+                        "{what}: the mesh provides no node set \"{name}\" (it has {:?})",
+                        node_sets.keys().collect::<Vec<_>>()
+                    )
                 })?;
                 for &n in set {
                     in_set[n as usize] = true;
                 }
             }
             for (n, p) in mesh.nodes.iter().enumerate() {
-                let in_box = s.box_.is_some_and(|b| (0..3).all(|i| b[0][i] <= p[i] && p[i] <= b[1][i]));
+                let in_box = s
+                    .box_
+                    .is_some_and(|b| (0..3).all(|i| b[0][i] <= p[i] && p[i] <= b[1][i]));
                 let in_sphere = s.sphere.is_some_and(|sp| {
-                    (0..3).map(|i| (p[i] - sp.center[i]).powi(2)).sum::<f64>() <= sp.radius * sp.radius
+                    (0..3).map(|i| (p[i] - sp.center[i]).powi(2)).sum::<f64>()
+                        <= sp.radius * sp.radius
                 });
                 if in_box || in_sphere || in_set[n] {
                     out.push(n as u32);
@@ -261,7 +291,9 @@ impl Problem {
                 }
                 node_kind[n as usize] = NodeKind::Prescribed(paths.len() as u32);
             }
-            paths.push(Path1 { points: p.path.iter().map(|q| (q[0], [q[1], q[2], q[3]])).collect() });
+            paths.push(Path1 {
+                points: p.path.iter().map(|q| (q[0], [q[1], q[2], q[3]])).collect(),
+            });
         }
         let mut loads = Vec::new();
         for (k, l) in scene.load.iter().enumerate() {
@@ -273,20 +305,32 @@ impl Problem {
                     if r.is_empty() || r.windows(2).any(|w| !(w[1][0] > w[0][0])) {
                         bail!("{what}: `ramp` needs points [t, factor] with increasing t");
                     }
-                    Some(Path1 { points: r.iter().map(|q| (q[0], [q[1]])).collect() })
+                    Some(Path1 {
+                        points: r.iter().map(|q| (q[0], [q[1]])).collect(),
+                    })
                 }
                 None => None,
             };
             for n in nodes {
-                loads.push(Load { node: n, force: l.force.map(|f| f * share), ramp: ramp.clone() });
+                loads.push(Load {
+                    node: n,
+                    force: l.force.map(|f| f * share),
+                    ramp: ramp.clone(),
+                });
             }
         }
         let s = &scene.solver;
         if !matches!(s.precision.as_str(), "f32" | "f64") {
-            bail!("[solver] precision = \"{}\": expected \"f32\" or \"f64\"", s.precision);
+            bail!(
+                "[solver] precision = \"{}\": expected \"f32\" or \"f64\"",
+                s.precision
+            );
         }
         if !matches!(s.integration.as_str(), "reduced" | "full") {
-            bail!("[solver] integration = \"{}\": expected \"reduced\" or \"full\"", s.integration);
+            bail!(
+                "[solver] integration = \"{}\": expected \"reduced\" or \"full\"",
+                s.integration
+            );
         }
         if !(s.mass_scaling >= 1.0) {
             bail!("[solver] mass_scaling must be >= 1, got {}", s.mass_scaling);
@@ -304,7 +348,11 @@ impl Problem {
             node_kind,
             paths,
             loads,
-            gravity: scene.gravity.as_ref().map(|g| g.acceleration).unwrap_or([0.0; 3]),
+            gravity: scene
+                .gravity
+                .as_ref()
+                .map(|g| g.acceleration)
+                .unwrap_or([0.0; 3]),
             solver: scene.solver.clone(),
             mass,
             critical: std::sync::OnceLock::new(),
@@ -313,15 +361,16 @@ impl Problem {
 
     /// Reads the scene's mesh (file, generated box or built-in anatomy) and resolves it.
     pub fn from_scene(scene: &Scene, scene_dir: &Path) -> Result<Problem> {
-        let (mesh, sets) = crate::scene_mesh::load(&scene.mesh, scene_dir)
-            .context("loading the scene's mesh")?;
+        let (mesh, sets) =
+            crate::scene_mesh::load(&scene.mesh, scene_dir).context("loading the scene's mesh")?;
         Problem::new(scene, mesh, sets)
     }
 
     /// Wave speed `c = √(M / (ρ · mass_scaling))` of cell `c`'s material.
     pub fn wave_speed(&self, cell: usize) -> f64 {
         let m = self.cell_material[cell] as usize;
-        (self.laws[m].dilatational_modulus() / (self.densities[m] * self.solver.mass_scaling)).sqrt()
+        (self.laws[m].dilatational_modulus() / (self.densities[m] * self.solver.mass_scaling))
+            .sqrt()
     }
 
     /// The seed's estimate `min_e L_e / c_e` (`L_e = V/A_max`) and the cell that sets it.
@@ -349,7 +398,11 @@ impl Problem {
         let (estimate, cell) = self.element_dt_estimate();
         let model = crate::solver::Model::<f64>::new(self, estimate);
         let omega = model.max_frequency(200)?;
-        let power = if omega > 0.0 { 2.0 / omega } else { f64::INFINITY };
+        let power = if omega > 0.0 {
+            2.0 / omega
+        } else {
+            f64::INFINITY
+        };
         let c = CriticalStep {
             dt_critical_s: estimate.min(power),
             dt_element_estimate_s: estimate,

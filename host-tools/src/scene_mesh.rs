@@ -12,7 +12,11 @@ use crate::mesh::Mesh;
 use crate::scene::*;
 
 pub fn load(spec: &MeshSpec, scene_dir: &Path) -> Result<(Mesh, BTreeMap<String, Vec<u32>>)> {
-    let given = [spec.file.is_some(), spec.generate.is_some(), spec.builtin.is_some()];
+    let given = [
+        spec.file.is_some(),
+        spec.generate.is_some(),
+        spec.builtin.is_some(),
+    ];
     if given.iter().filter(|g| **g).count() != 1 {
         bail!("[mesh] needs exactly one of `file`, `generate`, `builtin`");
     }
@@ -22,18 +26,29 @@ pub fn load(spec: &MeshSpec, scene_dir: &Path) -> Result<(Mesh, BTreeMap<String,
     }
     if let Some(g) = &spec.generate {
         if g.kind != "box" {
-            bail!("[mesh] generate.kind = \"{}\": only \"box\" is known", g.kind);
+            bail!(
+                "[mesh] generate.kind = \"{}\": only \"box\" is known",
+                g.kind
+            );
         }
-        if g.cells.iter().any(|&c| c == 0) || g.size.iter().any(|&s| !(s > 0.0)) {
+        if g.cells.contains(&0) || g.size.iter().any(|&s| !(s > 0.0)) {
             bail!("[mesh] generate: size and cells must be positive");
         }
-        return Ok((crate::mesh_io::generate_box(g.size, g.cells), BTreeMap::new()));
+        return Ok((
+            crate::mesh_io::generate_box(g.size, g.cells),
+            BTreeMap::new(),
+        ));
     }
     let name = spec.builtin.as_deref().unwrap_or_default();
     if name != "uterus" {
         bail!("[mesh] builtin = \"{name}\": only \"uterus\" is built in");
     }
-    let level: Level = spec.level.as_deref().unwrap_or("medium").parse().map_err(|e| anyhow!("[mesh] level: {e}"))?;
+    let level: Level = spec
+        .level
+        .as_deref()
+        .unwrap_or("medium")
+        .parse()
+        .map_err(|e| anyhow!("[mesh] level: {e}"))?;
     let a = builtin::generate(level);
     let mut sets = BTreeMap::new();
     sets.insert("cervix".to_string(), a.cervix_nodes.clone());
@@ -58,7 +73,10 @@ fn tube_end_nodes(mesh: &Mesh, region: i32) -> Vec<u32> {
         .collect();
     nodes.sort_unstable();
     nodes.dedup();
-    let far = nodes.iter().map(|&n| mesh.nodes[n as usize][1].abs()).fold(0.0, f64::max);
+    let far = nodes
+        .iter()
+        .map(|&n| mesh.nodes[n as usize][1].abs())
+        .fold(0.0, f64::max);
     nodes.retain(|&n| mesh.nodes[n as usize][1].abs() > far - 1e-4);
     nodes
 }
@@ -74,7 +92,8 @@ pub const PROBE_PUSH_S: f64 = 0.5;
 /// probe is a prescribed displacement of these nodes, so the whole section moves with it).
 fn probe_nodes(a: &builtin::Anatomy) -> Vec<u32> {
     let p = &a.probe;
-    let c: [f64; 3] = core::array::from_fn(|i| p.contact_point[i] + p.tube_radius_m * p.push_direction[i]);
+    let c: [f64; 3] =
+        core::array::from_fn(|i| p.contact_point[i] + p.tube_radius_m * p.push_direction[i]);
     let mut r = PROBE_TIP_RADIUS_M;
     loop {
         let v: Vec<u32> = (0..a.mesh.nodes.len() as u32)
@@ -107,12 +126,25 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
         density: 1000.0,
     };
     Ok(Scene {
-        mesh: MeshSpec { file: None, generate: None, builtin: Some("uterus".into()), level: Some(level.into()) },
+        mesh: MeshSpec {
+            file: None,
+            generate: None,
+            builtin: Some("uterus".into()),
+            level: Some(level.into()),
+        },
         // Uterine wall ~ 10 kPa; the oviducts are softer (3 kPa).
-        materials: vec![mat(None, 10.0e3), mat(Some("left_oviduct"), 3.0e3), mat(Some("right_oviduct"), 3.0e3)],
+        materials: vec![
+            mat(None, 10.0e3),
+            mat(Some("left_oviduct"), 3.0e3),
+            mat(Some("right_oviduct"), 3.0e3),
+        ],
         // Held at the cervix; the tubes' far ends are held by their ligaments.
         fixed: ["cervix", "left_tube_end", "right_tube_end"]
-            .map(|s| FixedSpec { box_: None, sphere: None, set: Some(s.into()) })
+            .map(|s| FixedSpec {
+                box_: None,
+                sphere: None,
+                set: Some(s.into()),
+            })
             .to_vec(),
         prescribed: vec![PrescribedSpec {
             box_: None,
@@ -124,6 +156,10 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
         // The organs rest on their neighbours in the pelvis, which carry their weight; a
         // 3 kPa tube 3.5 mm across could not carry its own over 10 cm, so gravity is off.
         gravity: None,
-        solver: SolverSpec { damping: 20.0, duration: Some(0.6), ..SolverSpec::default() },
+        solver: SolverSpec {
+            damping: 20.0,
+            duration: Some(0.6),
+            ..SolverSpec::default()
+        },
     })
 }

@@ -58,7 +58,11 @@ impl<T: Real> Elements<T> {
         }
     }
 
-    pub fn stored_energy(&self, laws: &[MaterialLaw<T>], u: &[[T; 3]]) -> Result<f64, PhysicsError> {
+    pub fn stored_energy(
+        &self,
+        laws: &[MaterialLaw<T>],
+        u: &[[T; 3]],
+    ) -> Result<f64, PhysicsError> {
         match self {
             Elements::Reduced(v) => stored_energy(v, laws, u),
             Elements::Full(v) => stored_energy(v, laws, u),
@@ -117,9 +121,16 @@ impl<'p, T: Real> Model<'p, T> {
     pub fn new(problem: &'p Problem, dt_s: f64) -> Self {
         let n = problem.mesh.nodes.len();
         let cd = CentralDifference::<T>::new(dt_s, problem.solver.damping);
-        let gain = problem.mass.iter().map(|m| cd.gain(m * problem.solver.mass_scaling)).collect();
-        let gravity_force =
-            problem.mass.iter().map(|m| problem.gravity.map(|g| T::from_f64(g * m))).collect();
+        let gain = problem
+            .mass
+            .iter()
+            .map(|m| cd.gain(m * problem.solver.mass_scaling))
+            .collect();
+        let gravity_force = problem
+            .mass
+            .iter()
+            .map(|m| problem.gravity.map(|g| T::from_f64(g * m)))
+            .collect();
         Model {
             problem,
             elements: Elements::build(problem),
@@ -174,9 +185,14 @@ impl<'p, T: Real> Model<'p, T> {
             let next = match self.problem.node_kind[n] {
                 NodeKind::Free => {
                     let r: [T; 3] = core::array::from_fn(|i| self.f_ext[n][i] - self.f_int[n][i]);
-                    let next = self.cd.advance(&self.u[n], &self.u_prev[n], self.gain[n], &r);
+                    let next = self
+                        .cd
+                        .advance(&self.u[n], &self.u_prev[n], self.gain[n], &r);
                     if !next.iter().all(|v| v.is_finite()) {
-                        return Err(StepError { step, error: PhysicsError::NonFinite { node: n as u32 } });
+                        return Err(StepError {
+                            step,
+                            error: PhysicsError::NonFinite { node: n as u32 },
+                        });
                     }
                     next
                 }
@@ -199,7 +215,10 @@ impl<'p, T: Real> Model<'p, T> {
             if v2 > limit * limit {
                 return Err(StepError {
                     step,
-                    error: PhysicsError::SpeedLimit { node: n as u32, speed_m_per_s: v2.sqrt() },
+                    error: PhysicsError::SpeedLimit {
+                        node: n as u32,
+                        speed_m_per_s: v2.sqrt(),
+                    },
                 });
             }
             ke += 0.5 * self.problem.mass[n] * ms * v2;
@@ -215,17 +234,9 @@ impl<'p, T: Real> Model<'p, T> {
 
     /// Stored (strain + hourglass) energy at the current state, J.
     pub fn stored_energy(&self) -> Result<f64> {
-        self.elements.stored_energy(&self.laws, &self.u).map_err(|e| anyhow!("{e}"))
-    }
-
-    /// Gravitational potential `−Σ m g·u` at the current state, J.
-    pub fn gravity_potential(&self) -> f64 {
-        let g = self.problem.gravity;
-        self.u
-            .iter()
-            .zip(&self.problem.mass)
-            .map(|(u, m)| -m * (0..3).map(|i| g[i] * u[i].to_f64()).sum::<f64>())
-            .sum()
+        self.elements
+            .stored_energy(&self.laws, &self.u)
+            .map_err(|e| anyhow!("{e}"))
     }
 
     /// Displacements as `f64`.
@@ -266,7 +277,13 @@ pub struct RunOutput {
 
 /// Called every step with the model's state after the step (for progress and frames).
 pub trait Observer {
-    fn after_step(&mut self, step: u64, time_s: f64, steps_total: u64, u: &dyn Fn() -> Vec<[f64; 3]>);
+    fn after_step(
+        &mut self,
+        step: u64,
+        time_s: f64,
+        steps_total: u64,
+        u: &dyn Fn() -> Vec<[f64; 3]>,
+    );
 }
 
 impl Observer for () {
@@ -323,7 +340,10 @@ pub fn run_typed<T: Real>(
         prescribed_reaction_n: model.reaction_prescribed,
         fixed_reaction_n: model.reaction_fixed,
     };
-    Ok(RunOutput { displacements, report })
+    Ok(RunOutput {
+        displacements,
+        report,
+    })
 }
 
 impl<'p, T: Real> Model<'p, T> {
@@ -333,27 +353,69 @@ impl<'p, T: Real> Model<'p, T> {
     /// Costs about two force evaluations per iteration.
     pub fn max_frequency(&self, iterations: usize) -> Result<f64> {
         let n = self.u.len();
-        let free: Vec<bool> =
-            self.problem.node_kind.iter().map(|k| *k == crate::problem::NodeKind::Free).collect();
-        let m: Vec<f64> = self.problem.mass.iter().map(|m| m * self.problem.solver.mass_scaling).collect();
+        let free: Vec<bool> = self
+            .problem
+            .node_kind
+            .iter()
+            .map(|k| *k == crate::problem::NodeKind::Free)
+            .collect();
+        let m: Vec<f64> = self
+            .problem
+            .mass
+            .iter()
+            .map(|m| m * self.problem.solver.mass_scaling)
+            .collect();
         // Deterministic start with every component excited.
         let mut v: Vec<[f64; 3]> = (0..n)
-            .map(|k| core::array::from_fn(|i| if free[k] { (((k * 3 + i) as f64) * 0.7548776662).fract() - 0.5 } else { 0.0 }))
+            .map(|k| {
+                core::array::from_fn(|i| {
+                    if free[k] {
+                        (((k * 3 + i) as f64) * 0.7548776662).fract() - 0.5
+                    } else {
+                        0.0
+                    }
+                })
+            })
             .collect();
-        let scale = self.problem.reference.iter().map(|r| r.characteristic_length).fold(f64::INFINITY, f64::min);
+        let scale = self
+            .problem
+            .reference
+            .iter()
+            .map(|r| r.characteristic_length)
+            .fold(f64::INFINITY, f64::min);
         let eps = 1e-7 * scale;
         let mut lambda = 0.0;
         let mut fp = vec![[T::ZERO; 3]; n];
         let mut fm = vec![[T::ZERO; 3]; n];
         for _ in 0..iterations {
-            let norm = v.iter().zip(&m).map(|(a, mm)| mm * (a[0] * a[0] + a[1] * a[1] + a[2] * a[2])).sum::<f64>().sqrt();
-            v.iter_mut().for_each(|a| a.iter_mut().for_each(|x| *x /= norm));
-            let up: Vec<[T; 3]> = self.u.iter().zip(&v).map(|(u, d)| core::array::from_fn(|i| T::from_f64(u[i].to_f64() + eps * d[i]))).collect();
-            let um: Vec<[T; 3]> = self.u.iter().zip(&v).map(|(u, d)| core::array::from_fn(|i| T::from_f64(u[i].to_f64() - eps * d[i]))).collect();
+            let norm = v
+                .iter()
+                .zip(&m)
+                .map(|(a, mm)| mm * (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]))
+                .sum::<f64>()
+                .sqrt();
+            v.iter_mut()
+                .for_each(|a| a.iter_mut().for_each(|x| *x /= norm));
+            let up: Vec<[T; 3]> = self
+                .u
+                .iter()
+                .zip(&v)
+                .map(|(u, d)| core::array::from_fn(|i| T::from_f64(u[i].to_f64() + eps * d[i])))
+                .collect();
+            let um: Vec<[T; 3]> = self
+                .u
+                .iter()
+                .zip(&v)
+                .map(|(u, d)| core::array::from_fn(|i| T::from_f64(u[i].to_f64() - eps * d[i])))
+                .collect();
             fp.iter_mut().for_each(|f| *f = [T::ZERO; 3]);
             fm.iter_mut().for_each(|f| *f = [T::ZERO; 3]);
-            self.elements.internal_forces(&self.laws, &up, &mut fp).map_err(|e| anyhow!("{e}"))?;
-            self.elements.internal_forces(&self.laws, &um, &mut fm).map_err(|e| anyhow!("{e}"))?;
+            self.elements
+                .internal_forces(&self.laws, &up, &mut fp)
+                .map_err(|e| anyhow!("{e}"))?;
+            self.elements
+                .internal_forces(&self.laws, &um, &mut fm)
+                .map_err(|e| anyhow!("{e}"))?;
             let mut vkv = 0.0;
             let mut w = vec![[0.0; 3]; n];
             for k in 0..n {
@@ -393,8 +455,10 @@ impl<'p, T: Real> Model<'p, T> {
     /// Energies at `t_{n}` after the step that produced `u_{n+1}`: the kinetic energy of
     /// the central velocity and the stored and gravity energy of `u_n`.
     pub fn energies(&self) -> Result<Energies> {
-        let stored =
-            self.elements.stored_energy(&self.laws, &self.u_prev).map_err(|e| anyhow!("{e}"))?;
+        let stored = self
+            .elements
+            .stored_energy(&self.laws, &self.u_prev)
+            .map_err(|e| anyhow!("{e}"))?;
         let g = self.problem.gravity;
         let gravity = self
             .u_prev
@@ -402,6 +466,10 @@ impl<'p, T: Real> Model<'p, T> {
             .zip(&self.problem.mass)
             .map(|(u, m)| -m * (0..3).map(|i| g[i] * u[i].to_f64()).sum::<f64>())
             .sum();
-        Ok(Energies { kinetic: self.kinetic_energy, stored, gravity })
+        Ok(Energies {
+            kinetic: self.kinetic_energy,
+            stored,
+            gravity,
+        })
     }
 }

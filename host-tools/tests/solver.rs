@@ -1,4 +1,5 @@
 //! Serial solver tests: conservation, convergence to closed forms, stability limits.
+#![allow(clippy::needless_range_loop)]
 
 mod common;
 use common::*;
@@ -42,15 +43,32 @@ fn cantilever_under_gravity_converges_to_euler_bernoulli() {
     let eb = euler_bernoulli_tip(1000.0, 9.81, 0.1, 1e9, 0.01);
     let mut errors = Vec::new();
     for n in [2, 4, 8] {
-        let sc = box_scene([0.1, 0.01, 0.01], [10 * n, n, n], 1e9, 0.3, "damping = 2000.0", GRAVITY);
+        let sc = box_scene(
+            [0.1, 0.01, 0.01],
+            [10 * n, n, n],
+            1e9,
+            0.3,
+            "damping = 2000.0",
+            GRAVITY,
+        );
         let p = problem(&sc);
         let tip = node_near(&p, [0.1, 0.005, 0.005]);
         let w = -settle(&p, tip, 1e-7, 100_000);
-        println!("{n} cells through thickness: tip {w:e} m, EB {eb:e} m, ratio {}", w / eb);
+        println!(
+            "{n} cells through thickness: tip {w:e} m, EB {eb:e} m, ratio {}",
+            w / eb
+        );
         errors.push((w / eb - 1.0).abs());
     }
-    assert!(errors[1] < errors[0] && errors[2] < errors[1], "not converging: {errors:?}");
-    assert!(errors[2] < 0.02, "finest mesh off Euler-Bernoulli by {}", errors[2]);
+    assert!(
+        errors[1] < errors[0] && errors[2] < errors[1],
+        "not converging: {errors:?}"
+    );
+    assert!(
+        errors[2] < 0.02,
+        "finest mesh off Euler-Bernoulli by {}",
+        errors[2]
+    );
 }
 
 /// Undamped, from rest under suddenly applied gravity: kinetic + stored + gravity energy
@@ -58,7 +76,14 @@ fn cantilever_under_gravity_converges_to_euler_bernoulli() {
 /// (central differences conserve a shadow energy; measured drift ~1e-5).
 #[test]
 fn undamped_energy_is_conserved_over_1e5_steps() {
-    let sc = box_scene([0.1, 0.02, 0.02], [10, 2, 2], 5e5, 0.45, "dt_safety = 0.9\nhourglass = 0.1", GRAVITY);
+    let sc = box_scene(
+        [0.1, 0.02, 0.02],
+        [10, 2, 2],
+        5e5,
+        0.45,
+        "dt_safety = 0.9\nhourglass = 0.1",
+        GRAVITY,
+    );
     let p = problem(&sc);
     let (dt, _) = p.time_step().unwrap();
     let mut m = Model::<f64>::new(&p, dt);
@@ -73,7 +98,10 @@ fn undamped_energy_is_conserved_over_1e5_steps() {
         }
     }
     let drift = (emax - emin) / stored_max;
-    println!("energy band {:e} J of peak stored {stored_max:e} J: {drift:e}", emax - emin);
+    println!(
+        "energy band {:e} J of peak stored {stored_max:e} J: {drift:e}",
+        emax - emin
+    );
     assert!(stored_max > 0.0 && drift < 0.005, "energy drift {drift}");
 }
 
@@ -89,7 +117,14 @@ box = [[0.0999, -1.0, -1.0], [1.0, 1.0, 1.0]]
 force = [0.0, 0.0, -2.0]
 ramp = [[0.0, 0.0], [0.1, 1.0], [0.2, 1.0], [0.3, 0.0]]
 "#;
-    let sc = box_scene([0.1, 0.02, 0.02], [20, 4, 4], 5e5, 0.45, "damping = 60.0\nhourglass = 0.1", extra);
+    let sc = box_scene(
+        [0.1, 0.02, 0.02],
+        [20, 4, 4],
+        5e5,
+        0.45,
+        "damping = 60.0\nhourglass = 0.1",
+        extra,
+    );
     let p = problem(&sc);
     let (dt, _) = p.time_step().unwrap();
     let mut m = Model::<f64>::new(&p, dt);
@@ -97,12 +132,25 @@ ramp = [[0.0, 0.0], [0.1, 1.0], [0.2, 1.0], [0.3, 0.0]]
     let steps = (2.0 / dt) as u64;
     for _ in 0..steps {
         m.advance().unwrap();
-        peak = peak.max(m.u.iter().map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()).fold(0.0, f64::max));
+        peak = peak.max(
+            m.u.iter()
+                .map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt())
+                .fold(0.0, f64::max),
+        );
     }
-    let rest = m.u.iter().map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()).fold(0.0, f64::max);
+    let rest =
+        m.u.iter()
+            .map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt())
+            .fold(0.0, f64::max);
     println!("peak {peak:e} m, residual {rest:e} m after {steps} steps");
-    assert!(peak > 0.01, "the cycle should deflect the beam strongly (peak {peak})");
-    assert!(rest < 1e-9 * peak, "residual {rest:e} m after unloading (peak {peak:e} m)");
+    assert!(
+        peak > 0.01,
+        "the cycle should deflect the beam strongly (peak {peak})"
+    );
+    assert!(
+        rest < 1e-9 * peak,
+        "residual {rest:e} m after unloading (peak {peak:e} m)"
+    );
 }
 
 /// A requested step above critical is refused with an error that says so; a safety factor
@@ -121,8 +169,15 @@ fn dt_above_critical_is_refused_and_a_forced_one_is_caught() {
     assert!(problem(&sc).time_step().is_err());
     sc.solver.force_dt = true;
     sc.solver.steps = Some(5000);
-    let err = solver::run(&problem(&sc), "forced", &mut ()).err().expect("a forced unstable step must fail").to_string();
-    assert!(err.contains("step") && (err.contains("speed") || err.contains("inverted") || err.contains("not finite")), "{err}");
+    let err = solver::run(&problem(&sc), "forced", &mut ())
+        .err()
+        .expect("a forced unstable step must fail")
+        .to_string();
+    assert!(
+        err.contains("step")
+            && (err.contains("speed") || err.contains("inverted") || err.contains("not finite")),
+        "{err}"
+    );
     // 0.99 of critical runs stable.
     let mut ok = base.clone();
     ok.solver.dt_safety = 0.99;
@@ -137,14 +192,24 @@ fn dt_above_critical_is_refused_and_a_forced_one_is_caught() {
 #[test]
 fn nearly_incompressible_runs_stable_without_locking() {
     let tip_for = |nu: f64| {
-        let sc = box_scene([0.1, 0.01, 0.01], [20, 2, 2], 1e9, nu, "damping = 2000.0", GRAVITY);
+        let sc = box_scene(
+            [0.1, 0.01, 0.01],
+            [20, 2, 2],
+            1e9,
+            nu,
+            "damping = 2000.0",
+            GRAVITY,
+        );
         let p = problem(&sc);
         let tip = node_near(&p, [0.1, 0.005, 0.005]);
         settle(&p, tip, 1e-7, 400_000)
     };
     let (a, b) = (tip_for(0.3), tip_for(0.499));
     println!("tip nu=0.3 {a:e}, nu=0.499 {b:e}");
-    assert!((b / a - 1.0).abs() < 0.05, "ν = 0.499 tip {b:e} vs ν = 0.3 {a:e}");
+    assert!(
+        (b / a - 1.0).abs() < 0.05,
+        "ν = 0.499 tip {b:e} vs ν = 0.3 {a:e}"
+    );
 }
 
 /// f32 and f64 agree to f32 precision on a short run of the built-in scene (coarse, 300
@@ -156,10 +221,21 @@ fn f32_and_f64_agree_on_a_short_run() {
     let mut sc = host_tools::scene_mesh::builtin_scene("coarse").unwrap();
     sc.solver.steps = Some(300);
     let p = problem(&sc);
-    let a = solver::run_typed::<f64>(&p, "f64", &mut ()).unwrap().displacements;
-    let b = solver::run_typed::<f32>(&p, "f32", &mut ()).unwrap().displacements;
+    let a = solver::run_typed::<f64>(&p, "f64", &mut ())
+        .unwrap()
+        .displacements;
+    let b = solver::run_typed::<f32>(&p, "f32", &mut ())
+        .unwrap()
+        .displacements;
     let umax = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
-    let dmax = a.iter().flatten().zip(b.iter().flatten()).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
-    println!("max |u| {umax:e}, max |u32 - u64| {dmax:e}, ratio {}", dmax / umax);
+    let dmax = a
+        .iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    println!(
+        "max |u| {umax:e}, max |u32 - u64| {dmax:e}, ratio {}",
+        dmax / umax
+    );
     assert!(umax > 0.0 && dmax < 1e-4 * umax);
 }

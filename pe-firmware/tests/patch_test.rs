@@ -5,6 +5,7 @@
 //! inner nodes are free. The exact solution is the same linear field everywhere (any
 //! homogeneous F solves the finite-strain problem too), so the inner nodes must land on it,
 //! every element's stress equals S(F) and the hourglass forces vanish.
+#![allow(clippy::needless_range_loop)]
 
 use pe_firmware::physics::explicit::accumulate_internal_forces;
 use pe_firmware::physics::hex::{natural_gradients, FACES, NODE_XI};
@@ -38,10 +39,18 @@ fn patch() -> Patch {
         // orders is a positively oriented hexahedron.
         let outer = f.map(|a| a as u32);
         let inner = f.map(|a| a as u32 + 8);
-        let a = [outer[0], outer[1], outer[2], outer[3], inner[0], inner[1], inner[2], inner[3]];
-        let b = [inner[0], inner[1], inner[2], inner[3], outer[0], outer[1], outer[2], outer[3]];
+        let a = [
+            outer[0], outer[1], outer[2], outer[3], inner[0], inner[1], inner[2], inner[3],
+        ];
+        let b = [
+            inner[0], inner[1], inner[2], inner[3], outer[0], outer[1], outer[2], outer[3],
+        ];
         let coords = |c: &[u32; 8]| c.map(|n| x[n as usize]);
-        cells.push(if ReferenceHex::new(&coords(&a)).is_ok() { a } else { b });
+        cells.push(if ReferenceHex::new(&coords(&a)).is_ok() {
+            a
+        } else {
+            b
+        });
     }
     for c in &cells {
         ReferenceHex::new(&c.map(|n| x[n as usize])).expect("patch cells are valid");
@@ -51,7 +60,11 @@ fn patch() -> Patch {
 
 fn linear_field(a: f64, p: &[f64; 3]) -> [f64; 3] {
     let [x, y, z] = *p;
-    [a * (2.0 * x + y + z) / 2.0, a * (x + 2.0 * y + z) / 2.0, a * (x + y + 2.0 * z) / 2.0]
+    [
+        a * (2.0 * x + y + z) / 2.0,
+        a * (x + 2.0 * y + z) / 2.0,
+        a * (x + y + 2.0 * z) / 2.0,
+    ]
 }
 
 /// Relaxes the inner nodes with damped explicit dynamics from a perturbed start; returns the
@@ -89,7 +102,11 @@ fn relax(elements: &[HexReduced<f64>], p: &Patch, a: f64) -> (f64, f64) {
     }
     let scale = a * 2.0; // |u| at the far corner is 2a·√3; use 2a as the field's scale
     let err = (8..n)
-        .map(|k| (0..3).map(|i| (u[k][i] - exact[k][i]).abs()).fold(0.0, f64::max))
+        .map(|k| {
+            (0..3)
+                .map(|i| (u[k][i] - exact[k][i]).abs())
+                .fold(0.0, f64::max)
+        })
         .fold(0.0, f64::max)
         / scale;
     let hg = elements
@@ -99,7 +116,12 @@ fn relax(elements: &[HexReduced<f64>], p: &Patch, a: f64) -> (f64, f64) {
             (0..4)
                 .map(|al| {
                     (0..3)
-                        .map(|i| (0..8).map(|b| e.hourglass[b][al] * ue[b][i]).sum::<f64>().abs())
+                        .map(|i| {
+                            (0..8)
+                                .map(|b| e.hourglass[b][al] * ue[b][i])
+                                .sum::<f64>()
+                                .abs()
+                        })
                         .fold(0.0, f64::max)
                 })
                 .fold(0.0, f64::max)
@@ -119,11 +141,18 @@ fn macneal_harder_distorted_patch_passes_with_mean_gradients() {
     let elements: Vec<HexReduced<f64>> = p
         .cells
         .iter()
-        .map(|c| ReferenceHex::new(&c.map(|n| p.x[n as usize])).unwrap().reduced(*c, 0, 1.5e6, 0.1))
+        .map(|c| {
+            ReferenceHex::new(&c.map(|n| p.x[n as usize]))
+                .unwrap()
+                .reduced(*c, 0, 1.5e6, 0.1)
+        })
         .collect();
     for a in [1e-4, 0.1] {
         let (err, hg) = relax(&elements, &p, a);
-        assert!(err < 1e-9, "a = {a}: inner nodes off the linear field by {err:e}");
+        assert!(
+            err < 1e-9,
+            "a = {a}: inner nodes off the linear field by {err:e}"
+        );
         assert!(hg < 1e-9, "a = {a}: hourglass modes {hg:e}");
         // Uniform stress: every element's F equals the exact homogeneous F.
     }

@@ -1,4 +1,5 @@
 //! Physics tests against closed forms, independent computations and exact solutions.
+#![allow(clippy::needless_range_loop)]
 
 use pe_firmware::physics::hex::{natural_gradients, NODE_XI};
 use pe_firmware::physics::material::cauchy_stress;
@@ -59,17 +60,27 @@ fn cauchy_closed_form(law: &str, f: &Mat3<f64>) -> Mat3<f64> {
         }
         return s;
     }
-    let (c10, c01) = if law == "dnh" { (mu / 2.0, 0.0) } else { (0.3 * mu, 0.2 * mu) };
-    let bb: Mat3<f64> = core::array::from_fn(|i| core::array::from_fn(|k| j.powf(-2.0 / 3.0) * b[i][k]));
+    let (c10, c01) = if law == "dnh" {
+        (mu / 2.0, 0.0)
+    } else {
+        (0.3 * mu, 0.2 * mu)
+    };
+    let bb: Mat3<f64> =
+        core::array::from_fn(|i| core::array::from_fn(|k| j.powf(-2.0 / 3.0) * b[i][k]));
     let i1 = tensor::trace(&bb);
     let bb2 = tensor::mul(&bb, &bb);
-    let mut a: Mat3<f64> =
-        core::array::from_fn(|i| core::array::from_fn(|k| (c10 + c01 * i1) * bb[i][k] - c01 * bb2[i][k]));
+    let mut a: Mat3<f64> = core::array::from_fn(|i| {
+        core::array::from_fn(|k| (c10 + c01 * i1) * bb[i][k] - c01 * bb2[i][k])
+    });
     let tr = tensor::trace(&a) / 3.0;
     for i in 0..3 {
         a[i][i] -= tr;
     }
-    let p = if law == "mr-l" { kappa * j.ln() / j } else { kappa * (j - 1.0) };
+    let p = if law == "mr-l" {
+        kappa * j.ln() / j
+    } else {
+        kappa * (j - 1.0)
+    };
     for i in 0..3 {
         for k in 0..3 {
             s[i][k] = 2.0 / j * a[i][k] + p * id[i][k];
@@ -150,7 +161,10 @@ fn simple_shear_matches_closed_form_for_every_law() {
     // Cross-check the test's formula itself against the shared numpy reference (printed to 1e-6).
     for &(name, g, s12, s11) in REF_SHEAR {
         let s = cauchy_closed_form(name, &shear(g));
-        assert!((s[0][1] - s12).abs() < 2e-6 && (s[0][0] - s11).abs() < 2e-6, "{name} {g}");
+        assert!(
+            (s[0][1] - s12).abs() < 2e-6 && (s[0][0] - s11).abs() < 2e-6,
+            "{name} {g}"
+        );
     }
 }
 
@@ -173,7 +187,11 @@ fn uniaxial_stretch_matches_closed_form_for_every_law() {
         let t = lateral_stretch(name, l);
         let s = cauchy_closed_form(name, &diag(l, t, t));
         assert!((t - t_ref).abs() < 2e-9, "{name} {l}: t {t} vs {t_ref}");
-        assert!((s[0][0] - s11).abs() < 2e-6, "{name} {l}: {} vs {s11}", s[0][0]);
+        assert!(
+            (s[0][0] - s11).abs() < 2e-6,
+            "{name} {l}: {} vs {s11}",
+            s[0][0]
+        );
     }
 }
 
@@ -188,12 +206,18 @@ fn stress_is_derivative_of_energy() {
         let s = law.second_piola_kirchhoff(&f0).unwrap();
         let p = tensor::mul(&f0, &s);
         let h = 1e-6;
-        let fp: Mat3<f64> = core::array::from_fn(|i| core::array::from_fn(|k| f0[i][k] + h * df[i][k]));
-        let fm: Mat3<f64> = core::array::from_fn(|i| core::array::from_fn(|k| f0[i][k] - h * df[i][k]));
-        let dw = (law.strain_energy_density(&fp).unwrap() - law.strain_energy_density(&fm).unwrap())
+        let fp: Mat3<f64> =
+            core::array::from_fn(|i| core::array::from_fn(|k| f0[i][k] + h * df[i][k]));
+        let fm: Mat3<f64> =
+            core::array::from_fn(|i| core::array::from_fn(|k| f0[i][k] - h * df[i][k]));
+        let dw = (law.strain_energy_density(&fp).unwrap()
+            - law.strain_energy_density(&fm).unwrap())
             / (2.0 * h);
         let pdf = tensor::ddot(&p, &df);
-        assert!((dw - pdf).abs() < 1e-6 * pdf.abs().max(1.0), "{name}: {dw} vs {pdf}");
+        assert!(
+            (dw - pdf).abs() < 1e-6 * pdf.abs().max(1.0),
+            "{name}: {dw} vs {pdf}"
+        );
     }
 }
 
@@ -215,7 +239,14 @@ fn element_forces_equal_face_tractions_under_homogeneous_stretch() {
         let t = lateral_stretch(name, l);
         let f = diag(l, t, t);
         let u: [[f64; 3]; 8] = core::array::from_fn(|a| {
-            let p = tensor::mul(&f, &[[x[a][0], 0.0, 0.0], [x[a][1], 0.0, 0.0], [x[a][2], 0.0, 0.0]]);
+            let p = tensor::mul(
+                &f,
+                &[
+                    [x[a][0], 0.0, 0.0],
+                    [x[a][1], 0.0, 0.0],
+                    [x[a][2], 0.0, 0.0],
+                ],
+            );
             [p[0][0] - x[a][0], p[1][0] - x[a][1], p[2][0] - x[a][2]]
         });
         let sigma = cauchy_closed_form(name, &f);
@@ -228,7 +259,10 @@ fn element_forces_equal_face_tractions_under_homogeneous_stretch() {
         ] {
             let fe = el.internal_forces(&law, &u).unwrap();
             let face_x1: f64 = (0..8).filter(|&a| x[a][0] > 0.5).map(|a| fe[a][0]).sum();
-            assert!((face_x1 - p11).abs() < 1e-9 * mu, "{name}: {face_x1} vs {p11}");
+            assert!(
+                (face_x1 - p11).abs() < 1e-9 * mu,
+                "{name}: {face_x1} vs {p11}"
+            );
             // Zero lateral traction: y-forces on the face Y = 1 vanish.
             let face_y1: f64 = (0..8).filter(|&a| x[a][1] > 0.5).map(|a| fe[a][1]).sum();
             assert!(face_y1.abs() < 1e-9 * mu);
@@ -272,14 +306,20 @@ fn rigid_rotation_by_90_degrees_gives_zero_force() {
         let m = law.dilatational_modulus();
         let scale = m * r.volume * r.gradient_norm_sq().sqrt();
         let s = law.second_piola_kirchhoff(&rot).unwrap();
-        assert!(s.iter().flatten().all(|v| v.abs() < 1e-10 * m), "{name}: S = {s:?}");
+        assert!(
+            s.iter().flatten().all(|v| v.abs() < 1e-10 * m),
+            "{name}: S = {s:?}"
+        );
         for el in [
             Box::new(r.reduced::<f64>([0; 8], 0, m, 0.1)) as Box<dyn HexElement<f64>>,
             Box::new(r.full::<f64>([0; 8], 0)),
         ] {
             let fe = el.internal_forces(&law, &u).unwrap();
             let fmax = fe.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
-            assert!(fmax < 1e-10 * scale, "{name}: max |f| = {fmax:e}, scale {scale:e}");
+            assert!(
+                fmax < 1e-10 * scale,
+                "{name}: max |f| = {fmax:e}, scale {scale:e}"
+            );
         }
     }
 }
@@ -329,7 +369,11 @@ fn mean_gradients_reproduce_linear_fields_on_distorted_cells() {
             }
         }
     }
-    assert!((v - r.volume).abs() < 1e-4 * r.volume, "{v} vs {}", r.volume);
+    assert!(
+        (v - r.volume).abs() < 1e-4 * r.volume,
+        "{v} vs {}",
+        r.volume
+    );
 }
 
 /// An inverted cell (two nodes swapped) and a degenerate one (a collapsed face) are refused.

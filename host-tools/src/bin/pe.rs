@@ -4,11 +4,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
+use host_tools::output;
 use host_tools::problem::Problem;
 use host_tools::scene::Scene;
 use host_tools::scene_mesh::builtin_scene;
 use host_tools::solver::{self, Observer};
-use host_tools::output;
 
 #[derive(Parser)]
 #[command(name = "pe", version, about = "Soft-tissue simulator host tools")]
@@ -32,7 +32,11 @@ struct SceneArgs {
 impl SceneArgs {
     fn load(&self) -> Result<(Scene, PathBuf, String)> {
         if self.builtin {
-            return Ok((builtin_scene(&self.level)?, PathBuf::from("."), format!("builtin:{}", self.level)));
+            return Ok((
+                builtin_scene(&self.level)?,
+                PathBuf::from("."),
+                format!("builtin:{}", self.level),
+            ));
         }
         let path = self
             .scene
@@ -97,7 +101,7 @@ struct Progress {
 impl Observer for Progress {
     fn after_step(&mut self, step: u64, time_s: f64, total: u64, u: &dyn Fn() -> Vec<[f64; 3]>) {
         if let Some(b) = &self.bar {
-            if step % 64 == 0 || step == total {
+            if step.is_multiple_of(64) || step == total {
                 b.set_position(step);
             }
         }
@@ -112,7 +116,16 @@ impl Observer for Progress {
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Solve { scene, output_nodes, report, vtk, steps, precision, integration, quiet } => {
+        Command::Solve {
+            scene,
+            output_nodes,
+            report,
+            vtk,
+            steps,
+            precision,
+            integration,
+            quiet,
+        } => {
             let (mut sc, dir, name) = scene.load()?;
             if let Some(n) = steps {
                 sc.solver.steps = Some(n);
@@ -123,8 +136,11 @@ fn main() -> Result<()> {
             if let Some(i) = integration {
                 sc.solver.integration = i;
             }
-            let problem = Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
-            let (dt, dt_crit) = problem.time_step().with_context(|| format!("scene {name}"))?;
+            let problem =
+                Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
+            let (dt, dt_crit) = problem
+                .time_step()
+                .with_context(|| format!("scene {name}"))?;
             let total = problem.steps(dt);
             eprintln!(
                 "{name}: {} elements, {} nodes, {} {}, dt = {dt:.3e} s (critical {dt_crit:.3e} s), {total} steps",
@@ -136,16 +152,27 @@ fn main() -> Result<()> {
             let bar = (!quiet && total > 2000).then(|| {
                 let b = indicatif::ProgressBar::new(total);
                 b.set_style(
-                    indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} steps  {elapsed} (eta {eta})")
-                        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+                    indicatif::ProgressStyle::with_template(
+                        "{bar:40} {pos}/{len} steps  {elapsed} (eta {eta})",
+                    )
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
                 );
                 b
             });
             let frames = match &vtk {
-                Some(d) => Some(output::FrameWriter::new(d, &problem.mesh, problem.solver.output_interval, dt)?),
+                Some(d) => Some(output::FrameWriter::new(
+                    d,
+                    &problem.mesh,
+                    problem.solver.output_interval,
+                    dt,
+                )?),
                 None => None,
             };
-            let mut obs = Progress { bar, frames, error: None };
+            let mut obs = Progress {
+                bar,
+                frames,
+                error: None,
+            };
             let out = solver::run(&problem, &name, &mut obs)?;
             if let Some(b) = &obs.bar {
                 b.finish_and_clear();

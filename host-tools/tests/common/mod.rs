@@ -6,7 +6,14 @@ use host_tools::scene::Scene;
 
 /// A box scene with a neo-Hookean material, clamped at x = 0; `extra` is appended TOML
 /// (more tables, e.g. [gravity] or [[load]]) and `solver` goes into [solver].
-pub fn box_scene(size: [f64; 3], cells: [usize; 3], e: f64, nu: f64, solver: &str, extra: &str) -> Scene {
+pub fn box_scene(
+    size: [f64; 3],
+    cells: [usize; 3],
+    e: f64,
+    nu: f64,
+    solver: &str,
+    extra: &str,
+) -> Scene {
     let text = format!(
         r#"
 [mesh]
@@ -35,7 +42,11 @@ pub fn problem(scene: &Scene) -> Problem {
 pub fn node_near(p: &Problem, x: [f64; 3]) -> usize {
     (0..p.mesh.nodes.len())
         .min_by(|&a, &b| {
-            let d = |n: usize| (0..3).map(|i| (p.mesh.nodes[n][i] - x[i]).powi(2)).sum::<f64>();
+            let d = |n: usize| {
+                (0..3)
+                    .map(|i| (p.mesh.nodes[n][i] - x[i]).powi(2))
+                    .sum::<f64>()
+            };
             d(a).total_cmp(&d(b))
         })
         .expect("mesh has nodes")

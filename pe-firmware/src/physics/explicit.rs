@@ -34,13 +34,21 @@ impl core::fmt::Display for PhysicsError {
             PhysicsError::InvertedElement { element, jacobian } => {
                 write!(f, "element {element} inverted (J = {jacobian:.3e} <= 0)")
             }
-            PhysicsError::NonFinite { node } => write!(f, "node {node}: displacement is not finite"),
-            PhysicsError::SpeedLimit { node, speed_m_per_s } => write!(
+            PhysicsError::NonFinite { node } => {
+                write!(f, "node {node}: displacement is not finite")
+            }
+            PhysicsError::SpeedLimit {
+                node,
+                speed_m_per_s,
+            } => write!(
                 f,
                 "node {node}: speed {speed_m_per_s:.3e} m/s exceeds the bound (unstable step?)"
             ),
             PhysicsError::BadIndex { element } => {
-                write!(f, "element {element} refers to a node or material outside the model")
+                write!(
+                    f,
+                    "element {element} refers to a node or material outside the model"
+                )
             }
         }
     }
@@ -91,16 +99,25 @@ pub fn accumulate_internal_forces<T: Real, E: HexElement<T>>(
 ) -> Result<(), PhysicsError> {
     for (k, e) in elements.iter().enumerate() {
         let element = first_element + k as u32;
-        let law = laws.get(e.material()).ok_or(PhysicsError::BadIndex { element })?;
+        let law = laws
+            .get(e.material())
+            .ok_or(PhysicsError::BadIndex { element })?;
         let mut ue = [[T::ZERO; 3]; 8];
         for (a, &n) in e.nodes().iter().enumerate() {
-            ue[a] = *u.get(n as usize).ok_or(PhysicsError::BadIndex { element })?;
+            ue[a] = *u
+                .get(n as usize)
+                .ok_or(PhysicsError::BadIndex { element })?;
         }
         let fe = e
             .internal_forces(law, &ue)
-            .map_err(|j| PhysicsError::InvertedElement { element, jacobian: j.jacobian })?;
+            .map_err(|j| PhysicsError::InvertedElement {
+                element,
+                jacobian: j.jacobian,
+            })?;
         for (a, &n) in e.nodes().iter().enumerate() {
-            let dst = f_int.get_mut(n as usize).ok_or(PhysicsError::BadIndex { element })?;
+            let dst = f_int
+                .get_mut(n as usize)
+                .ok_or(PhysicsError::BadIndex { element })?;
             for i in 0..3 {
                 dst[i] += fe[a][i];
             }
@@ -118,14 +135,21 @@ pub fn stored_energy<T: Real, E: HexElement<T>>(
     let mut total = 0.0;
     for (k, e) in elements.iter().enumerate() {
         let element = k as u32;
-        let law = laws.get(e.material()).ok_or(PhysicsError::BadIndex { element })?;
+        let law = laws
+            .get(e.material())
+            .ok_or(PhysicsError::BadIndex { element })?;
         let mut ue = [[T::ZERO; 3]; 8];
         for (a, &n) in e.nodes().iter().enumerate() {
-            ue[a] = *u.get(n as usize).ok_or(PhysicsError::BadIndex { element })?;
+            ue[a] = *u
+                .get(n as usize)
+                .ok_or(PhysicsError::BadIndex { element })?;
         }
         total += e
             .energy(law, &ue)
-            .map_err(|j| PhysicsError::InvertedElement { element, jacobian: j.jacobian })?
+            .map_err(|j| PhysicsError::InvertedElement {
+                element,
+                jacobian: j.jacobian,
+            })?
             .to_f64();
     }
     Ok(total)

@@ -150,7 +150,10 @@ impl ReferenceHex {
             });
             let scale = cols[0] * cols[1] * cols[2];
             if !(scale > 0.0) || d < -0.2 * scale {
-                return Err(GeometryError::NonPositiveJacobian { at: corner, det_j: d });
+                return Err(GeometryError::NonPositiveJacobian {
+                    at: corner,
+                    det_j: d,
+                });
             }
             min_scaled_jacobian = min_scaled_jacobian.min(d / scale);
         }
@@ -237,8 +240,8 @@ impl ReferenceHex {
         hourglass_modulus: f64,
         hourglass_coefficient: f64,
     ) -> HexReduced<T> {
-        let k = hourglass_coefficient * hourglass_modulus * self.volume * self.gradient_norm_sq()
-            / 8.0;
+        let k =
+            hourglass_coefficient * hourglass_modulus * self.volume * self.gradient_norm_sq() / 8.0;
         HexReduced {
             nodes,
             material,

@@ -52,8 +52,16 @@ pub enum Volumetric {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum MaterialLaw<T> {
     NeoHookean(LameParameters<T>),
-    NeoHookeanDecoupled { mu: T, kappa: T },
-    MooneyRivlin { c10: T, c01: T, kappa: T, volumetric: Volumetric },
+    NeoHookeanDecoupled {
+        mu: T,
+        kappa: T,
+    },
+    MooneyRivlin {
+        c10: T,
+        c01: T,
+        kappa: T,
+        volumetric: Volumetric,
+    },
 }
 
 /// `J = det F ≤ 0`: the element is inverted (or degenerate) at this point.
@@ -75,9 +83,17 @@ impl MaterialLaw<f64> {
                 mu: c(mu),
                 kappa: c(kappa),
             },
-            MaterialLaw::MooneyRivlin { c10, c01, kappa, volumetric } => {
-                MaterialLaw::MooneyRivlin { c10: c(c10), c01: c(c01), kappa: c(kappa), volumetric }
-            }
+            MaterialLaw::MooneyRivlin {
+                c10,
+                c01,
+                kappa,
+                volumetric,
+            } => MaterialLaw::MooneyRivlin {
+                c10: c(c10),
+                c01: c(c01),
+                kappa: c(kappa),
+                volumetric,
+            },
         }
     }
 
@@ -118,7 +134,9 @@ impl<T: Real> MaterialLaw<T> {
     pub fn second_piola_kirchhoff(&self, f: &Mat3<T>) -> Result<Mat3<T>, NonPositiveJacobian> {
         let j = tensor::det(f);
         if !(j > T::ZERO) {
-            return Err(NonPositiveJacobian { jacobian: j.to_f64() });
+            return Err(NonPositiveJacobian {
+                jacobian: j.to_f64(),
+            });
         }
         let c = tensor::gram(f);
         let det_c = j * j;
@@ -147,7 +165,12 @@ impl<T: Real> MaterialLaw<T> {
                     s[i][i] += a;
                 }
             }
-            MaterialLaw::MooneyRivlin { c10, c01, kappa, volumetric } => {
+            MaterialLaw::MooneyRivlin {
+                c10,
+                c01,
+                kappa,
+                volumetric,
+            } => {
                 let j23 = inv_j_two_thirds(j);
                 let j43 = j23 * j23;
                 let i1 = tensor::trace(&c);
@@ -177,7 +200,9 @@ impl<T: Real> MaterialLaw<T> {
     pub fn strain_energy_density(&self, f: &Mat3<T>) -> Result<T, NonPositiveJacobian> {
         let j = tensor::det(f);
         if !(j > T::ZERO) {
-            return Err(NonPositiveJacobian { jacobian: j.to_f64() });
+            return Err(NonPositiveJacobian {
+                jacobian: j.to_f64(),
+            });
         }
         let c = tensor::gram(f);
         let i1 = tensor::trace(&c);
@@ -192,7 +217,12 @@ impl<T: Real> MaterialLaw<T> {
                 let d = j - T::ONE;
                 half * mu * (inv_j_two_thirds(j) * i1 - three) + half * kappa * d * d
             }
-            MaterialLaw::MooneyRivlin { c10, c01, kappa, volumetric } => {
+            MaterialLaw::MooneyRivlin {
+                c10,
+                c01,
+                kappa,
+                volumetric,
+            } => {
                 let j23 = inv_j_two_thirds(j);
                 let i2 = half_i2(&c, i1);
                 let u = match volumetric {

@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# Runs every test of the workspace on a fresh machine: installs what it needs first.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+rustup target add thumbv7em-none-eabihf >/dev/null 2>&1 || rustup target add thumbv7em-none-eabihf
+
+# The board crates must build for the board: no_std, allocation-free, Cortex-M7 FPU.
+RUSTFLAGS="-C target-cpu=cortex-m7" cargo build --release --target thumbv7em-none-eabihf \
+    -p pe-firmware -p link-proto
+
+# Host tests (optimised: the physics tests run 1e5-step simulations).
+cargo test --workspace --release
