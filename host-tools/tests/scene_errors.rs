@@ -31,9 +31,7 @@ density = 1000.0
 fn err(dir: &std::path::Path, text: &str) -> String {
     format!(
         "{:#}",
-        resolve(dir, text)
-            .err()
-            .expect("this scene must be refused")
+        resolve(dir, text).expect_err("this scene must be refused")
     )
 }
 
