@@ -31,7 +31,14 @@ pub fn encode_wire(frame: &[u8], out: &mut [u8]) -> Result<usize> {
     // Keep one byte for the trailing delimiter.
     let body_cap = rest.len().checked_sub(1).ok_or(Error::BufferTooSmall)?;
     let body = rest.get_mut(..body_cap).ok_or(Error::BufferTooSmall)?;
-    let n = cobs::try_encode(frame, body).map_err(|_| Error::BufferTooSmall)?;
+    let n = if frame.is_empty() {
+        // COBS of nothing is one code byte 0x01; the `cobs` crate writes
+        // nothing, which the receiver could not tell from an idle line.
+        *body.first_mut().ok_or(Error::BufferTooSmall)? = 0x01;
+        1
+    } else {
+        cobs::try_encode(frame, body).map_err(|_| Error::BufferTooSmall)?
+    };
     *rest.get_mut(n).ok_or(Error::BufferTooSmall)? = 0;
     Ok(n + 2)
 }

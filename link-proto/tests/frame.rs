@@ -32,7 +32,13 @@ const EMPTY_FRAME: [u8; 12] = [
 #[test]
 fn emit_matches_byte_literals() {
     let mut buf = [0u8; 64];
-    let n = emit_values(FrameKind::Forces, 0x0102_0304, Values::F32(&[1.0, -2.5]), &mut buf).unwrap();
+    let n = emit_values(
+        FrameKind::Forces,
+        0x0102_0304,
+        Values::F32(&[1.0, -2.5]),
+        &mut buf,
+    )
+    .unwrap();
     assert_eq!(&buf[..n], &F32_FRAME);
 
     let n = emit_values(FrameKind::Displacements, 7, Values::F64(&[0.1]), &mut buf).unwrap();
@@ -108,7 +114,11 @@ fn unknown_kind_parses_as_unknown() {
 fn malformed_frames_are_rejected_with_the_right_error() {
     // Every proper prefix of a valid frame is truncated.
     for cut in 0..F32_FRAME.len() {
-        assert_eq!(FrameRepr::parse_bytes(&F32_FRAME[..cut]), Err(Error::Truncated), "cut {cut}");
+        assert_eq!(
+            FrameRepr::parse_bytes(&F32_FRAME[..cut]),
+            Err(Error::Truncated),
+            "cut {cut}"
+        );
     }
     // A trailing byte.
     let mut long = F32_FRAME.to_vec();
@@ -145,7 +155,10 @@ fn emit_rejects_oversized_and_short_buffers() {
     );
     let max = vec![1.5f64; VALUES_PER_FRAME_MAX];
     let n = emit_values(FrameKind::Forces, 0, Values::F64(&max), &mut buf).unwrap();
-    assert_eq!(n, FRAME_LEN_MAX, "the largest frame is exactly FRAME_LEN_MAX");
+    assert_eq!(
+        n, FRAME_LEN_MAX,
+        "the largest frame is exactly FRAME_LEN_MAX"
+    );
     assert!(FrameRepr::parse_bytes(&buf[..n]).is_ok());
     let mut short = [0u8; FRAME_LEN_MIN + 3];
     assert_eq!(
@@ -165,7 +178,10 @@ fn assert_every_bit_flip_detected(frame: &[u8]) {
     let mut buf = frame.to_vec();
     for bit in 0..frame.len() * 8 {
         buf[bit / 8] ^= 1 << (bit % 8);
-        assert!(FrameRepr::parse_bytes(&buf).is_err(), "flip of bit {bit} not detected");
+        assert!(
+            FrameRepr::parse_bytes(&buf).is_err(),
+            "flip of bit {bit} not detected"
+        );
         buf[bit / 8] ^= 1 << (bit % 8);
     }
     assert!(FrameRepr::parse_bytes(&buf).is_ok());
@@ -182,9 +198,17 @@ fn every_single_bit_flip_is_detected() {
     assert_every_bit_flip_detected(&EMPTY_FRAME);
     let mut buf = vec![0u8; FRAME_LEN_MAX];
     let vals: Vec<f64> = (0..300).map(|i| i as f64 * 0.37 - 20.0).collect();
-    let n = emit_values(FrameKind::Displacements, 123_456, Values::F64(&vals), &mut buf).unwrap();
+    let n = emit_values(
+        FrameKind::Displacements,
+        123_456,
+        Values::F64(&vals),
+        &mut buf,
+    )
+    .unwrap();
     assert_every_bit_flip_detected(&buf[..n]);
-    let vals: Vec<f32> = (0..VALUES_PER_FRAME_MAX).map(|i| i as f32 * -1.25).collect();
+    let vals: Vec<f32> = (0..VALUES_PER_FRAME_MAX)
+        .map(|i| i as f32 * -1.25)
+        .collect();
     let n = emit_values(FrameKind::Forces, 9, Values::F32(&vals), &mut buf).unwrap();
     assert_every_bit_flip_detected(&buf[..n]);
 }

@@ -86,7 +86,13 @@ fn kind_codes() {
         }
     }
     let mut buf = [0u8; 32];
-    let r = PacketRepr { dst: 1, src: 2, msg_id: 3, kind: PacketKind::Unknown(0x99), payload: &[1] };
+    let r = PacketRepr {
+        dst: 1,
+        src: 2,
+        msg_id: 3,
+        kind: PacketKind::Unknown(0x99),
+        payload: &[1],
+    };
     let n = r.emit(&mut buf).unwrap();
     assert_eq!(PacketRepr::parse_bytes(&buf[..n]), Ok(r));
 }
@@ -98,7 +104,11 @@ fn kind_codes() {
 #[test]
 fn malformed_packets_are_rejected_with_the_right_error() {
     for cut in 0..SURFACE.len() {
-        assert_eq!(PacketRepr::parse_bytes(&SURFACE[..cut]), Err(Error::Truncated), "cut {cut}");
+        assert_eq!(
+            PacketRepr::parse_bytes(&SURFACE[..cut]),
+            Err(Error::Truncated),
+            "cut {cut}"
+        );
     }
     let mut long = SURFACE.to_vec();
     long.push(0);
@@ -106,7 +116,10 @@ fn malformed_packets_are_rejected_with_the_right_error() {
     let mut big = SURFACE.to_vec();
     big[6..8].copy_from_slice(&((PACKET_PAYLOAD_LEN_MAX + 1) as u16).to_le_bytes());
     assert_eq!(PacketRepr::parse_bytes(&big), Err(Error::Oversized));
-    assert_eq!(PacketRepr::parse_bytes(&vec![0u8; PACKET_LEN_MAX + 1]), Err(Error::Oversized));
+    assert_eq!(
+        PacketRepr::parse_bytes(&vec![0u8; PACKET_LEN_MAX + 1]),
+        Err(Error::Oversized)
+    );
     let mut crc = SURFACE.to_vec();
     crc[9] ^= 1;
     assert_eq!(PacketRepr::parse_bytes(&crc), Err(Error::BadCrc));
@@ -115,7 +128,10 @@ fn malformed_packets_are_rejected_with_the_right_error() {
     v2[5] = 2;
     let mut p = Packet::new_unchecked(&mut v2[..]);
     p.fill_crc();
-    assert_eq!(PacketRepr::parse_bytes(&v2), Err(Error::UnsupportedVersion(2)));
+    assert_eq!(
+        PacketRepr::parse_bytes(&v2),
+        Err(Error::UnsupportedVersion(2))
+    );
 }
 
 // Property: emit refuses payloads past the maximum and short buffers, no panic.
@@ -123,18 +139,33 @@ fn malformed_packets_are_rejected_with_the_right_error() {
 fn emit_rejects_oversized_and_short_buffers() {
     let payload = vec![7u8; PACKET_PAYLOAD_LEN_MAX + 1];
     let mut buf = vec![0u8; PACKET_LEN_MAX * 2];
-    let r = PacketRepr { dst: 0, src: 1, msg_id: 0, kind: PacketKind::FaultReport, payload: &payload };
+    let r = PacketRepr {
+        dst: 0,
+        src: 1,
+        msg_id: 0,
+        kind: PacketKind::FaultReport,
+        payload: &payload,
+    };
     assert_eq!(r.emit(&mut buf), Err(Error::Oversized));
-    let r = PacketRepr { payload: &payload[..PACKET_PAYLOAD_LEN_MAX], ..r };
+    let r = PacketRepr {
+        payload: &payload[..PACKET_PAYLOAD_LEN_MAX],
+        ..r
+    };
     assert_eq!(r.emit(&mut buf), Ok(PACKET_LEN_MAX));
-    assert_eq!(r.emit(&mut buf[..PACKET_LEN_MAX - 1]), Err(Error::BufferTooSmall));
+    assert_eq!(
+        r.emit(&mut buf[..PACKET_LEN_MAX - 1]),
+        Err(Error::BufferTooSmall)
+    );
 }
 
 fn assert_every_bit_flip_detected(packet: &[u8]) {
     let mut buf = packet.to_vec();
     for bit in 0..packet.len() * 8 {
         buf[bit / 8] ^= 1 << (bit % 8);
-        assert!(PacketRepr::parse_bytes(&buf).is_err(), "flip of bit {bit} not detected");
+        assert!(
+            PacketRepr::parse_bytes(&buf).is_err(),
+            "flip of bit {bit} not detected"
+        );
         buf[bit / 8] ^= 1 << (bit % 8);
     }
     assert!(PacketRepr::parse_bytes(&buf).is_ok());
@@ -147,7 +178,9 @@ fn assert_every_bit_flip_detected(packet: &[u8]) {
 fn every_single_bit_flip_is_detected() {
     assert_every_bit_flip_detected(&SURFACE);
     assert_every_bit_flip_detected(&START);
-    let payload: Vec<u8> = (0..PACKET_PAYLOAD_LEN_MAX).map(|i| (i * 31 % 251) as u8).collect();
+    let payload: Vec<u8> = (0..PACKET_PAYLOAD_LEN_MAX)
+        .map(|i| (i * 31 % 251) as u8)
+        .collect();
     let mut buf = vec![0u8; PACKET_LEN_MAX];
     for len in [1, 100, PACKET_PAYLOAD_LEN_MAX] {
         let r = PacketRepr {
