@@ -274,7 +274,7 @@ impl<'a> Payload<'a> {
     /// length is not a multiple of the width, [`Error::Oversized`] if there are
     /// more than [`VALUES_PER_FRAME_MAX`] values.
     pub fn new(precision: Precision, bytes: &'a [u8]) -> Result<Self> {
-        if bytes.len() % precision.width() != 0 {
+        if !bytes.chunks_exact(precision.width()).remainder().is_empty() {
             return Err(Error::BadLength);
         }
         if bytes.len() / precision.width() > VALUES_PER_FRAME_MAX {
