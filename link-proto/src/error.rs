@@ -41,3 +41,5 @@ impl fmt::Display for Error {
 
 /// Result with this crate's [`Error`].
 pub type Result<T> = core::result::Result<T, Error>;
+
+impl core::error::Error for Error {}

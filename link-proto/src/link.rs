@@ -178,6 +178,9 @@ impl fmt::Display for SendError {
     }
 }
 
+impl core::error::Error for SendError {}
+impl core::error::Error for RecvError {}
+
 impl fmt::Display for RecvError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
@@ -214,4 +217,26 @@ pub trait Links {
     /// Moves queued bytes along without sending or receiving a new frame, for
     /// firmware that computes between sends. Default: nothing to do.
     fn poll(&mut self) {}
+}
+
+impl<L: Links + ?Sized> Links for &mut L {
+    fn try_send(&mut self, face: Face, frame: &[u8]) -> Result<(), SendError> {
+        (**self).try_send(face, frame)
+    }
+
+    fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        (**self).try_recv(face, buf)
+    }
+
+    fn try_send_global(&mut self, packet: &[u8]) -> Result<(), SendError> {
+        (**self).try_send_global(packet)
+    }
+
+    fn try_recv_global(&mut self, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        (**self).try_recv_global(buf)
+    }
+
+    fn poll(&mut self) {
+        (**self).poll()
+    }
 }

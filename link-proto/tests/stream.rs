@@ -279,3 +279,30 @@ fn corrupted_bytes_on_the_wire_cost_one_frame() {
     assert_eq!(steps, vec![2]);
     assert_eq!(damaged, 1);
 }
+
+/// Firmware-style code written against the trait only (as a trait object, so
+/// board-sim's emulated links can be swapped in).
+fn exchange_step(links: &mut dyn Links, face: Face, step: u32, buf: &mut [u8]) -> Option<u32> {
+    let f = forces_frame(step, 9);
+    links.try_send(face, &f).ok()?;
+    links.poll();
+    let n = links.try_recv(face, buf).ok()??;
+    FrameRepr::parse_bytes(&buf[..n]).ok().map(|r| r.step)
+}
+
+// Property: the trait is object-safe and `&mut L` forwards to `L`; a
+// lockstep exchange through `dyn Links` delivers each side's frame to the
+// other.
+#[test]
+fn lockstep_exchange_through_dyn_links() {
+    let (mut a, mut b, _, _) = two_boards(1 << 16, 1 << 16);
+    let mut buf = vec![0u8; FRAME_LEN_MAX];
+    // A sends first (nothing to receive yet), B then sends and receives A's.
+    assert_eq!(exchange_step(&mut *a, Face::PosX, 10, &mut buf), None);
+    assert_eq!(
+        exchange_step(&mut &mut *b, Face::NegX, 20, &mut buf),
+        Some(10)
+    );
+    let n = a.try_recv(Face::PosX, &mut buf).unwrap().unwrap();
+    assert_eq!(FrameRepr::parse_bytes(&buf[..n]).unwrap().step, 20);
+}
