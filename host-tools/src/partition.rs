@@ -1,0 +1,156 @@
+//! Partitioning the elements onto a logical X×Y×Z board mesh.
+//!
+//! Board coordinates are logical (the seed's Fig. 2): elements are sorted by centroid into
+//! X slabs along x with equal counts, each slab into Y columns along y, each column into Z
+//! boards along z, so every board gets the same number of elements (±1) and neighbouring
+//! boards hold neighbouring tissue.
+//!
+//! The dimension-ordered force summation needs every node's boards to lie within two
+//! adjacent boards along each axis (a node shared by boards two apart would need a relay
+//! through the board between). Thin boards can break that; a repair pass then moves the
+//! offending elements to the middle board, a few at a time, until no node spans more than
+//! two boards per axis. If that fails, the error names the node and its boards.
+
+use anyhow::{bail, Result};
+
+use crate::mesh::Mesh;
+
+/// Machine size (boards per axis).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Machine {
+    pub dims: [usize; 3],
+}
+
+impl Machine {
+    pub fn parse(s: &str) -> Result<Machine> {
+        let parts: Vec<&str> = s.split(['x', 'X']).collect();
+        let dims: Vec<usize> = parts.iter().filter_map(|p| p.trim().parse().ok()).collect();
+        if parts.len() != 3 || dims.len() != 3 || dims.iter().any(|&d| d == 0 || d > 16) {
+            bail!("--boards {s:?}: expected X x Y x Z with 1..16 boards per axis, e.g. 4x4x4");
+        }
+        Ok(Machine { dims: [dims[0], dims[1], dims[2]] })
+    }
+    pub fn count(&self) -> usize {
+        self.dims.iter().product()
+    }
+    /// Linear index of board coordinates (x fastest).
+    pub fn index(&self, c: [usize; 3]) -> usize {
+        c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])
+    }
+    pub fn coords(&self, i: usize) -> [usize; 3] {
+        [i % self.dims[0], (i / self.dims[0]) % self.dims[1], i / (self.dims[0] * self.dims[1])]
+    }
+}
+
+impl std::fmt::Display for Machine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}x{}x{}", self.dims[0], self.dims[1], self.dims[2])
+    }
+}
+
+/// Splits `items` (sorted by key) into `parts` runs of equal length (±1).
+fn split_even<T: Copy>(items: &[T], parts: usize) -> Vec<Vec<T>> {
+    (0..parts)
+        .map(|p| items[p * items.len() / parts..(p + 1) * items.len() / parts].to_vec())
+        .collect()
+}
+
+fn centroid(mesh: &Mesh, e: usize) -> [f64; 3] {
+    let mut c = [0.0; 3];
+    for &n in &mesh.cells[e] {
+        for (i, v) in mesh.nodes[n as usize].iter().enumerate() {
+            c[i] += v / 8.0;
+        }
+    }
+    c
+}
+
+/// Board (linear index) of every element.
+pub fn partition(mesh: &Mesh, machine: Machine) -> Result<Vec<u32>> {
+    let n = mesh.cells.len();
+    if n < machine.count() {
+        bail!("{} elements cannot fill {} boards ({machine}): every board needs at least one", n, machine.count());
+    }
+    let cents: Vec<[f64; 3]> = (0..n).map(|e| centroid(mesh, e)).collect();
+    let sorted = |mut v: Vec<usize>, axis: usize| {
+        v.sort_by(|&a, &b| cents[a][axis].total_cmp(&cents[b][axis]).then(a.cmp(&b)));
+        v
+    };
+    let mut board = vec![0u32; n];
+    let all = sorted((0..n).collect(), 0);
+    for (x, slab) in split_even(&all, machine.dims[0]).into_iter().enumerate() {
+        for (y, col) in split_even(&sorted(slab, 1), machine.dims[1]).into_iter().enumerate() {
+            for (z, part) in split_even(&sorted(col, 2), machine.dims[2]).into_iter().enumerate() {
+                let b = machine.index([x, y, z]) as u32;
+                for e in part {
+                    board[e] = b;
+                }
+            }
+        }
+    }
+    repair(mesh, machine, &mut board)?;
+    Ok(board)
+}
+
+/// Elements around each node.
+pub fn node_elements(mesh: &Mesh) -> Vec<Vec<u32>> {
+    let mut v = vec![Vec::new(); mesh.nodes.len()];
+    for (e, c) in mesh.cells.iter().enumerate() {
+        for &n in c {
+            v[n as usize].push(e as u32);
+        }
+    }
+    v
+}
+
+/// Boards (coordinates) whose elements touch node `n`, min and max along each axis.
+pub fn node_board_range(machine: Machine, board: &[u32], around: &[u32]) -> ([usize; 3], [usize; 3]) {
+    let mut lo = [usize::MAX; 3];
+    let mut hi = [0; 3];
+    for &e in around {
+        let c = machine.coords(board[e as usize] as usize);
+        for a in 0..3 {
+            lo[a] = lo[a].min(c[a]);
+            hi[a] = hi[a].max(c[a]);
+        }
+    }
+    (lo, hi)
+}
+
+fn repair(mesh: &Mesh, machine: Machine, board: &mut [u32]) -> Result<()> {
+    let around = node_elements(mesh);
+    for _round in 0..200 {
+        let mut moved = 0;
+        for els in around.iter() {
+            let (lo, hi) = node_board_range(machine, board, els);
+            for a in 0..3 {
+                if hi[a] > lo[a] + 1 {
+                    // Pull the elements beyond lo+1 one board back towards lo.
+                    for &e in els {
+                        let mut c = machine.coords(board[e as usize] as usize);
+                        if c[a] > lo[a] + 1 {
+                            c[a] -= 1;
+                            board[e as usize] = machine.index(c) as u32;
+                            moved += 1;
+                        }
+                    }
+                    break;
+                }
+            }
+        }
+        if moved == 0 {
+            return Ok(());
+        }
+    }
+    for (n, els) in around.iter().enumerate() {
+        let (lo, hi) = node_board_range(machine, board, els);
+        if (0..3).any(|a| hi[a] > lo[a] + 1) {
+            bail!(
+                "node {} is shared by boards from {lo:?} to {hi:?}: more than two adjacent boards along an axis, which the dimension-ordered exchange cannot sum; use fewer boards ({machine} is too fine for {} elements here)",
+                mesh.node_tags.get(n).copied().unwrap_or(n as u64),
+                mesh.cells.len()
+            );
+        }
+    }
+    Ok(())
+}
