@@ -31,6 +31,14 @@ use crate::problem::{NodeKind, Problem};
 /// Faces in image order.
 pub const FACE_NAMES: [&str; 6] = ["+x", "-x", "+y", "-y", "+z", "-z"];
 
+/// One exchange round of one axis on one board: per face (+axis, −axis) the global nodes to
+/// send and to receive (with how to combine), in wire order (ascending global id).
+#[derive(Clone, Debug, Default)]
+pub struct RoundPlan {
+    pub send: [Vec<u32>; 2],
+    pub recv: [Vec<(u32, Combine)>; 2],
+}
+
 /// One board's part of the schedule, in global numbering.
 #[derive(Clone, Debug)]
 pub struct BoardPlan {
@@ -43,8 +51,10 @@ pub struct BoardPlan {
     pub nodes: Vec<u32>,
     /// Whether this board owns each local node.
     pub owner: Vec<bool>,
-    /// Global node ids exchanged across each face, in wire order.
+    /// Distinct global nodes exchanged across each face (+x, −x, +y, −y, +z, −z).
     pub exchange: [Vec<u32>; 6],
+    /// Exchange rounds per axis.
+    pub rounds: [Vec<RoundPlan>; 3],
     /// Stage (0 = x, 1 = y, 2 = z, 3 = before the update) at which each owned node's
     /// external force is added; `u8::MAX` for nodes this board does not own.
     pub ext_stage: Vec<u8>,
@@ -57,7 +67,53 @@ pub struct Plan {
     pub element_board: Vec<u32>,
     /// Owner board of every node.
     pub node_owner: Vec<u32>,
+    pub rounds: [usize; 3],
     pub boards: Vec<BoardPlan>,
+}
+
+/// One transfer of a node's value along an axis line: in `round`, from line position
+/// `from` to `to` (adjacent), combined at the receiver by `combine`.
+struct Transfer {
+    round: usize,
+    from: usize,
+    to: usize,
+    combine: Combine,
+}
+
+/// The summation tree of a node held by `m + 1` boards in a line (positions 0..=m).
+/// Two boards: one symmetric exchange (`p0 + p1` on both, exact since `a + b = b + a`).
+/// More: reduce towards the middle board `r = m/2` (left prefix sums `((p0 + p1) + …)`, right
+/// suffix sums), the middle forms `(left + p_r) + right`, then broadcasts the total back.
+fn line_transfers(m: usize) -> Vec<Transfer> {
+    let t = |round, from, to, combine| Transfer { round, from, to, combine };
+    if m == 1 {
+        return vec![t(0, 0, 1, Combine::Before), t(0, 1, 0, Combine::After)];
+    }
+    let root = m / 2;
+    let reduce = m - root;
+    let mut v = Vec::new();
+    for i in 0..root {
+        v.push(t(i, i, i + 1, Combine::Before));
+    }
+    for j in root + 1..=m {
+        v.push(t(m - j, j, j - 1, Combine::After));
+    }
+    for d in 1..=root {
+        v.push(t(reduce + d - 1, root - d + 1, root - d, Combine::Replace));
+    }
+    for d in 1..=m - root {
+        v.push(t(reduce + d - 1, root + d - 1, root + d, Combine::Replace));
+    }
+    v
+}
+
+/// Rounds the line of `m + 1` boards needs.
+pub fn line_rounds(m: usize) -> usize {
+    match m {
+        0 => 0,
+        1 => 1,
+        _ => 2 * (m - m / 2),
+    }
 }
 
 pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
@@ -65,6 +121,20 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
     let element_board = partition(mesh, machine)?;
     let around = node_elements(mesh);
     let nb = machine.count();
+    let mut node_box = Vec::with_capacity(mesh.nodes.len());
+    let mut rounds = [0usize; 3];
+    let mut node_owner = vec![0u32; mesh.nodes.len()];
+    for (n, els) in around.iter().enumerate() {
+        if els.is_empty() {
+            bail!("node {} of mesh {} belongs to no cell", mesh.node_tags[n], mesh.source);
+        }
+        let (lo, hi) = node_board_range(machine, &element_board, els);
+        for a in 0..3 {
+            rounds[a] = rounds[a].max(line_rounds(hi[a] - lo[a]));
+        }
+        node_owner[n] = els.iter().map(|&e| element_board[e as usize]).min().unwrap_or(0);
+        node_box.push((lo, hi));
+    }
     let mut boards: Vec<BoardPlan> = (0..nb)
         .map(|b| BoardPlan {
             coords: machine.coords(b),
@@ -73,31 +143,43 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
             nodes: Vec::new(),
             owner: Vec::new(),
             exchange: Default::default(),
+            rounds: core::array::from_fn(|a| vec![RoundPlan::default(); rounds[a]]),
             ext_stage: Vec::new(),
         })
         .collect();
-    let mut node_owner = vec![0u32; mesh.nodes.len()];
-    for (n, els) in around.iter().enumerate() {
-        if els.is_empty() {
-            bail!("node {} of mesh {} belongs to no cell", mesh.node_tags[n], mesh.source);
-        }
-        let (lo, hi) = node_board_range(machine, &element_board, els);
-        let owner = els.iter().map(|&e| element_board[e as usize]).min().unwrap_or(0);
-        node_owner[n] = owner;
+    let trees: Vec<Vec<Transfer>> = (0..machine.dims.iter().copied().max().unwrap_or(1)).map(line_transfers_or_empty).collect();
+    for (n, &(lo, hi)) in node_box.iter().enumerate() {
+        let n32 = n as u32;
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
                 for x in lo[0]..=hi[0] {
-                    let c = [x, y, z];
-                    let b = machine.index(c);
-                    boards[b].nodes.push(n as u32);
-                    boards[b].owner.push(b as u32 == owner);
-                    for a in 0..3 {
-                        if c[a] < hi[a] {
-                            let mut d = c;
-                            d[a] += 1;
-                            boards[b].exchange[2 * a].push(n as u32);
-                            boards[machine.index(d)].exchange[2 * a + 1].push(n as u32);
-                        }
+                    let b = machine.index([x, y, z]);
+                    boards[b].nodes.push(n32);
+                    boards[b].owner.push(b as u32 == node_owner[n]);
+                }
+            }
+        }
+        for a in 0..3 {
+            let m = hi[a] - lo[a];
+            if m == 0 {
+                continue;
+            }
+            // Every line of the box along axis a runs the same tree.
+            let (o1, o2) = ((a + 1) % 3, (a + 2) % 3);
+            for p in lo[o1]..=hi[o1] {
+                for q in lo[o2]..=hi[o2] {
+                    let at = |t: usize| {
+                        let mut c = [0; 3];
+                        c[a] = lo[a] + t;
+                        c[o1] = p;
+                        c[o2] = q;
+                        machine.index(c)
+                    };
+                    for tr in &trees[m] {
+                        // face index within the axis: 0 = +axis, 1 = −axis
+                        let (send_face, recv_face) = if tr.to > tr.from { (0, 1) } else { (1, 0) };
+                        boards[at(tr.from)].rounds[a][tr.round].send[send_face].push(n32);
+                        boards[at(tr.to)].rounds[a][tr.round].recv[recv_face].push((n32, tr.combine));
                     }
                 }
             }
@@ -107,6 +189,17 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
         boards[b as usize].elements.push(e as u32);
     }
     for bp in &mut boards {
+        for a in 0..3 {
+            for f in 0..2 {
+                let mut all: Vec<u32> = bp.rounds[a]
+                    .iter()
+                    .flat_map(|r| r.send[f].iter().copied().chain(r.recv[f].iter().map(|x| x.0)))
+                    .collect();
+                all.sort_unstable();
+                all.dedup();
+                bp.exchange[2 * a + f] = all;
+            }
+        }
         let axis_nodes: [std::collections::HashSet<u32>; 3] = core::array::from_fn(|a| {
             bp.exchange[2 * a].iter().chain(&bp.exchange[2 * a + 1]).copied().collect()
         });
@@ -124,16 +217,18 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
             .nodes
             .iter()
             .zip(&bp.owner)
-            .map(|(n, own)| {
-                if !own {
-                    u8::MAX
-                } else {
-                    (0..3).find(|&a| axis_nodes[a].contains(n)).unwrap_or(3) as u8
-                }
-            })
+            .map(|(n, own)| if !own { u8::MAX } else { (0..3).find(|&a| axis_nodes[a].contains(n)).unwrap_or(3) as u8 })
             .collect();
     }
-    Ok(Plan { machine, element_board, node_owner, boards })
+    Ok(Plan { machine, element_board, node_owner, rounds, boards })
+}
+
+fn line_transfers_or_empty(m: usize) -> Vec<Transfer> {
+    if m == 0 {
+        Vec::new()
+    } else {
+        line_transfers(m)
+    }
 }
 
 /// Bytes of RAM the runtime needs for a board's image contents and state.
@@ -146,7 +241,7 @@ pub fn runtime_ram_bytes(h: &ImageHeader) -> u64 {
         Integration::Full => 32 + 8 + w * 8 * (24 + 1),
     };
     let node = 8 + w * 4 + 8 /* record */ + w * 9 /* u, u_prev, f */;
-    let exchange: u64 = c.exchange.iter().map(|&x| x as u64 * 2).sum();
+    let exchange: u64 = (c.sends as u64) * 2 + (c.recvs as u64) * 4;
     let link_buffers = 6 * 2 * (12 + 3 * w * link_proto::BORDER_NODES_PER_FACE_MAX as u64);
     c.elements as u64 * element
         + c.nodes as u64 * node
@@ -225,6 +320,9 @@ fn write_image<T: Real + Serialize>(problem: &Problem, plan: &Plan, b: usize) ->
             batch_ends: bp.batch_ends.map(|e| e as u32),
             nodes: bp.nodes.len() as u32,
             exchange: core::array::from_fn(|f| bp.exchange[f].len() as u16),
+            rounds: plan.rounds.map(|r| r as u8),
+            sends: bp.rounds.iter().flatten().map(|r| r.send[0].len() + r.send[1].len()).sum::<usize>() as u32,
+            recvs: bp.rounds.iter().flatten().map(|r| r.recv[0].len() + r.recv[1].len()).sum::<usize>() as u32,
             path_points: points.len() as u16,
             loads: loads.len() as u16,
         },
@@ -275,9 +373,18 @@ fn write_image<T: Real + Serialize>(problem: &Problem, plan: &Plan, b: usize) ->
         w.push(&rec).map_err(err)?;
         w.push(&bp.ext_stage[k]).map_err(err)?;
     }
-    for list in &bp.exchange {
-        for &n in list {
-            w.push(&lid(n)?).map_err(err)?;
+    for axis in &bp.rounds {
+        for round in axis {
+            for f in 0..2 {
+                w.push(&(round.send[f].len() as u16)).map_err(err)?;
+                for &n in &round.send[f] {
+                    w.push(&lid(n)?).map_err(err)?;
+                }
+                w.push(&(round.recv[f].len() as u16)).map_err(err)?;
+                for &(n, combine) in &round.recv[f] {
+                    w.push(&RecvEntry { node: lid(n)?, combine }).map_err(err)?;
+                }
+            }
         }
     }
     for p in &points {
@@ -358,4 +465,346 @@ pub fn write_images(dir: &Path, images: &[BoardImage]) -> Result<()> {
 
 pub fn image_file_name(c: [usize; 3]) -> String {
     format!("board-{}-{}-{}.bin", c[0], c[1], c[2])
+}
+
+/// Figures of a compiled schedule (`DIR/report.json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct CompileReport {
+    pub scene: String,
+    pub machine: String,
+    /// Exchange rounds per axis (1 where every node spans at most two boards).
+    pub rounds: [usize; 3],
+    pub profile: String,
+    pub precision: String,
+    pub integration: String,
+    pub dt_s: f64,
+    pub steps_per_s: f64,
+    pub elements: usize,
+    pub nodes: usize,
+    pub elements_per_board: Vec<usize>,
+    pub nodes_per_board: Vec<usize>,
+    /// max / mean elements per board.
+    pub load_imbalance: f64,
+    /// Node copies beyond one per node (replicas), in all.
+    pub replicated_nodes: usize,
+    pub border_nodes_per_face_max: [usize; 6],
+    /// Force vectors sent per step, all links, both directions.
+    pub force_vectors_per_step: usize,
+    /// Force vectors per step on the busiest link direction.
+    pub force_vectors_per_link_max: usize,
+    pub bytes_per_step_per_link_max: usize,
+    pub bytes_per_step_total: usize,
+    /// Bandwidth needed at the scene's step rate (bytes/s).
+    pub bandwidth_total_bytes_per_s: f64,
+    pub bandwidth_per_link_max_bytes_per_s: f64,
+    pub link_bandwidth_bytes_per_s: u64,
+    /// Fraction of a step the busiest link is busy at the scene's step rate.
+    pub link_utilisation_max: f64,
+    pub image_bytes_max: usize,
+    pub ram_bytes_max: u64,
+    pub boards: Vec<BoardSummary>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct BoardSummary {
+    pub board: [usize; 3],
+    pub file: String,
+    pub elements: usize,
+    pub batches: [usize; 4],
+    pub nodes: usize,
+    pub owned_nodes: usize,
+    pub exchange: [usize; 6],
+    pub image_bytes: usize,
+    pub ram_bytes: u64,
+}
+
+pub fn report(
+    scene: &str,
+    problem: &Problem,
+    plan: &Plan,
+    images: &[BoardImage],
+    profile: &BoardProfile,
+) -> Result<CompileReport> {
+    let (dt, _) = problem.time_step()?;
+    let w = if problem.solver.precision == "f32" { 4 } else { 8 };
+    let epb: Vec<usize> = plan.boards.iter().map(|b| b.elements.len()).collect();
+    let npb: Vec<usize> = plan.boards.iter().map(|b| b.nodes.len()).collect();
+    let mean = epb.iter().sum::<usize>() as f64 / epb.len() as f64;
+    // Values sent per link direction per step, over all rounds (one frame per round).
+    let per_link: Vec<usize> = plan
+        .boards
+        .iter()
+        .flat_map(|b| (0..6).map(move |f| b.rounds[f / 2].iter().map(|r| r.send[f % 2].len()).sum::<usize>()))
+        .collect();
+    let frames_per_link: Vec<usize> = plan
+        .boards
+        .iter()
+        .flat_map(|b| (0..6).map(move |f| b.rounds[f / 2].iter().filter(|r| !r.send[f % 2].is_empty()).count()))
+        .collect();
+    let vectors: usize = per_link.iter().sum();
+    let link_max = per_link.iter().copied().max().unwrap_or(0);
+    let overhead = link_proto::FRAME_HEADER_LEN + link_proto::CRC_LEN;
+    let link_bytes: Vec<usize> = per_link.iter().zip(&frames_per_link).map(|(&n, &f)| 3 * w * n + f * overhead).collect();
+    let frame_bytes_max = link_bytes.iter().copied().max().unwrap_or(0);
+    let bytes_total: usize = link_bytes.iter().sum();
+    let rate = 1.0 / dt;
+    let boards = plan
+        .boards
+        .iter()
+        .zip(images)
+        .map(|(b, im)| BoardSummary {
+            board: b.coords,
+            file: image_file_name(b.coords),
+            elements: b.elements.len(),
+            batches: [
+                b.batch_ends[0],
+                b.batch_ends[1] - b.batch_ends[0],
+                b.batch_ends[2] - b.batch_ends[1],
+                b.batch_ends[3] - b.batch_ends[2],
+            ],
+            nodes: b.nodes.len(),
+            owned_nodes: b.owner.iter().filter(|o| **o).count(),
+            exchange: core::array::from_fn(|f| b.exchange[f].len()),
+            image_bytes: im.bytes.len(),
+            ram_bytes: im.ram_bytes,
+        })
+        .collect();
+    Ok(CompileReport {
+        scene: scene.to_string(),
+        machine: plan.machine.to_string(),
+        rounds: plan.rounds,
+        profile: profile.name.to_string(),
+        precision: problem.solver.precision.clone(),
+        integration: problem.solver.integration.clone(),
+        dt_s: dt,
+        steps_per_s: rate,
+        elements: problem.mesh.cells.len(),
+        nodes: problem.mesh.nodes.len(),
+        load_imbalance: epb.iter().copied().max().unwrap_or(0) as f64 / mean,
+        elements_per_board: epb,
+        replicated_nodes: npb.iter().sum::<usize>() - problem.mesh.nodes.len(),
+        nodes_per_board: npb,
+        border_nodes_per_face_max: core::array::from_fn(|f| plan.boards.iter().map(|b| b.exchange[f].len()).max().unwrap_or(0)),
+        force_vectors_per_step: vectors,
+        force_vectors_per_link_max: link_max,
+        bytes_per_step_per_link_max: frame_bytes_max,
+        bytes_per_step_total: bytes_total,
+        bandwidth_total_bytes_per_s: bytes_total as f64 * rate,
+        bandwidth_per_link_max_bytes_per_s: frame_bytes_max as f64 * rate,
+        link_bandwidth_bytes_per_s: profile.link_bytes_per_s,
+        link_utilisation_max: frame_bytes_max as f64 * rate / profile.link_bytes_per_s as f64,
+        image_bytes_max: images.iter().map(|i| i.bytes.len()).max().unwrap_or(0),
+        ram_bytes_max: images.iter().map(|i| i.ram_bytes).max().unwrap_or(0),
+        boards,
+    })
+}
+
+/// The readable summary printed by `pe compile`.
+pub fn summary(r: &CompileReport) -> String {
+    let min = r.elements_per_board.iter().min().copied().unwrap_or(0);
+    let max = r.elements_per_board.iter().max().copied().unwrap_or(0);
+    let mut s = String::new();
+    s += &format!("{}: {} elements, {} nodes on {} boards ({}), {} {}\n", r.scene, r.elements, r.nodes, r.elements_per_board.len(), r.machine, r.precision, r.integration);
+    s += &format!("  elements per board {min}..{max} (imbalance max/mean {:.3}); nodes per board {}..{}; {} replicas\n",
+        r.load_imbalance, r.nodes_per_board.iter().min().copied().unwrap_or(0), r.nodes_per_board.iter().max().copied().unwrap_or(0), r.replicated_nodes);
+    s += &format!("  exchange rounds per step: x {}, y {}, z {}\n", r.rounds[0], r.rounds[1], r.rounds[2]);
+    s += &format!("  border nodes per face (max over boards): +x {} -x {} +y {} -y {} +z {} -z {}\n",
+        r.border_nodes_per_face_max[0], r.border_nodes_per_face_max[1], r.border_nodes_per_face_max[2],
+        r.border_nodes_per_face_max[3], r.border_nodes_per_face_max[4], r.border_nodes_per_face_max[5]);
+    s += &format!("  force vectors per step: {} in all, {} on the busiest link direction\n", r.force_vectors_per_step, r.force_vectors_per_link_max);
+    s += &format!("  bytes per step: {} in all, {} on the busiest link; at dt = {:.3e} s ({:.0} steps/s): {:.3} GB/s in all, {:.1} MB/s on the busiest link ({:.0}% of its {:.0} MB/s)\n",
+        r.bytes_per_step_total, r.bytes_per_step_per_link_max, r.dt_s, r.steps_per_s, r.bandwidth_total_bytes_per_s / 1e9,
+        r.bandwidth_per_link_max_bytes_per_s / 1e6, 100.0 * r.link_utilisation_max, r.link_bandwidth_bytes_per_s as f64 / 1e6);
+    s += &format!("  largest image {} bytes, largest run-time state {} bytes ({} profile)\n", r.image_bytes_max, r.ram_bytes_max, r.profile);
+    s += "  seed's reference case: 2000 elements on 4x4x4 boards at dt = 100 us: 5600 force vectors per step, 1.35 GB/s in all\n";
+    s += &format!("  this scene at dt = 100 us: {} force vectors per step, {:.3} GB/s in all\n", r.force_vectors_per_step, r.bytes_per_step_total as f64 * 1e4 / 1e9);
+    s
+}
+
+/// One decoded exchange round (local node indices).
+#[derive(Clone, Debug, Default)]
+pub struct DecodedRound {
+    pub send: [Vec<u16>; 2],
+    pub recv: [Vec<RecvEntry>; 2],
+}
+
+/// An image decoded on the host (for `pe inspect` and tests), elements as `f64`.
+#[derive(Clone, Debug)]
+pub struct DecodedImage {
+    pub header: ImageHeader,
+    pub materials: Vec<MaterialLaw<f64>>,
+    /// Element node lists (local indices).
+    pub element_nodes: Vec<[u32; 8]>,
+    pub nodes: Vec<NodeRecord<f64>>,
+    pub ext_stage: Vec<u8>,
+    /// Exchange rounds per axis: per face (+axis, −axis) the sends and receives.
+    pub rounds: [Vec<DecodedRound>; 3],
+    pub path_points: Vec<PathPoint>,
+    pub loads: Vec<LoadRecord>,
+}
+
+fn decode_typed<T: Real + serde::de::DeserializeOwned>(mut r: ImageReader<'_>) -> Result<DecodedImage, ImageError> {
+    use pe_firmware::physics::{HexElement, HexFull, HexReduced};
+    let h = r.header;
+    let c = h.counts;
+    let mut d = DecodedImage {
+        header: h,
+        materials: Vec::new(),
+        element_nodes: Vec::new(),
+        nodes: Vec::new(),
+        ext_stage: Vec::new(),
+        rounds: Default::default(),
+        path_points: Vec::new(),
+        loads: Vec::new(),
+    };
+    for _ in 0..c.materials {
+        d.materials.push(r.next("material")?);
+    }
+    for _ in 0..c.elements {
+        let nodes = match h.integration {
+            Integration::Reduced => *r.next::<HexReduced<T>>("element")?.nodes(),
+            Integration::Full => *r.next::<HexFull<T>>("element")?.nodes(),
+        };
+        d.element_nodes.push(nodes);
+    }
+    for _ in 0..c.nodes {
+        let n: NodeRecord<T> = r.next("node")?;
+        d.nodes.push(NodeRecord { global: n.global, gain: n.gain.to_f64(), motion: n.motion, owner: n.owner, gravity: n.gravity.map(|g| g.to_f64()) });
+        d.ext_stage.push(r.next("node stage")?);
+    }
+    for a in 0..3 {
+        for _ in 0..c.rounds[a] {
+            let mut round = DecodedRound::default();
+            for f in 0..2 {
+                let n: u16 = r.next("send count")?;
+                for _ in 0..n {
+                    round.send[f].push(r.next("send")?);
+                }
+                let n: u16 = r.next("receive count")?;
+                for _ in 0..n {
+                    round.recv[f].push(r.next("receive")?);
+                }
+            }
+            d.rounds[a].push(round);
+        }
+    }
+    for _ in 0..c.path_points {
+        d.path_points.push(r.next("path point")?);
+    }
+    for _ in 0..c.loads {
+        d.loads.push(r.next("load")?);
+    }
+    if !r.is_done() {
+        return Err(ImageError::Malformed { record: "trailing bytes" });
+    }
+    Ok(d)
+}
+
+/// Decodes and checks a whole image.
+pub fn decode_image(bytes: &[u8], expected_board: Option<[u8; 3]>) -> Result<DecodedImage, ImageError> {
+    let r = ImageReader::new(bytes, expected_board)?;
+    match r.header.precision {
+        Precision::F32 => decode_typed::<f32>(r),
+        Precision::F64 => decode_typed::<f64>(r),
+    }
+}
+
+/// `DIR/manifest.json`.
+#[derive(Clone, Debug, Serialize, serde::Deserialize)]
+pub struct Manifest {
+    pub format_version: u16,
+    pub scene: String,
+    pub machine: [usize; 3],
+    pub profile: String,
+    pub precision: String,
+    pub integration: String,
+    pub dt_s: f64,
+    pub steps: u64,
+    pub boards: Vec<ManifestBoard>,
+}
+
+#[derive(Clone, Debug, Serialize, serde::Deserialize)]
+pub struct ManifestBoard {
+    pub board: [usize; 3],
+    pub file: String,
+    pub bytes: usize,
+    pub crc32: String,
+}
+
+/// Compiles a problem into `dir`: images, manifest.json, report.json; returns the report.
+pub fn compile_to_dir(scene: &str, problem: &Problem, machine: Machine, profile: &BoardProfile, dir: &Path) -> Result<CompileReport> {
+    let plan = plan(problem, machine)?;
+    let images = compile_images(problem, &plan)?;
+    check_fit(&images, profile)?;
+    write_images(dir, &images)?;
+    let (dt, _) = problem.time_step()?;
+    let manifest = Manifest {
+        format_version: FORMAT_VERSION,
+        scene: scene.to_string(),
+        machine: machine.dims,
+        profile: profile.name.to_string(),
+        precision: problem.solver.precision.clone(),
+        integration: problem.solver.integration.clone(),
+        dt_s: dt,
+        steps: problem.steps(dt),
+        boards: images
+            .iter()
+            .map(|im| ManifestBoard {
+                board: im.coords,
+                file: image_file_name(im.coords),
+                bytes: im.bytes.len(),
+                crc32: format!("{:08x}", link_proto::frame::crc32(&im.bytes[..im.bytes.len() - 4])),
+            })
+            .collect(),
+    };
+    let p = dir.join("manifest.json");
+    std::fs::write(&p, serde_json::to_string_pretty(&manifest)?).with_context(|| format!("writing {}", p.display()))?;
+    let rep = report(scene, problem, &plan, &images, profile)?;
+    let p = dir.join("report.json");
+    std::fs::write(&p, serde_json::to_string_pretty(&rep)?).with_context(|| format!("writing {}", p.display()))?;
+    Ok(rep)
+}
+
+/// Reads `DIR/manifest.json`.
+pub fn read_manifest(dir: &Path) -> Result<Manifest> {
+    let p = dir.join("manifest.json");
+    let text = std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))
+}
+
+/// `pe inspect`: a readable dump of one board's schedule.
+pub fn inspect(dir: &Path, board: [usize; 3]) -> Result<String> {
+    let p = dir.join(image_file_name(board));
+    let bytes = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
+    let d = decode_image(&bytes, Some(board.map(|c| c as u8))).map_err(|e| anyhow!("{}: {e}", p.display()))?;
+    let h = &d.header;
+    let c = &h.counts;
+    let mut s = format!(
+        "{}: board ({},{},{}) of a {}x{}x{} machine, format v{}, {:?} {:?}, {} bytes\n",
+        p.display(), h.board[0], h.board[1], h.board[2], h.machine[0], h.machine[1], h.machine[2], h.version, h.precision, h.integration, bytes.len()
+    );
+    s += &format!("  dt = {:.4e} s, {} steps, damping {} 1/s\n", h.params.dt_s, h.params.steps, h.params.damping_per_s);
+    let b = c.batch_ends;
+    s += &format!(
+        "  {} elements: batch x {}, batch y {}, batch z {}, inner {}\n",
+        c.elements, b[0], b[1] - b[0], b[2] - b[1], b[3] - b[2]
+    );
+    let owned = d.nodes.iter().filter(|n| n.owner).count();
+    s += &format!("  {} nodes ({} owned, {} replicas), {} materials, {} path points, {} loads\n", c.nodes, owned, c.nodes as usize - owned, c.materials, c.path_points, c.loads);
+    s += "  schedule: recover x | send ±x | recover y | add ±x | send ±y | recover z | add ±y | send ±z | recover inner | add ±z | update\n";
+    let g = |l: u16| d.nodes.get(l as usize).map(|n| n.global).unwrap_or(u32::MAX);
+    let list = |v: Vec<u32>| {
+        let shown: Vec<String> = v.iter().take(20).map(|x| x.to_string()).collect();
+        format!("{} [{}{}]", v.len(), shown.join(" "), if v.len() > 20 { " ..." } else { "" })
+    };
+    for a in 0..3 {
+        for (k, round) in d.rounds[a].iter().enumerate() {
+            for f in 0..2 {
+                let face = FACE_NAMES[2 * a + f];
+                s += &format!("  {} round {k} face {face}: send {}\n", ["x", "y", "z"][a], list(round.send[f].iter().map(|&l| g(l)).collect()));
+                s += &format!("  {} round {k} face {face}: recv {}\n", ["x", "y", "z"][a], list(round.recv[f].iter().map(|e| g(e.node)).collect()));
+            }
+        }
+    }
+    Ok(s)
 }

@@ -6,9 +6,11 @@
 #![allow(clippy::needless_range_loop)]
 pub mod bench;
 pub mod builtin;
+pub mod compile;
 pub mod mesh;
 pub mod mesh_io;
 pub mod output;
+pub mod partition;
 pub mod problem;
 pub mod scene;
 pub mod scene_mesh;

@@ -5,13 +5,13 @@
 //! boards along z, so every board gets the same number of elements (±1) and neighbouring
 //! boards hold neighbouring tissue.
 //!
-//! The dimension-ordered force summation needs every node's boards to lie within two
-//! adjacent boards along each axis (a node shared by boards two apart would need a relay
-//! through the board between). Thin boards can break that; a repair pass then moves the
-//! offending elements to the middle board, a few at a time, until no node spans more than
-//! two boards per axis. If that fails, the error names the node and its boards.
+//! With few elements per board, boards can be thinner than an element, so a node may touch
+//! boards more than one apart along an axis; the schedule compiler handles that with relay
+//! replicas and extra exchange rounds (see [`crate::compile`]), so the partition stays
+//! balanced to ±1 element.
 
 use anyhow::{bail, Result};
+
 
 use crate::mesh::Mesh;
 
@@ -88,7 +88,6 @@ pub fn partition(mesh: &Mesh, machine: Machine) -> Result<Vec<u32>> {
             }
         }
     }
-    repair(mesh, machine, &mut board)?;
     Ok(board)
 }
 
@@ -115,42 +114,4 @@ pub fn node_board_range(machine: Machine, board: &[u32], around: &[u32]) -> ([us
         }
     }
     (lo, hi)
-}
-
-fn repair(mesh: &Mesh, machine: Machine, board: &mut [u32]) -> Result<()> {
-    let around = node_elements(mesh);
-    for _round in 0..200 {
-        let mut moved = 0;
-        for els in around.iter() {
-            let (lo, hi) = node_board_range(machine, board, els);
-            for a in 0..3 {
-                if hi[a] > lo[a] + 1 {
-                    // Pull the elements beyond lo+1 one board back towards lo.
-                    for &e in els {
-                        let mut c = machine.coords(board[e as usize] as usize);
-                        if c[a] > lo[a] + 1 {
-                            c[a] -= 1;
-                            board[e as usize] = machine.index(c) as u32;
-                            moved += 1;
-                        }
-                    }
-                    break;
-                }
-            }
-        }
-        if moved == 0 {
-            return Ok(());
-        }
-    }
-    for (n, els) in around.iter().enumerate() {
-        let (lo, hi) = node_board_range(machine, board, els);
-        if (0..3).any(|a| hi[a] > lo[a] + 1) {
-            bail!(
-                "node {} is shared by boards from {lo:?} to {hi:?}: more than two adjacent boards along an axis, which the dimension-ordered exchange cannot sum; use fewer boards ({machine} is too fine for {} elements here)",
-                mesh.node_tags.get(n).copied().unwrap_or(n as u64),
-                mesh.cells.len()
-            );
-        }
-    }
-    Ok(())
 }

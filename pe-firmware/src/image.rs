@@ -5,8 +5,11 @@
 //! Layout: `MAGIC` (4 bytes), then postcard records: one [`ImageHeader`], then
 //! `materials` × [`MaterialLaw<f64>`], `elements` × element (`HexReduced<T>` or
 //! `HexFull<T>` by `integration`, `T` by `precision`, local node indices, batch order),
-//! `nodes` × [`NodeRecord<T>`], the six exchange lists (faces +x, −x, +y, −y, +z, −z) as
-//! `exchange[f]` × `u16` local node indices each, `path_points` × [`PathPoint`],
+//! `nodes` × ([`NodeRecord<T>`], `u8` stage at which an owned node's external force is
+//! added: 0/1/2 before the x/y/z exchange, 3 before the update, 255 not owned), then the
+//! exchange rounds: for each axis x, y, z, `rounds[axis]` rounds, each with, for the faces
+//! (+axis, −axis) in turn, a `u16` count and that many `u16` local node indices to send,
+//! then a `u16` count and that many [`RecvEntry`]; then `path_points` × [`PathPoint`],
 //! `loads` × [`LoadRecord`]; last, a CRC-32 (little-endian) of everything before it.
 //!
 //! Reading never panics: a short, corrupted or foreign image is an [`ImageError`].
@@ -40,8 +43,13 @@ pub struct Counts {
     /// End (exclusive) of batches x, y, z, inner in the element list.
     pub batch_ends: [u32; 4],
     pub nodes: u32,
-    /// Nodes exchanged across each face (+x, −x, +y, −y, +z, −z).
+    /// Distinct nodes exchanged across each face (+x, −x, +y, −y, +z, −z).
     pub exchange: [u16; 6],
+    /// Exchange rounds per axis (the same on every board of the machine).
+    pub rounds: [u8; 3],
+    /// Send and receive entries over all rounds and faces.
+    pub sends: u32,
+    pub recvs: u32,
     pub path_points: u16,
     pub loads: u16,
 }
@@ -97,6 +105,25 @@ pub struct NodeRecord<T> {
     pub owner: bool,
     /// Gravity force (true mass), N; zero on replicas.
     pub gravity: [T; 3],
+}
+
+/// How a received value combines with the node's current value `v`. Every replica of a node
+/// ends the exchange with the same bits because the compiler fixes one summation tree.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Combine {
+    /// `v = received + v` (the sender is on the left of the summation order).
+    Before,
+    /// `v = v + received`.
+    After,
+    /// `v = received` (the total, broadcast back).
+    Replace,
+}
+
+/// One value received in an exchange round.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RecvEntry {
+    pub node: u16,
+    pub combine: Combine,
 }
 
 /// A point of a prescribed path (or of a load ramp, factor in `value[0]`).

@@ -8,3 +8,5 @@
 #![forbid(unsafe_code)]
 
 pub mod physics;
+pub mod image;
+pub mod profile;

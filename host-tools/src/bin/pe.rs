@@ -81,6 +81,34 @@ enum Command {
         #[command(flatten)]
         scene: SceneArgs,
     },
+    /// Partition a scene onto a board mesh and write one schedule image per board.
+    Compile {
+        #[command(flatten)]
+        scene: SceneArgs,
+        /// Machine size, X x Y x Z boards.
+        #[arg(long, default_value = "4x4x4")]
+        boards: String,
+        /// Board profile the images must fit: pe-board | qemu-mps2-an500.
+        #[arg(long, default_value = "pe-board")]
+        profile: String,
+        /// Output directory.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Override the scene's precision (f32 | f64).
+        #[arg(long)]
+        precision: Option<String>,
+        /// Override the scene's step count.
+        #[arg(long)]
+        steps: Option<u64>,
+    },
+    /// Show a board's compiled schedule: batches and exchange lists.
+    Inspect {
+        /// Directory written by `pe compile`.
+        dir: PathBuf,
+        /// Board coordinates X,Y,Z.
+        #[arg(long, default_value = "0,0,0")]
+        board: String,
+    },
     /// Measure ns per element-step and the flop count of one element-step.
     Bench {
         /// Elements of the benchmark mesh (a box).
@@ -201,6 +229,29 @@ fn main() -> Result<()> {
         Command::Scene { scene } => {
             let (sc, _, _) = scene.load()?;
             print!("{}", sc.to_toml()?);
+        }
+        Command::Compile { scene, boards, profile, output, precision, steps } => {
+            let (mut sc, dir, name) = scene.load()?;
+            if let Some(p) = precision {
+                sc.solver.precision = p;
+            }
+            if let Some(n) = steps {
+                sc.solver.steps = Some(n);
+            }
+            let machine = host_tools::partition::Machine::parse(&boards)?;
+            let prof = pe_firmware::profile::profile(&profile)
+                .with_context(|| format!("--profile {profile:?}: known profiles are pe-board, qemu-mps2-an500"))?;
+            let problem = Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
+            let rep = host_tools::compile::compile_to_dir(&name, &problem, machine, &prof, &output)?;
+            print!("{}", host_tools::compile::summary(&rep));
+            println!("  wrote {} images, manifest.json and report.json to {}", rep.boards.len(), output.display());
+        }
+        Command::Inspect { dir, board } => {
+            let c: Vec<usize> = board.split(',').filter_map(|v| v.trim().parse().ok()).collect();
+            if c.len() != 3 {
+                anyhow::bail!("--board {board:?}: expected X,Y,Z");
+            }
+            print!("{}", host_tools::compile::inspect(&dir, [c[0], c[1], c[2]])?);
         }
         Command::Bench { elements, steps } => host_tools::bench::run_cli(elements, steps)?,
     }
