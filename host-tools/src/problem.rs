@@ -17,18 +17,16 @@ pub struct Path1<const N: usize> {
 }
 
 impl<const N: usize> Path1<N> {
+    /// Value at `t` (the firmware's [`pe_firmware::image::piecewise_linear`], so host and
+    /// board interpolate to the same bits).
     pub fn at(&self, t: f64) -> [f64; N] {
-        let p = &self.points;
-        match p.iter().position(|(ti, _)| *ti > t) {
-            None => p.last().map(|x| x.1).unwrap_or([0.0; N]),
-            Some(0) => p[0].1,
-            Some(k) => {
-                let (t0, a) = p[k - 1];
-                let (t1, b) = p[k];
-                let s = (t - t0) / (t1 - t0);
-                core::array::from_fn(|i| a[i] + s * (b[i] - a[i]))
-            }
-        }
+        let v = pe_firmware::image::piecewise_linear(t, self.points.len(), |k| {
+            let (tk, p) = self.points[k];
+            let mut q = [0.0; 3];
+            q[..N].copy_from_slice(&p);
+            (tk, q)
+        });
+        core::array::from_fn(|i| v[i])
     }
 }
 
