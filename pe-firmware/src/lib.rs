@@ -10,3 +10,4 @@
 pub mod physics;
 pub mod image;
 pub mod profile;
+pub mod runtime;
