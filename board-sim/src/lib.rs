@@ -1,2 +1,501 @@
-//! board-sim: runs one firmware runtime per board image on host threads over emulated links.
-//! (The runtime and the emulated links arrive with the board-runtime issue.)
+//! board-sim: one firmware runtime per board image, each on a host thread, connected by
+//! emulated point-to-point links. It runs the firmware's own runtime
+//! (`pe_firmware::runtime`), not a copy.
+
+pub mod links;
+pub mod timing;
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, bail, Context, Result};
+use host_tools::compile::{image_file_name, read_manifest, Manifest};
+use link_proto::Links;
+use pe_firmware::image::{ImageReader, Integration, Precision, RecvEntry};
+use pe_firmware::physics::{HexElement, HexFull, HexReduced, MaterialLaw};
+use pe_firmware::runtime::{Fault, LinkStats, Runtime, RuntimeConfig, Storage, WireReal};
+use serde::de::DeserializeOwned;
+
+use links::{build_links, FaultSpec, FaultyLinks, Injected, ThreadEnv};
+
+/// How to run.
+#[derive(Clone, Debug)]
+pub struct SimOptions {
+    /// Stop after this many steps (default: the images' step count).
+    pub steps: Option<u64>,
+    pub faults: Option<FaultSpec>,
+    pub link_timeout: Duration,
+    /// Collect every mesh node's displacement every this many steps (0 = only the end).
+    pub frame_every: u64,
+}
+
+impl Default for SimOptions {
+    fn default() -> Self {
+        SimOptions {
+            steps: None,
+            faults: None,
+            link_timeout: Duration::from_secs(10),
+            frame_every: 0,
+        }
+    }
+}
+
+/// Per-board results.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct BoardResult {
+    pub board: [usize; 3],
+    pub steps: u64,
+    pub frames_sent: [u64; 6],
+    pub bytes_sent: [u64; 6],
+    pub wait_s: f64,
+}
+
+/// What a run produced.
+pub struct SimOutput {
+    pub manifest: Manifest,
+    pub steps: u64,
+    pub wall_s: f64,
+    /// Displacement of every mesh node (global numbering) at the end.
+    pub displacements: Vec<[f64; 3]>,
+    /// Frames collected during the run: (step, displacements).
+    pub frames: Vec<(u64, Vec<[f64; 3]>)>,
+    pub boards: Vec<BoardResult>,
+    pub reaction_prescribed: [f64; 3],
+    pub reaction_fixed: [f64; 3],
+    pub kinetic_energy: f64,
+    pub injected: Vec<Injected>,
+}
+
+/// A run that stopped on a fault: the faults reported (root cause first) and what was
+/// injected.
+#[derive(Debug)]
+pub struct SimFault {
+    pub faults: Vec<Fault>,
+    pub injected: Vec<Injected>,
+}
+
+impl std::fmt::Display for SimFault {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(f, "the run stopped on a fault:")?;
+        for x in self.faults.iter().take(8) {
+            writeln!(f, "  {x}")?;
+        }
+        if self.faults.len() > 8 {
+            writeln!(f, "  ... and {} more", self.faults.len() - 8)?;
+        }
+        if !self.injected.is_empty() {
+            writeln!(f, "injected faults ({}):", self.injected.len())?;
+            for i in self.injected.iter().take(8) {
+                writeln!(
+                    f,
+                    "  board ({},{},{}) link {} step {}: {}",
+                    i.board[0], i.board[1], i.board[2], i.face, i.step, i.what
+                )?;
+            }
+        }
+        Ok(())
+    }
+}
+impl std::error::Error for SimFault {}
+
+/// Exact-size storage for one board on the host.
+struct OwnedStorage<T, E> {
+    laws: Vec<MaterialLaw<T>>,
+    elements: Vec<E>,
+    nodes: Vec<pe_firmware::image::NodeRecord<T>>,
+    ext_stage: Vec<u8>,
+    u: Vec<[T; 3]>,
+    u_prev: Vec<[T; 3]>,
+    force: Vec<[T; 3]>,
+    sends: Vec<u16>,
+    recvs: Vec<RecvEntry>,
+    path_points: Vec<pe_firmware::image::PathPoint>,
+    loads: Vec<pe_firmware::image::LoadRecord>,
+}
+
+impl<T: WireReal, E: Copy> OwnedStorage<T, E> {
+    fn new(image: &[u8], element: E) -> Result<Self, pe_firmware::image::ImageError> {
+        let h = ImageReader::new(image, None)?.header;
+        let c = h.counts;
+        let nn = c.nodes as usize;
+        let zero = pe_firmware::image::NodeRecord {
+            global: 0,
+            gain: T::ZERO,
+            motion: pe_firmware::image::NodeMotion::Free,
+            owner: false,
+            gravity: [T::ZERO; 3],
+        };
+        Ok(OwnedStorage {
+            laws: vec![
+                MaterialLaw::NeoHookean(pe_firmware::physics::LameParameters {
+                    mu: T::ZERO,
+                    lambda: T::ZERO
+                });
+                c.materials as usize
+            ],
+            elements: vec![element; c.elements as usize],
+            nodes: vec![zero; nn],
+            ext_stage: vec![0; nn],
+            u: vec![[T::ZERO; 3]; nn],
+            u_prev: vec![[T::ZERO; 3]; nn],
+            force: vec![[T::ZERO; 3]; nn],
+            sends: vec![0; c.sends as usize],
+            recvs: vec![
+                RecvEntry {
+                    node: 0,
+                    combine: pe_firmware::image::Combine::Replace
+                };
+                c.recvs as usize
+            ],
+            path_points: vec![
+                pe_firmware::image::PathPoint {
+                    path: 0,
+                    t_s: 0.0,
+                    value: [0.0; 3]
+                };
+                c.path_points as usize
+            ],
+            loads: vec![
+                pe_firmware::image::LoadRecord {
+                    node: 0,
+                    force: [0.0; 3],
+                    ramp: None
+                };
+                c.loads as usize
+            ],
+        })
+    }
+    fn storage(&mut self) -> Storage<'_, T, E> {
+        Storage {
+            laws: &mut self.laws,
+            elements: &mut self.elements,
+            nodes: &mut self.nodes,
+            ext_stage: &mut self.ext_stage,
+            u: &mut self.u,
+            u_prev: &mut self.u_prev,
+            force: &mut self.force,
+            sends: &mut self.sends,
+            recvs: &mut self.recvs,
+            path_points: &mut self.path_points,
+            loads: &mut self.loads,
+        }
+    }
+}
+
+/// Messages from board threads to the collector.
+enum Report {
+    /// Owned nodes' displacements at a step: (global, u).
+    Frame {
+        step: u64,
+        nodes: Vec<(u32, [f64; 3])>,
+    },
+    Done {
+        board: usize,
+        result: BoardResult,
+        reaction_prescribed: [f64; 3],
+        reaction_fixed: [f64; 3],
+        kinetic_energy: f64,
+    },
+    Failed(Fault),
+}
+
+struct BoardCtx {
+    index: usize,
+    coords: [usize; 3],
+    image: Vec<u8>,
+    steps: u64,
+    frame_every: u64,
+    config: RuntimeConfig,
+    progress: Arc<AtomicU64>,
+    stop: Arc<std::sync::atomic::AtomicBool>,
+}
+
+fn run_board<T: WireReal, E: HexElement<T> + DeserializeOwned + Copy>(
+    ctx: BoardCtx,
+    element: E,
+    links: &mut impl Links,
+    env: &mut ThreadEnv,
+    out: &mpsc::Sender<Report>,
+) -> Result<(), Fault> {
+    let coords8 = ctx.coords.map(|c| c as u8);
+    let load_fault = |e| Fault {
+        board: coords8,
+        step: 0,
+        kind: pe_firmware::runtime::FaultKind::Image(e),
+    };
+    let mut storage = OwnedStorage::<T, E>::new(&ctx.image, element).map_err(load_fault)?;
+    let mut rt: Runtime<'_, T, E> =
+        Runtime::load(&ctx.image, coords8, storage.storage(), ctx.config).map_err(load_fault)?;
+    let send_frame = |rt: &Runtime<'_, T, E>, step: u64| {
+        let nodes = rt
+            .nodes()
+            .iter()
+            .zip(rt.displacements())
+            .filter(|(n, _)| n.owner)
+            .map(|(n, u)| (n.global, u.map(|v| v.to_f64())))
+            .collect();
+        let _ = out.send(Report::Frame { step, nodes });
+    };
+    while rt.step_index() < ctx.steps {
+        if ctx.stop.load(Ordering::Relaxed) {
+            break;
+        }
+        rt.step(links, env)?;
+        let s = rt.step_index();
+        if ctx.index == 0 {
+            ctx.progress.store(s, Ordering::Relaxed);
+        }
+        if ctx.frame_every > 0 && s % ctx.frame_every == 0 && s < ctx.steps {
+            send_frame(&rt, s);
+        }
+    }
+    send_frame(&rt, rt.step_index());
+    let st: LinkStats = rt.stats;
+    let _ = out.send(Report::Done {
+        board: ctx.index,
+        result: BoardResult {
+            board: ctx.coords,
+            steps: rt.step_index(),
+            frames_sent: st.frames_sent,
+            bytes_sent: st.bytes_sent,
+            wait_s: st.wait_ns as f64 * 1e-9,
+        },
+        reaction_prescribed: rt.reaction_prescribed,
+        reaction_fixed: rt.reaction_fixed,
+        kinetic_energy: rt.kinetic_energy,
+    });
+    Ok(())
+}
+
+/// Runs the compiled machine in `dir`. `on_progress(step, total)` is called from the
+/// collector thread.
+pub fn run(
+    dir: &Path,
+    opts: &SimOptions,
+    on_progress: &mut dyn FnMut(u64, u64),
+) -> Result<SimOutput> {
+    let manifest = read_manifest(dir)?;
+    let dims = manifest.machine;
+    let count = dims.iter().product::<usize>();
+    if manifest.boards.len() != count {
+        bail!(
+            "{}: manifest lists {} boards for a {}x{}x{} machine",
+            dir.display(),
+            manifest.boards.len(),
+            dims[0],
+            dims[1],
+            dims[2]
+        );
+    }
+    let mut images = vec![Vec::new(); count];
+    let mut header = None;
+    for b in &manifest.boards {
+        let p = dir.join(image_file_name(b.board));
+        let bytes = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
+        let r = ImageReader::new(&bytes, Some(b.board.map(|c| c as u8)))
+            .map_err(|e| anyhow!("{}: {e}", p.display()))?;
+        header.get_or_insert(r.header);
+        let i = b.board[0] + dims[0] * (b.board[1] + dims[1] * b.board[2]);
+        images[i] = bytes;
+    }
+    let header = header.ok_or_else(|| anyhow!("{}: no boards", dir.display()))?;
+    let steps = opts
+        .steps
+        .unwrap_or(header.params.steps)
+        .min(header.params.steps.max(opts.steps.unwrap_or(0)));
+    let n_nodes = header.scene_nodes as usize;
+    let (links, bells) = build_links(dims);
+    let (tx, rx) = mpsc::channel::<Report>();
+    let progress = Arc::new(AtomicU64::new(0));
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let injected = Arc::new(Mutex::new(Vec::new()));
+    let config = RuntimeConfig {
+        link_timeout_ns: opts.link_timeout.as_nanos() as u64,
+    };
+    let start = Instant::now();
+    let mut handles = Vec::new();
+    for (b, (image, link)) in images.into_iter().zip(links).enumerate() {
+        let coords = [
+            b % dims[0],
+            (b / dims[0]) % dims[1],
+            b / (dims[0] * dims[1]),
+        ];
+        let ctx = BoardCtx {
+            index: b,
+            coords,
+            image,
+            steps,
+            frame_every: opts.frame_every,
+            config,
+            progress: progress.clone(),
+            stop: stop.clone(),
+        };
+        let out = tx.clone();
+        let bell = bells[b].clone();
+        let faults = opts.faults.clone();
+        let inj = injected.clone();
+        let stop2 = stop.clone();
+        let h = std::thread::Builder::new()
+            .name(format!("board-{}-{}-{}", coords[0], coords[1], coords[2]))
+            .stack_size(8 << 20)
+            .spawn(move || {
+                let mut env = ThreadEnv::new(bell);
+                let mut plain = link;
+                let r = match faults {
+                    Some(spec) => {
+                        let mut fl = FaultyLinks::new(plain, coords, b, spec, inj);
+                        dispatch(
+                            ctx,
+                            &mut fl,
+                            &mut env,
+                            &out,
+                            header.precision,
+                            header.integration,
+                        )
+                    }
+                    None => dispatch(
+                        ctx,
+                        &mut plain,
+                        &mut env,
+                        &out,
+                        header.precision,
+                        header.integration,
+                    ),
+                };
+                if let Err(f) = r {
+                    stop2.store(true, Ordering::Relaxed);
+                    let _ = out.send(Report::Failed(f));
+                }
+            })
+            .context("spawning a board thread")?;
+        handles.push(h);
+    }
+    drop(tx);
+    let mut displacements = vec![[0.0; 3]; n_nodes];
+    let mut pending: std::collections::BTreeMap<u64, (usize, Vec<[f64; 3]>)> = Default::default();
+    let mut frames = Vec::new();
+    let mut results: Vec<Option<BoardResult>> = vec![None; count];
+    let (mut rp, mut rf, mut ke) = ([0.0; 3], [0.0; 3], 0.0);
+    let mut faults = Vec::new();
+    let owned_total = n_nodes;
+    loop {
+        match rx.recv_timeout(Duration::from_millis(100)) {
+            Ok(Report::Frame { step, nodes }) => {
+                let e = pending
+                    .entry(step)
+                    .or_insert_with(|| (0, vec![[0.0; 3]; n_nodes]));
+                for (g, u) in nodes {
+                    if let Some(d) = e.1.get_mut(g as usize) {
+                        *d = u;
+                        e.0 += 1;
+                    }
+                }
+                if e.0 == owned_total {
+                    if let Some((_, v)) = pending.remove(&step) {
+                        if step == steps {
+                            displacements = v;
+                        } else {
+                            frames.push((step, v));
+                        }
+                    }
+                }
+            }
+            Ok(Report::Done {
+                board,
+                result,
+                reaction_prescribed,
+                reaction_fixed,
+                kinetic_energy,
+            }) => {
+                for i in 0..3 {
+                    rp[i] += reaction_prescribed[i];
+                    rf[i] += reaction_fixed[i];
+                }
+                ke += kinetic_energy;
+                results[board] = Some(result);
+            }
+            Ok(Report::Failed(f)) => faults.push(f),
+            Err(mpsc::RecvTimeoutError::Timeout) => {}
+            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+        }
+        on_progress(progress.load(Ordering::Relaxed), steps);
+    }
+    for h in handles {
+        let _ = h.join();
+    }
+    let wall_s = start.elapsed().as_secs_f64();
+    let injected = injected.lock().map(|v| v.clone()).unwrap_or_default();
+    if !faults.is_empty() {
+        // Root cause first: the earliest step; a timeout is a consequence of a neighbour's fault.
+        faults.sort_by_key(|f: &Fault| {
+            (
+                f.step,
+                matches!(f.kind, pe_firmware::runtime::FaultKind::LinkTimeout { .. }) as u8,
+                f.board,
+            )
+        });
+        return Err(SimFault { faults, injected }.into());
+    }
+    let boards = results
+        .into_iter()
+        .collect::<Option<Vec<_>>>()
+        .ok_or_else(|| anyhow!("a board ended without a report"))?;
+    frames.sort_by_key(|f| f.0);
+    Ok(SimOutput {
+        manifest,
+        steps,
+        wall_s,
+        displacements,
+        frames,
+        boards,
+        reaction_prescribed: rp,
+        reaction_fixed: rf,
+        kinetic_energy: ke,
+        injected,
+    })
+}
+
+fn dispatch(
+    ctx: BoardCtx,
+    links: &mut impl Links,
+    env: &mut ThreadEnv,
+    out: &mpsc::Sender<Report>,
+    precision: Precision,
+    integration: Integration,
+) -> Result<(), Fault> {
+    use pe_firmware::physics::GaussPoint;
+    fn reduced<T: WireReal>() -> HexReduced<T> {
+        HexReduced {
+            nodes: [0; 8],
+            material: 0,
+            volume: T::ZERO,
+            gradients: [[T::ZERO; 3]; 8],
+            hourglass: [[T::ZERO; 4]; 8],
+            hourglass_stiffness: T::ZERO,
+        }
+    }
+    fn full<T: WireReal>() -> HexFull<T> {
+        HexFull {
+            nodes: [0; 8],
+            material: 0,
+            gauss: [GaussPoint {
+                gradients: [[T::ZERO; 3]; 8],
+                volume: T::ZERO,
+            }; 8],
+        }
+    }
+    match (precision, integration) {
+        (Precision::F64, Integration::Reduced) => run_board(ctx, reduced::<f64>(), links, env, out),
+        (Precision::F64, Integration::Full) => run_board(ctx, full::<f64>(), links, env, out),
+        (Precision::F32, Integration::Reduced) => run_board(ctx, reduced::<f32>(), links, env, out),
+        (Precision::F32, Integration::Full) => run_board(ctx, full::<f32>(), links, env, out),
+    }
+}
+
+/// Directory helper for callers.
+pub fn default_out(dir: &Path) -> PathBuf {
+    dir.join("sim")
+}

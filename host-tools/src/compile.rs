@@ -85,7 +85,12 @@ struct Transfer {
 /// More: reduce towards the middle board `r = m/2` (left prefix sums `((p0 + p1) + …)`, right
 /// suffix sums), the middle forms `(left + p_r) + right`, then broadcasts the total back.
 fn line_transfers(m: usize) -> Vec<Transfer> {
-    let t = |round, from, to, combine| Transfer { round, from, to, combine };
+    let t = |round, from, to, combine| Transfer {
+        round,
+        from,
+        to,
+        combine,
+    };
     if m == 1 {
         return vec![t(0, 0, 1, Combine::Before), t(0, 1, 0, Combine::After)];
     }
@@ -126,13 +131,21 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
     let mut node_owner = vec![0u32; mesh.nodes.len()];
     for (n, els) in around.iter().enumerate() {
         if els.is_empty() {
-            bail!("node {} of mesh {} belongs to no cell", mesh.node_tags[n], mesh.source);
+            bail!(
+                "node {} of mesh {} belongs to no cell",
+                mesh.node_tags[n],
+                mesh.source
+            );
         }
         let (lo, hi) = node_board_range(machine, &element_board, els);
         for a in 0..3 {
             rounds[a] = rounds[a].max(line_rounds(hi[a] - lo[a]));
         }
-        node_owner[n] = els.iter().map(|&e| element_board[e as usize]).min().unwrap_or(0);
+        node_owner[n] = els
+            .iter()
+            .map(|&e| element_board[e as usize])
+            .min()
+            .unwrap_or(0);
         node_box.push((lo, hi));
     }
     let mut boards: Vec<BoardPlan> = (0..nb)
@@ -147,7 +160,9 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
             ext_stage: Vec::new(),
         })
         .collect();
-    let trees: Vec<Vec<Transfer>> = (0..machine.dims.iter().copied().max().unwrap_or(1)).map(line_transfers_or_empty).collect();
+    let trees: Vec<Vec<Transfer>> = (0..machine.dims.iter().copied().max().unwrap_or(1))
+        .map(line_transfers_or_empty)
+        .collect();
     for (n, &(lo, hi)) in node_box.iter().enumerate() {
         let n32 = n as u32;
         for z in lo[2]..=hi[2] {
@@ -179,7 +194,8 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
                         // face index within the axis: 0 = +axis, 1 = −axis
                         let (send_face, recv_face) = if tr.to > tr.from { (0, 1) } else { (1, 0) };
                         boards[at(tr.from)].rounds[a][tr.round].send[send_face].push(n32);
-                        boards[at(tr.to)].rounds[a][tr.round].recv[recv_face].push((n32, tr.combine));
+                        boards[at(tr.to)].rounds[a][tr.round].recv[recv_face]
+                            .push((n32, tr.combine));
                     }
                 }
             }
@@ -193,7 +209,12 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
             for f in 0..2 {
                 let mut all: Vec<u32> = bp.rounds[a]
                     .iter()
-                    .flat_map(|r| r.send[f].iter().copied().chain(r.recv[f].iter().map(|x| x.0)))
+                    .flat_map(|r| {
+                        r.send[f]
+                            .iter()
+                            .copied()
+                            .chain(r.recv[f].iter().map(|x| x.0))
+                    })
                     .collect();
                 all.sort_unstable();
                 all.dedup();
@@ -201,13 +222,23 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
             }
         }
         let axis_nodes: [std::collections::HashSet<u32>; 3] = core::array::from_fn(|a| {
-            bp.exchange[2 * a].iter().chain(&bp.exchange[2 * a + 1]).copied().collect()
+            bp.exchange[2 * a]
+                .iter()
+                .chain(&bp.exchange[2 * a + 1])
+                .copied()
+                .collect()
         });
         let stage_of_element = |e: u32| {
             let cell = &mesh.cells[e as usize];
-            (0..3).find(|&a| cell.iter().any(|n| axis_nodes[a].contains(n))).unwrap_or(3)
+            (0..3)
+                .find(|&a| cell.iter().any(|n| axis_nodes[a].contains(n)))
+                .unwrap_or(3)
         };
-        let mut staged: Vec<(usize, u32)> = bp.elements.iter().map(|&e| (stage_of_element(e), e)).collect();
+        let mut staged: Vec<(usize, u32)> = bp
+            .elements
+            .iter()
+            .map(|&e| (stage_of_element(e), e))
+            .collect();
         staged.sort();
         for s in 0..4 {
             bp.batch_ends[s] = staged.iter().filter(|(st, _)| *st <= s).count();
@@ -217,10 +248,22 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
             .nodes
             .iter()
             .zip(&bp.owner)
-            .map(|(n, own)| if !own { u8::MAX } else { (0..3).find(|&a| axis_nodes[a].contains(n)).unwrap_or(3) as u8 })
+            .map(|(n, own)| {
+                if !own {
+                    u8::MAX
+                } else {
+                    (0..3).find(|&a| axis_nodes[a].contains(n)).unwrap_or(3) as u8
+                }
+            })
             .collect();
     }
-    Ok(Plan { machine, element_board, node_owner, rounds, boards })
+    Ok(Plan {
+        machine,
+        element_board,
+        node_owner,
+        rounds,
+        boards,
+    })
 }
 
 fn line_transfers_or_empty(m: usize) -> Vec<Transfer> {
@@ -265,7 +308,11 @@ fn path_table(problem: &Problem) -> (Vec<PathPoint>, Vec<Option<u16>>) {
     let mut points = Vec::new();
     for (k, p) in problem.paths.iter().enumerate() {
         for (t, v) in &p.points {
-            points.push(PathPoint { path: k as u16, t_s: *t, value: *v });
+            points.push(PathPoint {
+                path: k as u16,
+                t_s: *t,
+                value: *v,
+            });
         }
     }
     let mut ramps: Vec<&crate::problem::Path1<1>> = Vec::new();
@@ -281,23 +328,43 @@ fn path_table(problem: &Problem) -> (Vec<PathPoint>, Vec<Option<u16>>) {
     }
     for (k, r) in ramps.iter().enumerate() {
         for (t, v) in &r.points {
-            points.push(PathPoint { path: (problem.paths.len() + k) as u16, t_s: *t, value: [v[0], 0.0, 0.0] });
+            points.push(PathPoint {
+                path: (problem.paths.len() + k) as u16,
+                t_s: *t,
+                value: [v[0], 0.0, 0.0],
+            });
         }
     }
     (points, load_ramp)
 }
 
-fn write_image<T: Real + Serialize>(problem: &Problem, plan: &Plan, b: usize) -> Result<BoardImage> {
+fn write_image<T: Real + Serialize>(
+    problem: &Problem,
+    plan: &Plan,
+    b: usize,
+) -> Result<BoardImage> {
     let bp = &plan.boards[b];
     let (dt, _) = problem.time_step()?;
     let steps = problem.steps(dt);
     let cd = CentralDifference::<T>::new(dt, problem.solver.damping);
-    let local: BTreeMap<u32, u16> = bp.nodes.iter().enumerate().map(|(i, &n)| (n, i as u16)).collect();
+    let local: BTreeMap<u32, u16> = bp
+        .nodes
+        .iter()
+        .enumerate()
+        .map(|(i, &n)| (n, i as u16))
+        .collect();
     let lid = |n: u32| -> Result<u16> {
-        local.get(&n).copied().ok_or_else(|| anyhow!("internal: node {n} missing on board {:?}", bp.coords))
+        local
+            .get(&n)
+            .copied()
+            .ok_or_else(|| anyhow!("internal: node {n} missing on board {:?}", bp.coords))
     };
     if bp.nodes.len() > u16::MAX as usize {
-        bail!("board {:?} holds {} nodes, more than an image can index", bp.coords, bp.nodes.len());
+        bail!(
+            "board {:?} holds {} nodes, more than an image can index",
+            bp.coords,
+            bp.nodes.len()
+        );
     }
     let (points, load_ramp) = path_table(problem);
     let loads: Vec<LoadRecord> = problem
@@ -305,14 +372,28 @@ fn write_image<T: Real + Serialize>(problem: &Problem, plan: &Plan, b: usize) ->
         .iter()
         .zip(&load_ramp)
         .filter(|(l, _)| plan.node_owner[l.node as usize] as usize == b)
-        .map(|(l, r)| Ok(LoadRecord { node: lid(l.node)?, force: l.force, ramp: *r }))
+        .map(|(l, r)| {
+            Ok(LoadRecord {
+                node: lid(l.node)?,
+                force: l.force,
+                ramp: *r,
+            })
+        })
         .collect::<Result<_>>()?;
-    let integration = if problem.solver.integration == "full" { Integration::Full } else { Integration::Reduced };
+    let integration = if problem.solver.integration == "full" {
+        Integration::Full
+    } else {
+        Integration::Reduced
+    };
     let header = ImageHeader {
         version: FORMAT_VERSION,
         board: bp.coords.map(|c| c as u8),
         machine: plan.machine.dims.map(|c| c as u8),
-        precision: if T::NAME == "f32" { Precision::F32 } else { Precision::F64 },
+        precision: if T::NAME == "f32" {
+            Precision::F32
+        } else {
+            Precision::F64
+        },
         integration,
         counts: Counts {
             materials: problem.laws.len() as u16,
@@ -321,8 +402,18 @@ fn write_image<T: Real + Serialize>(problem: &Problem, plan: &Plan, b: usize) ->
             nodes: bp.nodes.len() as u32,
             exchange: core::array::from_fn(|f| bp.exchange[f].len() as u16),
             rounds: plan.rounds.map(|r| r as u8),
-            sends: bp.rounds.iter().flatten().map(|r| r.send[0].len() + r.send[1].len()).sum::<usize>() as u32,
-            recvs: bp.rounds.iter().flatten().map(|r| r.recv[0].len() + r.recv[1].len()).sum::<usize>() as u32,
+            sends: bp
+                .rounds
+                .iter()
+                .flatten()
+                .map(|r| r.send[0].len() + r.send[1].len())
+                .sum::<usize>() as u32,
+            recvs: bp
+                .rounds
+                .iter()
+                .flatten()
+                .map(|r| r.recv[0].len() + r.recv[1].len())
+                .sum::<usize>() as u32,
             path_points: points.len() as u16,
             loads: loads.len() as u16,
         },
@@ -337,7 +428,13 @@ fn write_image<T: Real + Serialize>(problem: &Problem, plan: &Plan, b: usize) ->
         scene_elements: problem.mesh.cells.len() as u32,
         scene_nodes: problem.mesh.nodes.len() as u32,
     };
-    let mut buf = vec![0u8; 4096 + bp.elements.len() * 2048 + bp.nodes.len() * 128 + points.len() * 64 + loads.len() * 64];
+    let mut buf = vec![
+        0u8;
+        4096 + bp.elements.len() * 2048
+            + bp.nodes.len() * 128
+            + points.len() * 64
+            + loads.len() * 64
+    ];
     let mut w = ImageWriter::new(&mut buf, &header).map_err(|e| anyhow!("{e}"))?;
     let err = |e: ImageError| anyhow!("board {:?}: {e}", bp.coords);
     for law in &problem.laws {
@@ -351,7 +448,8 @@ fn write_image<T: Real + Serialize>(problem: &Problem, plan: &Plan, b: usize) ->
         match integration {
             Integration::Reduced => {
                 let modulus = problem.laws[m as usize].hourglass_modulus();
-                w.push(&r.reduced::<T>(nodes, m, modulus, problem.solver.hourglass)).map_err(err)?
+                w.push(&r.reduced::<T>(nodes, m, modulus, problem.solver.hourglass))
+                    .map_err(err)?
             }
             Integration::Full => w.push(&r.full::<T>(nodes, m)).map_err(err)?,
         }
@@ -368,7 +466,11 @@ fn write_image<T: Real + Serialize>(problem: &Problem, plan: &Plan, b: usize) ->
                 NodeKind::Prescribed(p) => NodeMotion::Prescribed(p as u16),
             },
             owner: own,
-            gravity: if own { problem.gravity.map(|g| T::from_f64(g * mass)) } else { [T::ZERO; 3] },
+            gravity: if own {
+                problem.gravity.map(|g| T::from_f64(g * mass))
+            } else {
+                [T::ZERO; 3]
+            },
         };
         w.push(&rec).map_err(err)?;
         w.push(&bp.ext_stage[k]).map_err(err)?;
@@ -382,7 +484,11 @@ fn write_image<T: Real + Serialize>(problem: &Problem, plan: &Plan, b: usize) ->
                 }
                 w.push(&(round.recv[f].len() as u16)).map_err(err)?;
                 for &(n, combine) in &round.recv[f] {
-                    w.push(&RecvEntry { node: lid(n)?, combine }).map_err(err)?;
+                    w.push(&RecvEntry {
+                        node: lid(n)?,
+                        combine,
+                    })
+                    .map_err(err)?;
                 }
             }
         }
@@ -396,7 +502,12 @@ fn write_image<T: Real + Serialize>(problem: &Problem, plan: &Plan, b: usize) ->
     let len = w.finish().map_err(err)?;
     buf.truncate(len);
     let ram_bytes = runtime_ram_bytes(&header);
-    Ok(BoardImage { coords: bp.coords, header, bytes: buf, ram_bytes })
+    Ok(BoardImage {
+        coords: bp.coords,
+        header,
+        bytes: buf,
+        ram_bytes,
+    })
 }
 
 /// Compiles every board's image.
@@ -434,14 +545,23 @@ pub fn check_fit(images: &[BoardImage], profile: &BoardProfile) -> Result<()> {
         if counts.nodes as usize > link_proto::NODES_PER_BOARD_MAX {
             problems.push(format!(
                 "board ({},{},{}): {} nodes exceed the firmware's {} nodes per board",
-                c[0], c[1], c[2], counts.nodes, link_proto::NODES_PER_BOARD_MAX
+                c[0],
+                c[1],
+                c[2],
+                counts.nodes,
+                link_proto::NODES_PER_BOARD_MAX
             ));
         }
         for (f, &x) in counts.exchange.iter().enumerate() {
             if x as usize > link_proto::BORDER_NODES_PER_FACE_MAX {
                 problems.push(format!(
                     "board ({},{},{}) link {}: {} border nodes exceed the {} a frame carries",
-                    c[0], c[1], c[2], FACE_NAMES[f], x, link_proto::BORDER_NODES_PER_FACE_MAX
+                    c[0],
+                    c[1],
+                    c[2],
+                    FACE_NAMES[f],
+                    x,
+                    link_proto::BORDER_NODES_PER_FACE_MAX
                 ));
             }
         }
@@ -449,7 +569,11 @@ pub fn check_fit(images: &[BoardImage], profile: &BoardProfile) -> Result<()> {
     if problems.is_empty() {
         Ok(())
     } else {
-        bail!("the schedule does not fit the {} board profile:\n  {}", profile.name, problems.join("\n  "))
+        bail!(
+            "the schedule does not fit the {} board profile:\n  {}",
+            profile.name,
+            problems.join("\n  ")
+        )
     }
 }
 
@@ -526,7 +650,11 @@ pub fn report(
     profile: &BoardProfile,
 ) -> Result<CompileReport> {
     let (dt, _) = problem.time_step()?;
-    let w = if problem.solver.precision == "f32" { 4 } else { 8 };
+    let w = if problem.solver.precision == "f32" {
+        4
+    } else {
+        8
+    };
     let epb: Vec<usize> = plan.boards.iter().map(|b| b.elements.len()).collect();
     let npb: Vec<usize> = plan.boards.iter().map(|b| b.nodes.len()).collect();
     let mean = epb.iter().sum::<usize>() as f64 / epb.len() as f64;
@@ -534,17 +662,35 @@ pub fn report(
     let per_link: Vec<usize> = plan
         .boards
         .iter()
-        .flat_map(|b| (0..6).map(move |f| b.rounds[f / 2].iter().map(|r| r.send[f % 2].len()).sum::<usize>()))
+        .flat_map(|b| {
+            (0..6).map(move |f| {
+                b.rounds[f / 2]
+                    .iter()
+                    .map(|r| r.send[f % 2].len())
+                    .sum::<usize>()
+            })
+        })
         .collect();
     let frames_per_link: Vec<usize> = plan
         .boards
         .iter()
-        .flat_map(|b| (0..6).map(move |f| b.rounds[f / 2].iter().filter(|r| !r.send[f % 2].is_empty()).count()))
+        .flat_map(|b| {
+            (0..6).map(move |f| {
+                b.rounds[f / 2]
+                    .iter()
+                    .filter(|r| !r.send[f % 2].is_empty())
+                    .count()
+            })
+        })
         .collect();
     let vectors: usize = per_link.iter().sum();
     let link_max = per_link.iter().copied().max().unwrap_or(0);
     let overhead = link_proto::FRAME_HEADER_LEN + link_proto::CRC_LEN;
-    let link_bytes: Vec<usize> = per_link.iter().zip(&frames_per_link).map(|(&n, &f)| 3 * w * n + f * overhead).collect();
+    let link_bytes: Vec<usize> = per_link
+        .iter()
+        .zip(&frames_per_link)
+        .map(|(&n, &f)| 3 * w * n + f * overhead)
+        .collect();
     let frame_bytes_max = link_bytes.iter().copied().max().unwrap_or(0);
     let bytes_total: usize = link_bytes.iter().sum();
     let rate = 1.0 / dt;
@@ -584,7 +730,13 @@ pub fn report(
         elements_per_board: epb,
         replicated_nodes: npb.iter().sum::<usize>() - problem.mesh.nodes.len(),
         nodes_per_board: npb,
-        border_nodes_per_face_max: core::array::from_fn(|f| plan.boards.iter().map(|b| b.exchange[f].len()).max().unwrap_or(0)),
+        border_nodes_per_face_max: core::array::from_fn(|f| {
+            plan.boards
+                .iter()
+                .map(|b| b.exchange[f].len())
+                .max()
+                .unwrap_or(0)
+        }),
         force_vectors_per_step: vectors,
         force_vectors_per_link_max: link_max,
         bytes_per_step_per_link_max: frame_bytes_max,
@@ -604,20 +756,48 @@ pub fn summary(r: &CompileReport) -> String {
     let min = r.elements_per_board.iter().min().copied().unwrap_or(0);
     let max = r.elements_per_board.iter().max().copied().unwrap_or(0);
     let mut s = String::new();
-    s += &format!("{}: {} elements, {} nodes on {} boards ({}), {} {}\n", r.scene, r.elements, r.nodes, r.elements_per_board.len(), r.machine, r.precision, r.integration);
+    s += &format!(
+        "{}: {} elements, {} nodes on {} boards ({}), {} {}\n",
+        r.scene,
+        r.elements,
+        r.nodes,
+        r.elements_per_board.len(),
+        r.machine,
+        r.precision,
+        r.integration
+    );
     s += &format!("  elements per board {min}..{max} (imbalance max/mean {:.3}); nodes per board {}..{}; {} replicas\n",
         r.load_imbalance, r.nodes_per_board.iter().min().copied().unwrap_or(0), r.nodes_per_board.iter().max().copied().unwrap_or(0), r.replicated_nodes);
-    s += &format!("  exchange rounds per step: x {}, y {}, z {}\n", r.rounds[0], r.rounds[1], r.rounds[2]);
-    s += &format!("  border nodes per face (max over boards): +x {} -x {} +y {} -y {} +z {} -z {}\n",
-        r.border_nodes_per_face_max[0], r.border_nodes_per_face_max[1], r.border_nodes_per_face_max[2],
-        r.border_nodes_per_face_max[3], r.border_nodes_per_face_max[4], r.border_nodes_per_face_max[5]);
-    s += &format!("  force vectors per step: {} in all, {} on the busiest link direction\n", r.force_vectors_per_step, r.force_vectors_per_link_max);
+    s += &format!(
+        "  exchange rounds per step: x {}, y {}, z {}\n",
+        r.rounds[0], r.rounds[1], r.rounds[2]
+    );
+    s += &format!(
+        "  border nodes per face (max over boards): +x {} -x {} +y {} -y {} +z {} -z {}\n",
+        r.border_nodes_per_face_max[0],
+        r.border_nodes_per_face_max[1],
+        r.border_nodes_per_face_max[2],
+        r.border_nodes_per_face_max[3],
+        r.border_nodes_per_face_max[4],
+        r.border_nodes_per_face_max[5]
+    );
+    s += &format!(
+        "  force vectors per step: {} in all, {} on the busiest link direction\n",
+        r.force_vectors_per_step, r.force_vectors_per_link_max
+    );
     s += &format!("  bytes per step: {} in all, {} on the busiest link; at dt = {:.3e} s ({:.0} steps/s): {:.3} GB/s in all, {:.1} MB/s on the busiest link ({:.0}% of its {:.0} MB/s)\n",
         r.bytes_per_step_total, r.bytes_per_step_per_link_max, r.dt_s, r.steps_per_s, r.bandwidth_total_bytes_per_s / 1e9,
         r.bandwidth_per_link_max_bytes_per_s / 1e6, 100.0 * r.link_utilisation_max, r.link_bandwidth_bytes_per_s as f64 / 1e6);
-    s += &format!("  largest image {} bytes, largest run-time state {} bytes ({} profile)\n", r.image_bytes_max, r.ram_bytes_max, r.profile);
+    s += &format!(
+        "  largest image {} bytes, largest run-time state {} bytes ({} profile)\n",
+        r.image_bytes_max, r.ram_bytes_max, r.profile
+    );
     s += "  seed's reference case: 2000 elements on 4x4x4 boards at dt = 100 us: 5600 force vectors per step, 1.35 GB/s in all\n";
-    s += &format!("  this scene at dt = 100 us: {} force vectors per step, {:.3} GB/s in all\n", r.force_vectors_per_step, r.bytes_per_step_total as f64 * 1e4 / 1e9);
+    s += &format!(
+        "  this scene at dt = 100 us: {} force vectors per step, {:.3} GB/s in all\n",
+        r.force_vectors_per_step,
+        r.bytes_per_step_total as f64 * 1e4 / 1e9
+    );
     s
 }
 
@@ -643,7 +823,9 @@ pub struct DecodedImage {
     pub loads: Vec<LoadRecord>,
 }
 
-fn decode_typed<T: Real + serde::de::DeserializeOwned>(mut r: ImageReader<'_>) -> Result<DecodedImage, ImageError> {
+fn decode_typed<T: Real + serde::de::DeserializeOwned>(
+    mut r: ImageReader<'_>,
+) -> Result<DecodedImage, ImageError> {
     use pe_firmware::physics::{HexElement, HexFull, HexReduced};
     let h = r.header;
     let c = h.counts;
@@ -669,7 +851,13 @@ fn decode_typed<T: Real + serde::de::DeserializeOwned>(mut r: ImageReader<'_>) -
     }
     for _ in 0..c.nodes {
         let n: NodeRecord<T> = r.next("node")?;
-        d.nodes.push(NodeRecord { global: n.global, gain: n.gain.to_f64(), motion: n.motion, owner: n.owner, gravity: n.gravity.map(|g| g.to_f64()) });
+        d.nodes.push(NodeRecord {
+            global: n.global,
+            gain: n.gain.to_f64(),
+            motion: n.motion,
+            owner: n.owner,
+            gravity: n.gravity.map(|g| g.to_f64()),
+        });
         d.ext_stage.push(r.next("node stage")?);
     }
     for a in 0..3 {
@@ -695,13 +883,18 @@ fn decode_typed<T: Real + serde::de::DeserializeOwned>(mut r: ImageReader<'_>) -
         d.loads.push(r.next("load")?);
     }
     if !r.is_done() {
-        return Err(ImageError::Malformed { record: "trailing bytes" });
+        return Err(ImageError::Malformed {
+            record: "trailing bytes",
+        });
     }
     Ok(d)
 }
 
 /// Decodes and checks a whole image.
-pub fn decode_image(bytes: &[u8], expected_board: Option<[u8; 3]>) -> Result<DecodedImage, ImageError> {
+pub fn decode_image(
+    bytes: &[u8],
+    expected_board: Option<[u8; 3]>,
+) -> Result<DecodedImage, ImageError> {
     let r = ImageReader::new(bytes, expected_board)?;
     match r.header.precision {
         Precision::F32 => decode_typed::<f32>(r),
@@ -714,6 +907,8 @@ pub fn decode_image(bytes: &[u8], expected_board: Option<[u8; 3]>) -> Result<Dec
 pub struct Manifest {
     pub format_version: u16,
     pub scene: String,
+    /// How to load the scene again (its mesh, for outputs): `builtin:LEVEL` or a file path.
+    pub scene_source: String,
     pub machine: [usize; 3],
     pub profile: String,
     pub precision: String,
@@ -732,7 +927,14 @@ pub struct ManifestBoard {
 }
 
 /// Compiles a problem into `dir`: images, manifest.json, report.json; returns the report.
-pub fn compile_to_dir(scene: &str, problem: &Problem, machine: Machine, profile: &BoardProfile, dir: &Path) -> Result<CompileReport> {
+pub fn compile_to_dir(
+    scene: &str,
+    scene_source: &str,
+    problem: &Problem,
+    machine: Machine,
+    profile: &BoardProfile,
+    dir: &Path,
+) -> Result<CompileReport> {
     let plan = plan(problem, machine)?;
     let images = compile_images(problem, &plan)?;
     check_fit(&images, profile)?;
@@ -741,6 +943,7 @@ pub fn compile_to_dir(scene: &str, problem: &Problem, machine: Machine, profile:
     let manifest = Manifest {
         format_version: FORMAT_VERSION,
         scene: scene.to_string(),
+        scene_source: scene_source.to_string(),
         machine: machine.dims,
         profile: profile.name.to_string(),
         precision: problem.solver.precision.clone(),
@@ -753,15 +956,20 @@ pub fn compile_to_dir(scene: &str, problem: &Problem, machine: Machine, profile:
                 board: im.coords,
                 file: image_file_name(im.coords),
                 bytes: im.bytes.len(),
-                crc32: format!("{:08x}", link_proto::frame::crc32(&im.bytes[..im.bytes.len() - 4])),
+                crc32: format!(
+                    "{:08x}",
+                    link_proto::frame::crc32(&im.bytes[..im.bytes.len() - 4])
+                ),
             })
             .collect(),
     };
     let p = dir.join("manifest.json");
-    std::fs::write(&p, serde_json::to_string_pretty(&manifest)?).with_context(|| format!("writing {}", p.display()))?;
+    std::fs::write(&p, serde_json::to_string_pretty(&manifest)?)
+        .with_context(|| format!("writing {}", p.display()))?;
     let rep = report(scene, problem, &plan, &images, profile)?;
     let p = dir.join("report.json");
-    std::fs::write(&p, serde_json::to_string_pretty(&rep)?).with_context(|| format!("writing {}", p.display()))?;
+    std::fs::write(&p, serde_json::to_string_pretty(&rep)?)
+        .with_context(|| format!("writing {}", p.display()))?;
     Ok(rep)
 }
 
@@ -776,33 +984,77 @@ pub fn read_manifest(dir: &Path) -> Result<Manifest> {
 pub fn inspect(dir: &Path, board: [usize; 3]) -> Result<String> {
     let p = dir.join(image_file_name(board));
     let bytes = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
-    let d = decode_image(&bytes, Some(board.map(|c| c as u8))).map_err(|e| anyhow!("{}: {e}", p.display()))?;
+    let d = decode_image(&bytes, Some(board.map(|c| c as u8)))
+        .map_err(|e| anyhow!("{}: {e}", p.display()))?;
     let h = &d.header;
     let c = &h.counts;
     let mut s = format!(
         "{}: board ({},{},{}) of a {}x{}x{} machine, format v{}, {:?} {:?}, {} bytes\n",
-        p.display(), h.board[0], h.board[1], h.board[2], h.machine[0], h.machine[1], h.machine[2], h.version, h.precision, h.integration, bytes.len()
+        p.display(),
+        h.board[0],
+        h.board[1],
+        h.board[2],
+        h.machine[0],
+        h.machine[1],
+        h.machine[2],
+        h.version,
+        h.precision,
+        h.integration,
+        bytes.len()
     );
-    s += &format!("  dt = {:.4e} s, {} steps, damping {} 1/s\n", h.params.dt_s, h.params.steps, h.params.damping_per_s);
+    s += &format!(
+        "  dt = {:.4e} s, {} steps, damping {} 1/s\n",
+        h.params.dt_s, h.params.steps, h.params.damping_per_s
+    );
     let b = c.batch_ends;
     s += &format!(
         "  {} elements: batch x {}, batch y {}, batch z {}, inner {}\n",
-        c.elements, b[0], b[1] - b[0], b[2] - b[1], b[3] - b[2]
+        c.elements,
+        b[0],
+        b[1] - b[0],
+        b[2] - b[1],
+        b[3] - b[2]
     );
     let owned = d.nodes.iter().filter(|n| n.owner).count();
-    s += &format!("  {} nodes ({} owned, {} replicas), {} materials, {} path points, {} loads\n", c.nodes, owned, c.nodes as usize - owned, c.materials, c.path_points, c.loads);
+    s += &format!(
+        "  {} nodes ({} owned, {} replicas), {} materials, {} path points, {} loads\n",
+        c.nodes,
+        owned,
+        c.nodes as usize - owned,
+        c.materials,
+        c.path_points,
+        c.loads
+    );
     s += "  schedule: recover x | send ±x | recover y | add ±x | send ±y | recover z | add ±y | send ±z | recover inner | add ±z | update\n";
-    let g = |l: u16| d.nodes.get(l as usize).map(|n| n.global).unwrap_or(u32::MAX);
+    let g = |l: u16| {
+        d.nodes
+            .get(l as usize)
+            .map(|n| n.global)
+            .unwrap_or(u32::MAX)
+    };
     let list = |v: Vec<u32>| {
         let shown: Vec<String> = v.iter().take(20).map(|x| x.to_string()).collect();
-        format!("{} [{}{}]", v.len(), shown.join(" "), if v.len() > 20 { " ..." } else { "" })
+        format!(
+            "{} [{}{}]",
+            v.len(),
+            shown.join(" "),
+            if v.len() > 20 { " ..." } else { "" }
+        )
     };
     for a in 0..3 {
         for (k, round) in d.rounds[a].iter().enumerate() {
             for f in 0..2 {
                 let face = FACE_NAMES[2 * a + f];
-                s += &format!("  {} round {k} face {face}: send {}\n", ["x", "y", "z"][a], list(round.send[f].iter().map(|&l| g(l)).collect()));
-                s += &format!("  {} round {k} face {face}: recv {}\n", ["x", "y", "z"][a], list(round.recv[f].iter().map(|e| g(e.node)).collect()));
+                s += &format!(
+                    "  {} round {k} face {face}: send {}\n",
+                    ["x", "y", "z"][a],
+                    list(round.send[f].iter().map(|&l| g(l)).collect())
+                );
+                s += &format!(
+                    "  {} round {k} face {face}: recv {}\n",
+                    ["x", "y", "z"][a],
+                    list(round.recv[f].iter().map(|e| g(e.node)).collect())
+                );
             }
         }
     }

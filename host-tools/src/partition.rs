@@ -12,7 +12,6 @@
 
 use anyhow::{bail, Result};
 
-
 use crate::mesh::Mesh;
 
 /// Machine size (boards per axis).
@@ -28,7 +27,9 @@ impl Machine {
         if parts.len() != 3 || dims.len() != 3 || dims.iter().any(|&d| d == 0 || d > 16) {
             bail!("--boards {s:?}: expected X x Y x Z with 1..16 boards per axis, e.g. 4x4x4");
         }
-        Ok(Machine { dims: [dims[0], dims[1], dims[2]] })
+        Ok(Machine {
+            dims: [dims[0], dims[1], dims[2]],
+        })
     }
     pub fn count(&self) -> usize {
         self.dims.iter().product()
@@ -38,7 +39,11 @@ impl Machine {
         c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])
     }
     pub fn coords(&self, i: usize) -> [usize; 3] {
-        [i % self.dims[0], (i / self.dims[0]) % self.dims[1], i / (self.dims[0] * self.dims[1])]
+        [
+            i % self.dims[0],
+            (i / self.dims[0]) % self.dims[1],
+            i / (self.dims[0] * self.dims[1]),
+        ]
     }
 }
 
@@ -69,7 +74,11 @@ fn centroid(mesh: &Mesh, e: usize) -> [f64; 3] {
 pub fn partition(mesh: &Mesh, machine: Machine) -> Result<Vec<u32>> {
     let n = mesh.cells.len();
     if n < machine.count() {
-        bail!("{} elements cannot fill {} boards ({machine}): every board needs at least one", n, machine.count());
+        bail!(
+            "{} elements cannot fill {} boards ({machine}): every board needs at least one",
+            n,
+            machine.count()
+        );
     }
     let cents: Vec<[f64; 3]> = (0..n).map(|e| centroid(mesh, e)).collect();
     let sorted = |mut v: Vec<usize>, axis: usize| {
@@ -79,8 +88,14 @@ pub fn partition(mesh: &Mesh, machine: Machine) -> Result<Vec<u32>> {
     let mut board = vec![0u32; n];
     let all = sorted((0..n).collect(), 0);
     for (x, slab) in split_even(&all, machine.dims[0]).into_iter().enumerate() {
-        for (y, col) in split_even(&sorted(slab, 1), machine.dims[1]).into_iter().enumerate() {
-            for (z, part) in split_even(&sorted(col, 2), machine.dims[2]).into_iter().enumerate() {
+        for (y, col) in split_even(&sorted(slab, 1), machine.dims[1])
+            .into_iter()
+            .enumerate()
+        {
+            for (z, part) in split_even(&sorted(col, 2), machine.dims[2])
+                .into_iter()
+                .enumerate()
+            {
                 let b = machine.index([x, y, z]) as u32;
                 for e in part {
                     board[e] = b;
@@ -103,7 +118,11 @@ pub fn node_elements(mesh: &Mesh) -> Vec<Vec<u32>> {
 }
 
 /// Boards (coordinates) whose elements touch node `n`, min and max along each axis.
-pub fn node_board_range(machine: Machine, board: &[u32], around: &[u32]) -> ([usize; 3], [usize; 3]) {
+pub fn node_board_range(
+    machine: Machine,
+    board: &[u32],
+    around: &[u32],
+) -> ([usize; 3], [usize; 3]) {
     let mut lo = [usize::MAX; 3];
     let mut hi = [0; 3];
     for &e in around {

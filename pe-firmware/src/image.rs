@@ -148,16 +148,34 @@ pub enum ImageError {
     TooShort,
     BadMagic,
     /// The CRC at the end does not match the content (a flipped bit, a truncated copy).
-    BadCrc { stored: u32, computed: u32 },
-    WrongVersion { found: u16, expected: u16 },
+    BadCrc {
+        stored: u32,
+        computed: u32,
+    },
+    WrongVersion {
+        found: u16,
+        expected: u16,
+    },
     /// The image is for another board position (or another machine size).
-    WrongBoard { image: [u8; 3], expected: [u8; 3] },
+    WrongBoard {
+        image: [u8; 3],
+        expected: [u8; 3],
+    },
     /// A record does not decode, or the records run past the end.
-    Malformed { record: &'static str },
+    Malformed {
+        record: &'static str,
+    },
     /// A count exceeds this firmware's capacity.
-    Capacity { what: &'static str, count: u32, max: u32 },
+    Capacity {
+        what: &'static str,
+        count: u32,
+        max: u32,
+    },
     /// A record refers to a node or material that does not exist.
-    BadIndex { what: &'static str, index: u32 },
+    BadIndex {
+        what: &'static str,
+        index: u32,
+    },
     /// Writing: the output buffer is too small.
     BufferFull,
 }
@@ -171,7 +189,10 @@ impl core::fmt::Display for ImageError {
                 write!(f, "image CRC mismatch (stored {stored:#010x}, computed {computed:#010x}): corrupted")
             }
             ImageError::WrongVersion { found, expected } => {
-                write!(f, "image format version {found}, this firmware reads {expected}")
+                write!(
+                    f,
+                    "image format version {found}, this firmware reads {expected}"
+                )
             }
             ImageError::WrongBoard { image, expected } => write!(
                 f,
@@ -180,9 +201,14 @@ impl core::fmt::Display for ImageError {
             ),
             ImageError::Malformed { record } => write!(f, "malformed image record: {record}"),
             ImageError::Capacity { what, count, max } => {
-                write!(f, "image has {count} {what}, this firmware holds at most {max}")
+                write!(
+                    f,
+                    "image has {count} {what}, this firmware holds at most {max}"
+                )
             }
-            ImageError::BadIndex { what, index } => write!(f, "image refers to {what} {index}, which does not exist"),
+            ImageError::BadIndex { what, index } => {
+                write!(f, "image refers to {what} {index}, which does not exist")
+            }
             ImageError::BufferFull => write!(f, "output buffer too small for the image"),
         }
     }
@@ -207,7 +233,9 @@ impl<'a> ImageWriter<'a> {
 
     pub fn push<R: Serialize>(&mut self, record: &R) -> Result<(), ImageError> {
         let rest = self.buf.get_mut(self.len..).ok_or(ImageError::BufferFull)?;
-        let used = postcard::to_slice(record, rest).map_err(|_| ImageError::BufferFull)?.len();
+        let used = postcard::to_slice(record, rest)
+            .map_err(|_| ImageError::BufferFull)?
+            .len();
         self.len += used;
         Ok(())
     }
@@ -216,7 +244,10 @@ impl<'a> ImageWriter<'a> {
     pub fn finish(self) -> Result<usize, ImageError> {
         let crc = link_proto::frame::crc32(&self.buf[..self.len]);
         let end = self.len + 4;
-        let dst = self.buf.get_mut(self.len..end).ok_or(ImageError::BufferFull)?;
+        let dst = self
+            .buf
+            .get_mut(self.len..end)
+            .ok_or(ImageError::BufferFull)?;
         dst.copy_from_slice(&crc.to_le_bytes());
         Ok(end)
     }
@@ -246,11 +277,17 @@ impl<'a> ImageReader<'a> {
         let (header, rest): (ImageHeader, _) = postcard::take_from_bytes(&body[4..])
             .map_err(|_| ImageError::Malformed { record: "header" })?;
         if header.version != FORMAT_VERSION {
-            return Err(ImageError::WrongVersion { found: header.version, expected: FORMAT_VERSION });
+            return Err(ImageError::WrongVersion {
+                found: header.version,
+                expected: FORMAT_VERSION,
+            });
         }
         if let Some(b) = expected_board {
             if b != header.board {
-                return Err(ImageError::WrongBoard { image: header.board, expected: b });
+                return Err(ImageError::WrongBoard {
+                    image: header.board,
+                    expected: b,
+                });
             }
         }
         Ok(ImageReader { header, rest })
@@ -258,7 +295,8 @@ impl<'a> ImageReader<'a> {
 
     /// The next record.
     pub fn next<R: DeserializeOwned>(&mut self, record: &'static str) -> Result<R, ImageError> {
-        let (r, rest) = postcard::take_from_bytes(self.rest).map_err(|_| ImageError::Malformed { record })?;
+        let (r, rest) =
+            postcard::take_from_bytes(self.rest).map_err(|_| ImageError::Malformed { record })?;
         self.rest = rest;
         Ok(r)
     }
@@ -289,13 +327,23 @@ pub fn piecewise_linear(t: f64, len: usize, point: impl Fn(usize) -> (f64, [f64;
     let (t0, a) = point(k - 1);
     let (t1, b) = point(k);
     let s = (t - t0) / (t1 - t0);
-    [a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1]), a[2] + s * (b[2] - a[2])]
+    [
+        a[0] + s * (b[0] - a[0]),
+        a[1] + s * (b[1] - a[1]),
+        a[2] + s * (b[2] - a[2]),
+    ]
 }
 
 /// Value of path `path` in a table of [`PathPoint`]s (points of one path are contiguous).
 pub fn path_value(points: &[PathPoint], path: u16, t: f64) -> [f64; 3] {
-    let first = points.iter().position(|p| p.path == path).unwrap_or(points.len());
-    let len = points[first..].iter().take_while(|p| p.path == path).count();
+    let first = points
+        .iter()
+        .position(|p| p.path == path)
+        .unwrap_or(points.len());
+    let len = points[first..]
+        .iter()
+        .take_while(|p| p.path == path)
+        .count();
     let run = &points[first..first + len];
     piecewise_linear(t, len, |k| (run[k].t_s, run[k].value))
 }

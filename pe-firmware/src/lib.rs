@@ -7,7 +7,7 @@
 #![no_std]
 #![forbid(unsafe_code)]
 
-pub mod physics;
 pub mod image;
+pub mod physics;
 pub mod profile;
 pub mod runtime;

@@ -12,7 +12,9 @@ use serde::de::DeserializeOwned;
 
 use crate::image::*;
 use crate::physics::explicit::accumulate_internal_forces;
-use crate::physics::{CentralDifference, HexElement, HexFull, HexReduced, MaterialLaw, PhysicsError, Real};
+use crate::physics::{
+    CentralDifference, HexElement, HexFull, HexReduced, MaterialLaw, PhysicsError, Real,
+};
 
 /// Most exchange rounds per axis a runtime handles.
 pub const ROUNDS_PER_AXIS_MAX: usize = 8;
@@ -49,16 +51,35 @@ pub trait Environment {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum FaultKind {
     /// No frame arrived on `face` within the link timeout.
-    LinkTimeout { face: Face },
+    LinkTimeout {
+        face: Face,
+    },
     /// The link reported an error (damaged frame, I/O).
-    LinkError { face: Face, error: link_proto::RecvError },
+    LinkError {
+        face: Face,
+        error: link_proto::RecvError,
+    },
     /// A frame could not be sent.
-    SendFailed { face: Face, error: link_proto::SendError },
+    SendFailed {
+        face: Face,
+        error: link_proto::SendError,
+    },
     /// A frame arrived intact but is not the one the schedule expects.
-    UnexpectedFrame { face: Face, expected_step: u32, step: u32, expected_values: u16, values: u16 },
+    UnexpectedFrame {
+        face: Face,
+        expected_step: u32,
+        step: u32,
+        expected_values: u16,
+        values: u16,
+    },
     /// The frame failed to parse (CRC, length).
-    BadFrame { face: Face, error: link_proto::Error },
+    BadFrame {
+        face: Face,
+        error: link_proto::Error,
+    },
     Physics(PhysicsError),
+    /// The schedule image was refused.
+    Image(ImageError),
 }
 
 /// A fault with its board and step.
@@ -83,6 +104,7 @@ impl core::fmt::Display for Fault {
             ),
             FaultKind::BadFrame { face, error } => write!(f, "link {face:?}: bad frame: {error}"),
             FaultKind::Physics(e) => write!(f, "{e}"),
+            FaultKind::Image(e) => write!(f, "schedule image: {e}"),
         }
     }
 }
@@ -104,7 +126,16 @@ pub struct Storage<'a, T, E> {
 
 /// Fixed-capacity storage for the firmware: `NE` elements, `NN` nodes, `NX` exchange
 /// entries, `NP` path points, `NL` loads, `NM` materials.
-pub struct StaticStorage<T, E, const NE: usize, const NN: usize, const NX: usize, const NP: usize, const NL: usize, const NM: usize> {
+pub struct StaticStorage<
+    T,
+    E,
+    const NE: usize,
+    const NN: usize,
+    const NX: usize,
+    const NP: usize,
+    const NL: usize,
+    const NM: usize,
+> {
     pub laws: [MaterialLaw<T>; NM],
     pub elements: [E; NE],
     pub nodes: [NodeRecord<T>; NN],
@@ -118,8 +149,16 @@ pub struct StaticStorage<T, E, const NE: usize, const NN: usize, const NX: usize
     pub loads: [LoadRecord; NL],
 }
 
-impl<T: Real, E, const NE: usize, const NN: usize, const NX: usize, const NP: usize, const NL: usize, const NM: usize>
-    StaticStorage<T, E, NE, NN, NX, NP, NL, NM>
+impl<
+        T: Real,
+        E,
+        const NE: usize,
+        const NN: usize,
+        const NX: usize,
+        const NP: usize,
+        const NL: usize,
+        const NM: usize,
+    > StaticStorage<T, E, NE, NN, NX, NP, NL, NM>
 {
     pub fn storage(&mut self) -> Storage<'_, T, E> {
         Storage {
@@ -154,7 +193,9 @@ pub struct RuntimeConfig {
 
 impl Default for RuntimeConfig {
     fn default() -> Self {
-        RuntimeConfig { link_timeout_ns: 10_000_000_000 }
+        RuntimeConfig {
+            link_timeout_ns: 10_000_000_000,
+        }
     }
 }
 
@@ -189,7 +230,11 @@ pub struct Runtime<'a, T, E> {
 
 fn capacity(what: &'static str, count: usize, max: usize) -> Result<(), ImageError> {
     if count > max {
-        Err(ImageError::Capacity { what, count: count as u32, max: max as u32 })
+        Err(ImageError::Capacity {
+            what,
+            count: count as u32,
+            max: max as u32,
+        })
     } else {
         Ok(())
     }
@@ -197,21 +242,39 @@ fn capacity(what: &'static str, count: usize, max: usize) -> Result<(), ImageErr
 
 impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
     /// Checks and loads `image` for board `board` into `st`.
-    pub fn load(image: &[u8], board: [u8; 3], st: Storage<'a, T, E>, config: RuntimeConfig) -> Result<Self, ImageError> {
+    pub fn load(
+        image: &[u8],
+        board: [u8; 3],
+        st: Storage<'a, T, E>,
+        config: RuntimeConfig,
+    ) -> Result<Self, ImageError> {
         let mut r = ImageReader::new(image, Some(board))?;
         let h = r.header;
         let c = h.counts;
         if h.precision != T::PRECISION {
-            return Err(ImageError::Malformed { record: "precision differs from this runtime's" });
+            return Err(ImageError::Malformed {
+                record: "precision differs from this runtime's",
+            });
         }
         let reduced = core::mem::size_of::<E>() == core::mem::size_of::<HexReduced<T>>();
         if (h.integration == Integration::Reduced) != reduced {
-            return Err(ImageError::Malformed { record: "integration differs from this runtime's" });
+            return Err(ImageError::Malformed {
+                record: "integration differs from this runtime's",
+            });
         }
         let (ne, nn) = (c.elements as usize, c.nodes as usize);
         capacity("materials", c.materials as usize, st.laws.len())?;
         capacity("elements", ne, st.elements.len())?;
-        capacity("nodes", nn, st.nodes.len().min(st.u.len()).min(st.u_prev.len()).min(st.force.len()).min(st.ext_stage.len()))?;
+        capacity(
+            "nodes",
+            nn,
+            st.nodes
+                .len()
+                .min(st.u.len())
+                .min(st.u_prev.len())
+                .min(st.force.len())
+                .min(st.ext_stage.len()),
+        )?;
         capacity("exchange sends", c.sends as usize, st.sends.len())?;
         capacity("exchange receives", c.recvs as usize, st.recvs.len())?;
         capacity("path points", c.path_points as usize, st.path_points.len())?;
@@ -219,8 +282,14 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
         for &n in &c.rounds {
             capacity("exchange rounds", n as usize, ROUNDS_PER_AXIS_MAX)?;
         }
-        if !(c.batch_ends[0] <= c.batch_ends[1] && c.batch_ends[1] <= c.batch_ends[2] && c.batch_ends[2] <= c.batch_ends[3] && c.batch_ends[3] as usize == ne) {
-            return Err(ImageError::Malformed { record: "batch ends" });
+        if !(c.batch_ends[0] <= c.batch_ends[1]
+            && c.batch_ends[1] <= c.batch_ends[2]
+            && c.batch_ends[2] <= c.batch_ends[3]
+            && c.batch_ends[3] as usize == ne)
+        {
+            return Err(ImageError::Malformed {
+                record: "batch ends",
+            });
         }
         for k in 0..c.materials as usize {
             st.laws[k] = r.next::<MaterialLaw<f64>>("material")?.cast::<T>();
@@ -228,10 +297,16 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
         for k in 0..ne {
             let e: E = r.next("element")?;
             if e.nodes().iter().any(|&n| n as usize >= nn) {
-                return Err(ImageError::BadIndex { what: "node of element", index: k as u32 });
+                return Err(ImageError::BadIndex {
+                    what: "node of element",
+                    index: k as u32,
+                });
             }
             if e.material() >= c.materials as usize {
-                return Err(ImageError::BadIndex { what: "material of element", index: k as u32 });
+                return Err(ImageError::BadIndex {
+                    what: "material of element",
+                    index: k as u32,
+                });
             }
             st.elements[k] = e;
         }
@@ -252,9 +327,16 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
                     for _ in 0..n {
                         let v: u16 = r.next("send")?;
                         if v as usize >= nn {
-                            return Err(ImageError::BadIndex { what: "node of send list", index: v as u32 });
+                            return Err(ImageError::BadIndex {
+                                what: "node of send list",
+                                index: v as u32,
+                            });
                         }
-                        *st.sends.get_mut(ns).ok_or(ImageError::Capacity { what: "exchange sends", count: ns as u32 + 1, max: c.sends })? = v;
+                        *st.sends.get_mut(ns).ok_or(ImageError::Capacity {
+                            what: "exchange sends",
+                            count: ns as u32 + 1,
+                            max: c.sends,
+                        })? = v;
                         ns += 1;
                     }
                     round.send[f] = (start as u32, ns as u32);
@@ -263,9 +345,16 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
                     for _ in 0..n {
                         let v: RecvEntry = r.next("receive")?;
                         if v.node as usize >= nn {
-                            return Err(ImageError::BadIndex { what: "node of receive list", index: v.node as u32 });
+                            return Err(ImageError::BadIndex {
+                                what: "node of receive list",
+                                index: v.node as u32,
+                            });
                         }
-                        *st.recvs.get_mut(nr).ok_or(ImageError::Capacity { what: "exchange receives", count: nr as u32 + 1, max: c.recvs })? = v;
+                        *st.recvs.get_mut(nr).ok_or(ImageError::Capacity {
+                            what: "exchange receives",
+                            count: nr as u32 + 1,
+                            max: c.recvs,
+                        })? = v;
                         nr += 1;
                     }
                     round.recv[f] = (start as u32, nr as u32);
@@ -278,12 +367,17 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
         for k in 0..c.loads as usize {
             let l: LoadRecord = r.next("load")?;
             if l.node as usize >= nn {
-                return Err(ImageError::BadIndex { what: "node of load", index: k as u32 });
+                return Err(ImageError::BadIndex {
+                    what: "node of load",
+                    index: k as u32,
+                });
             }
             st.loads[k] = l;
         }
         if !r.is_done() {
-            return Err(ImageError::Malformed { record: "trailing bytes" });
+            return Err(ImageError::Malformed {
+                record: "trailing bytes",
+            });
         }
         Ok(Runtime {
             header: h,
@@ -320,7 +414,11 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
     }
 
     fn fault(&self, kind: FaultKind) -> Fault {
-        Fault { board: self.header.board, step: self.step, kind }
+        Fault {
+            board: self.header.board,
+            step: self.step,
+            kind,
+        }
     }
 
     fn batch(&mut self, b: usize) -> Result<(), Fault> {
@@ -329,8 +427,18 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
         let end = ends[b] as usize;
         let st = &mut self.st;
         let n = self.header.counts.nodes as usize;
-        accumulate_internal_forces(&st.elements[start..end], start as u32, st.laws, &st.u[..n], &mut st.force[..n])
-            .map_err(|e| Fault { board: self.header.board, step: self.step, kind: FaultKind::Physics(e) })
+        accumulate_internal_forces(
+            &st.elements[start..end],
+            start as u32,
+            st.laws,
+            &st.u[..n],
+            &mut st.force[..n],
+        )
+        .map_err(|e| Fault {
+            board: self.header.board,
+            step: self.step,
+            kind: FaultKind::Physics(e),
+        })
     }
 
     /// Subtracts the external force of owned nodes whose stage is `stage`.
@@ -340,9 +448,16 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
             if self.st.ext_stage[k] == stage {
                 let g = self.st.nodes[k].gravity;
                 let mut fe = g;
-                for l in self.st.loads[..self.header.counts.loads as usize].iter().filter(|l| l.node as usize == k) {
+                for l in self.st.loads[..self.header.counts.loads as usize]
+                    .iter()
+                    .filter(|l| l.node as usize == k)
+                {
                     let s = match l.ramp {
-                        Some(p) => path_value(&self.st.path_points[..self.header.counts.path_points as usize], p, t)[0],
+                        Some(p) => path_value(
+                            &self.st.path_points[..self.header.counts.path_points as usize],
+                            p,
+                            t,
+                        )[0],
                         None => 1.0,
                     };
                     for i in 0..3 {
@@ -356,22 +471,39 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
         }
     }
 
-    fn send(&mut self, links: &mut impl Links, env: &mut impl Environment, axis: usize, round: usize) -> Result<(), Fault> {
+    fn send(
+        &mut self,
+        links: &mut impl Links,
+        env: &mut impl Environment,
+        axis: usize,
+        round: usize,
+    ) -> Result<(), Fault> {
         let rr = self.rounds[axis][round];
         for f in 0..2 {
             let (s, e) = rr.send[f];
             if s == e {
                 continue;
             }
-            let face = Face::from_index(2 * axis + f).ok_or(self.fault(FaultKind::Physics(PhysicsError::BadIndex { element: 0 })))?;
+            let face = Face::from_index(2 * axis + f)
+                .ok_or(self.fault(FaultKind::Physics(PhysicsError::BadIndex { element: 0 })))?;
             let mut m = 0;
             for &k in &self.st.sends[s as usize..e as usize] {
                 let v = self.st.force[k as usize];
                 self.scratch[m..m + 3].copy_from_slice(&v);
                 m += 3;
             }
-            let len = emit_values(FrameKind::Forces, self.step as u32, T::wire(&self.scratch[..m]), &mut self.tx)
-                .map_err(|_| self.fault(FaultKind::SendFailed { face, error: link_proto::SendError::TooLong }))?;
+            let len = emit_values(
+                FrameKind::Forces,
+                self.step as u32,
+                T::wire(&self.scratch[..m]),
+                &mut self.tx,
+            )
+            .map_err(|_| {
+                self.fault(FaultKind::SendFailed {
+                    face,
+                    error: link_proto::SendError::TooLong,
+                })
+            })?;
             let start = env.now_ns();
             loop {
                 match links.try_send(face, &self.tx[..len]) {
@@ -391,7 +523,13 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
         Ok(())
     }
 
-    fn receive(&mut self, links: &mut impl Links, env: &mut impl Environment, axis: usize, round: usize) -> Result<(), Fault> {
+    fn receive(
+        &mut self,
+        links: &mut impl Links,
+        env: &mut impl Environment,
+        axis: usize,
+        round: usize,
+    ) -> Result<(), Fault> {
         let rr = self.rounds[axis][round];
         // The −axis face first: the summation trees put the lower board's value on the left.
         for f in [1, 0] {
@@ -399,7 +537,8 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
             if s == e {
                 continue;
             }
-            let face = Face::from_index(2 * axis + f).ok_or(self.fault(FaultKind::Physics(PhysicsError::BadIndex { element: 0 })))?;
+            let face = Face::from_index(2 * axis + f)
+                .ok_or(self.fault(FaultKind::Physics(PhysicsError::BadIndex { element: 0 })))?;
             let start = env.now_ns();
             let len = loop {
                 match links.try_recv(face, &mut self.rx) {
@@ -415,7 +554,8 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
             };
             self.stats.wait_ns += env.now_ns().saturating_sub(start);
             self.stats.frames_received[face.index()] += 1;
-            let repr = FrameRepr::parse_bytes(&self.rx[..len]).map_err(|error| self.fault(FaultKind::BadFrame { face, error }))?;
+            let repr = FrameRepr::parse_bytes(&self.rx[..len])
+                .map_err(|error| self.fault(FaultKind::BadFrame { face, error }))?;
             let expected = 3 * (e - s) as usize;
             if repr.kind != FrameKind::Forces
                 || repr.step != self.step as u32
@@ -446,7 +586,12 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
         Ok(())
     }
 
-    fn exchange_rest(&mut self, links: &mut impl Links, env: &mut impl Environment, axis: usize) -> Result<(), Fault> {
+    fn exchange_rest(
+        &mut self,
+        links: &mut impl Links,
+        env: &mut impl Environment,
+        axis: usize,
+    ) -> Result<(), Fault> {
         self.receive(links, env, axis, 0)?;
         for round in 1..self.header.counts.rounds[axis] as usize {
             self.send(links, env, axis, round)?;
@@ -456,7 +601,11 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
     }
 
     /// One explicit step by the seed's interleaved schedule.
-    pub fn step(&mut self, links: &mut impl Links, env: &mut impl Environment) -> Result<(), Fault> {
+    pub fn step(
+        &mut self,
+        links: &mut impl Links,
+        env: &mut impl Environment,
+    ) -> Result<(), Fault> {
         let n = self.header.counts.nodes as usize;
         let dt = self.header.params.dt_s;
         let t = self.step as f64 * dt;
@@ -507,9 +656,13 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
             let next = match rec.motion {
                 NodeMotion::Free => {
                     let r = [-total[0], -total[1], -total[2]];
-                    let next = self.cd.advance(&self.st.u[k], &self.st.u_prev[k], rec.gain, &r);
+                    let next = self
+                        .cd
+                        .advance(&self.st.u[k], &self.st.u_prev[k], rec.gain, &r);
                     if !next.iter().all(|v| v.is_finite()) {
-                        return Err(self.fault(FaultKind::Physics(PhysicsError::NonFinite { node: rec.global })));
+                        return Err(self.fault(FaultKind::Physics(PhysicsError::NonFinite {
+                            node: rec.global,
+                        })));
                     }
                     next
                 }
@@ -530,10 +683,14 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
                     path_value(&self.st.path_points[..np], p, t_next).map(T::from_f64)
                 }
             };
-            let v: [f64; 3] = core::array::from_fn(|i| (next[i] - self.st.u_prev[k][i]).to_f64() * inv2dt);
+            let v: [f64; 3] =
+                core::array::from_fn(|i| (next[i] - self.st.u_prev[k][i]).to_f64() * inv2dt);
             let v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
             if v2 > limit * limit {
-                return Err(self.fault(FaultKind::Physics(PhysicsError::SpeedLimit { node: rec.global, speed_m_per_s: libm::sqrt(v2) })));
+                return Err(self.fault(FaultKind::Physics(PhysicsError::SpeedLimit {
+                    node: rec.global,
+                    speed_m_per_s: libm::sqrt(v2),
+                })));
             }
             if rec.owner {
                 // m_inertial = C / gain

@@ -230,7 +230,14 @@ fn main() -> Result<()> {
             let (sc, _, _) = scene.load()?;
             print!("{}", sc.to_toml()?);
         }
-        Command::Compile { scene, boards, profile, output, precision, steps } => {
+        Command::Compile {
+            scene,
+            boards,
+            profile,
+            output,
+            precision,
+            steps,
+        } => {
             let (mut sc, dir, name) = scene.load()?;
             if let Some(p) = precision {
                 sc.solver.precision = p;
@@ -239,19 +246,40 @@ fn main() -> Result<()> {
                 sc.solver.steps = Some(n);
             }
             let machine = host_tools::partition::Machine::parse(&boards)?;
-            let prof = pe_firmware::profile::profile(&profile)
-                .with_context(|| format!("--profile {profile:?}: known profiles are pe-board, qemu-mps2-an500"))?;
-            let problem = Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
-            let rep = host_tools::compile::compile_to_dir(&name, &problem, machine, &prof, &output)?;
+            let prof = pe_firmware::profile::profile(&profile).with_context(|| {
+                format!("--profile {profile:?}: known profiles are pe-board, qemu-mps2-an500")
+            })?;
+            let problem =
+                Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
+            let source = match (&scene.scene, scene.builtin) {
+                (Some(p), false) => std::fs::canonicalize(p)
+                    .unwrap_or(p.clone())
+                    .display()
+                    .to_string(),
+                _ => format!("builtin:{}", scene.level),
+            };
+            let rep = host_tools::compile::compile_to_dir(
+                &name, &source, &problem, machine, &prof, &output,
+            )?;
             print!("{}", host_tools::compile::summary(&rep));
-            println!("  wrote {} images, manifest.json and report.json to {}", rep.boards.len(), output.display());
+            println!(
+                "  wrote {} images, manifest.json and report.json to {}",
+                rep.boards.len(),
+                output.display()
+            );
         }
         Command::Inspect { dir, board } => {
-            let c: Vec<usize> = board.split(',').filter_map(|v| v.trim().parse().ok()).collect();
+            let c: Vec<usize> = board
+                .split(',')
+                .filter_map(|v| v.trim().parse().ok())
+                .collect();
             if c.len() != 3 {
                 anyhow::bail!("--board {board:?}: expected X,Y,Z");
             }
-            print!("{}", host_tools::compile::inspect(&dir, [c[0], c[1], c[2]])?);
+            print!(
+                "{}",
+                host_tools::compile::inspect(&dir, [c[0], c[1], c[2]])?
+            );
         }
         Command::Bench { elements, steps } => host_tools::bench::run_cli(elements, steps)?,
     }

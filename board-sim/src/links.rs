@@ -1,0 +1,353 @@
+//! Emulated point-to-point links and global network between board threads, and the fault
+//! injector that wraps a board's links.
+//!
+//! Each directed link is a bounded queue; a sender rings the receiving board's doorbell so a
+//! waiting board can park instead of spinning. All randomness of the fault injector comes
+//! from one seed (printed at the start of a run) mixed with the board and face, so a run
+//! replays exactly.
+
+use std::collections::VecDeque;
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
+
+use link_proto::{Face, Links, RecvError, SendError};
+use pe_firmware::runtime::Environment;
+
+/// Frames a link holds before the sender sees `WouldBlock`.
+pub const LINK_QUEUE_FRAMES: usize = 16;
+
+/// A board's doorbell: rung when a frame arrives for it.
+#[derive(Default)]
+pub struct Doorbell {
+    rung: Mutex<bool>,
+    cv: Condvar,
+}
+
+impl Doorbell {
+    pub fn ring(&self) {
+        if let Ok(mut r) = self.rung.lock() {
+            *r = true;
+        }
+        self.cv.notify_one();
+    }
+    /// Waits until rung (or `timeout`), and clears it.
+    pub fn wait(&self, timeout: Duration) {
+        if let Ok(mut r) = self.rung.lock() {
+            if !*r {
+                if let Ok((g, _)) = self.cv.wait_timeout(r, timeout) {
+                    r = g;
+                } else {
+                    return;
+                }
+            }
+            *r = false;
+        }
+    }
+}
+
+/// One directed link: a bounded queue of frames plus the receiver's doorbell.
+pub struct Channel {
+    queue: Mutex<VecDeque<Vec<u8>>>,
+    bell: Arc<Doorbell>,
+}
+
+/// A board's view of its links.
+pub struct EmuLinks {
+    /// Outgoing channel per face (None at the machine's edge).
+    pub tx: [Option<Arc<Channel>>; 6],
+    pub rx: [Option<Arc<Channel>>; 6],
+}
+
+impl Links for EmuLinks {
+    fn try_send(&mut self, face: Face, frame: &[u8]) -> Result<(), SendError> {
+        let ch = self.tx[face.index()].as_ref().ok_or(SendError::NoLink)?;
+        let mut q = ch.queue.lock().map_err(|_| SendError::NoLink)?;
+        if q.len() >= LINK_QUEUE_FRAMES {
+            return Err(SendError::WouldBlock);
+        }
+        q.push_back(frame.to_vec());
+        drop(q);
+        ch.bell.ring();
+        Ok(())
+    }
+
+    fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        let ch = self.rx[face.index()].as_ref().ok_or(RecvError::NoLink)?;
+        let mut q = ch.queue.lock().map_err(|_| RecvError::NoLink)?;
+        match q.pop_front() {
+            None => Ok(None),
+            Some(f) => {
+                let dst = buf
+                    .get_mut(..f.len())
+                    .ok_or(RecvError::BufferTooSmall { needed: f.len() })?;
+                dst.copy_from_slice(&f);
+                Ok(Some(f.len()))
+            }
+        }
+    }
+
+    fn try_send_global(&mut self, _packet: &[u8]) -> Result<(), SendError> {
+        Err(SendError::NoLink)
+    }
+
+    fn try_recv_global(&mut self, _buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        Ok(None)
+    }
+}
+
+/// Builds the links of a machine: `links[b]` for board `b` (x fastest).
+pub fn build_links(dims: [usize; 3]) -> (Vec<EmuLinks>, Vec<Arc<Doorbell>>) {
+    let count = dims.iter().product::<usize>();
+    let bells: Vec<Arc<Doorbell>> = (0..count).map(|_| Arc::new(Doorbell::default())).collect();
+    let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
+    let mut links: Vec<EmuLinks> = (0..count)
+        .map(|_| EmuLinks {
+            tx: Default::default(),
+            rx: Default::default(),
+        })
+        .collect();
+    for b in 0..count {
+        let c = [
+            b % dims[0],
+            (b / dims[0]) % dims[1],
+            b / (dims[0] * dims[1]),
+        ];
+        for face in Face::ALL {
+            let axis = face.index() / 2;
+            let plus = face.index() % 2 == 0;
+            let mut d = c;
+            if plus {
+                if c[axis] + 1 >= dims[axis] {
+                    continue;
+                }
+                d[axis] += 1;
+            } else {
+                if c[axis] == 0 {
+                    continue;
+                }
+                d[axis] -= 1;
+            }
+            let nb = index(d);
+            let ch = Arc::new(Channel {
+                queue: Mutex::new(VecDeque::new()),
+                bell: bells[nb].clone(),
+            });
+            links[b].tx[face.index()] = Some(ch.clone());
+            links[nb].rx[face.opposite().index()] = Some(ch);
+        }
+    }
+    (links, bells)
+}
+
+/// Time and waiting for a board thread.
+pub struct ThreadEnv {
+    pub start: Instant,
+    pub bell: Arc<Doorbell>,
+    spins: u32,
+}
+
+impl ThreadEnv {
+    pub fn new(bell: Arc<Doorbell>) -> Self {
+        ThreadEnv {
+            start: Instant::now(),
+            bell,
+            spins: 0,
+        }
+    }
+}
+
+impl Environment for ThreadEnv {
+    fn now_ns(&mut self) -> u64 {
+        self.start.elapsed().as_nanos() as u64
+    }
+    fn idle(&mut self) {
+        // Spin briefly (a frame is often about to arrive), then park on the doorbell.
+        self.spins += 1;
+        if self.spins % 64 != 0 {
+            std::hint::spin_loop();
+            std::thread::yield_now();
+        } else {
+            self.bell.wait(Duration::from_millis(2));
+        }
+    }
+}
+
+/// What to inject (`--faults seed=S,drop=P,corrupt=P,delay=MS,stall=X.Y.Z@STEP`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FaultSpec {
+    pub seed: u64,
+    /// Probability that a frame is lost.
+    pub drop: f64,
+    /// Probability that one bit of a frame is flipped.
+    pub corrupt: f64,
+    /// Every frame is held this long before delivery (ms).
+    pub delay_ms: u64,
+    /// This board stops sending at this step.
+    pub stall: Option<([usize; 3], u64)>,
+}
+
+impl FaultSpec {
+    pub fn parse(s: &str) -> anyhow::Result<FaultSpec> {
+        let mut f = FaultSpec {
+            seed: 1,
+            ..Default::default()
+        };
+        for part in s.split(',').filter(|p| !p.is_empty()) {
+            let (k, v) = part
+                .split_once('=')
+                .ok_or_else(|| anyhow::anyhow!("--faults: {part:?} is not key=value"))?;
+            let num = |v: &str| {
+                v.parse::<f64>()
+                    .map_err(|_| anyhow::anyhow!("--faults {k}: {v:?} is not a number"))
+            };
+            match k {
+                "seed" => {
+                    f.seed = v
+                        .parse()
+                        .map_err(|_| anyhow::anyhow!("--faults seed: {v:?}"))?
+                }
+                "drop" => f.drop = num(v)?,
+                "corrupt" => f.corrupt = num(v)?,
+                "delay" => {
+                    f.delay_ms = v
+                        .parse()
+                        .map_err(|_| anyhow::anyhow!("--faults delay: {v:?} (ms)"))?
+                }
+                "stall" => {
+                    let (b, st) = v
+                        .split_once('@')
+                        .ok_or_else(|| anyhow::anyhow!("--faults stall=X.Y.Z@STEP"))?;
+                    let c: Vec<usize> =
+                        b.split(['.', ':']).filter_map(|x| x.parse().ok()).collect();
+                    let step = st
+                        .parse()
+                        .map_err(|_| anyhow::anyhow!("--faults stall step: {st:?}"))?;
+                    if c.len() != 3 {
+                        anyhow::bail!("--faults stall=X.Y.Z@STEP: board {b:?}");
+                    }
+                    f.stall = Some(([c[0], c[1], c[2]], step));
+                }
+                _ => {
+                    anyhow::bail!("--faults: unknown key {k:?} (seed, drop, corrupt, delay, stall)")
+                }
+            }
+        }
+        if !(0.0..=1.0).contains(&f.drop) || !(0.0..=1.0).contains(&f.corrupt) {
+            anyhow::bail!("--faults: probabilities must lie in [0, 1]");
+        }
+        Ok(f)
+    }
+}
+
+/// SplitMix64: small, fast and good enough for fault injection.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Rng {
+        Rng(seed)
+    }
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    pub fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// An injected fault, as recorded by the injector.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Injected {
+    pub board: [usize; 3],
+    pub face: String,
+    pub step: u32,
+    pub what: String,
+}
+
+/// Wraps a board's links and injects faults into what it sends.
+pub struct FaultyLinks<L> {
+    pub inner: L,
+    pub board: [usize; 3],
+    spec: FaultSpec,
+    rng: Rng,
+    pub injected: Arc<Mutex<Vec<Injected>>>,
+}
+
+impl<L> FaultyLinks<L> {
+    pub fn new(
+        inner: L,
+        board: [usize; 3],
+        board_index: usize,
+        spec: FaultSpec,
+        injected: Arc<Mutex<Vec<Injected>>>,
+    ) -> Self {
+        let rng = Rng::new(spec.seed ^ (board_index as u64).wrapping_mul(0xA24B_AED4_963E_E407));
+        FaultyLinks {
+            inner,
+            board,
+            spec,
+            rng,
+            injected,
+        }
+    }
+    fn record(&self, face: Face, step: u32, what: &str) {
+        if let Ok(mut v) = self.injected.lock() {
+            v.push(Injected {
+                board: self.board,
+                face: format!("{face:?}"),
+                step,
+                what: what.into(),
+            });
+        }
+    }
+}
+
+fn frame_step(frame: &[u8]) -> u32 {
+    frame
+        .get(4..8)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .unwrap_or(0)
+}
+
+impl<L: Links> Links for FaultyLinks<L> {
+    fn try_send(&mut self, face: Face, frame: &[u8]) -> Result<(), SendError> {
+        let step = frame_step(frame);
+        if let Some((b, s)) = self.spec.stall {
+            if b == self.board && step as u64 >= s {
+                // A stalled board sends nothing more (and says it did).
+                if step as u64 == s {
+                    self.record(face, step, "stall");
+                }
+                return Ok(());
+            }
+        }
+        if self.spec.delay_ms > 0 {
+            std::thread::sleep(Duration::from_millis(self.spec.delay_ms));
+        }
+        let (u_drop, u_corrupt, bit) = (self.rng.unit(), self.rng.unit(), self.rng.next_u64());
+        if u_drop < self.spec.drop {
+            self.record(face, step, "drop");
+            return Ok(());
+        }
+        if u_corrupt < self.spec.corrupt {
+            let mut bad = frame.to_vec();
+            let k = (bit % (bad.len() as u64 * 8)) as usize;
+            bad[k / 8] ^= 1 << (k % 8);
+            self.record(face, step, &format!("corrupt bit {k}"));
+            return self.inner.try_send(face, &bad);
+        }
+        self.inner.try_send(face, frame)
+    }
+    fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        self.inner.try_recv(face, buf)
+    }
+    fn try_send_global(&mut self, p: &[u8]) -> Result<(), SendError> {
+        self.inner.try_send_global(p)
+    }
+    fn try_recv_global(&mut self, b: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        self.inner.try_recv_global(b)
+    }
+}

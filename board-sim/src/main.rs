@@ -1,0 +1,228 @@
+//! `board-sim run DIR`: run a compiled machine on host threads over emulated links.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use board_sim::links::FaultSpec;
+use board_sim::timing::{model, SimTiming};
+use board_sim::{run, SimOptions};
+use clap::{Parser, Subcommand};
+use host_tools::output::write_nodes_csv;
+use host_tools::problem::Problem;
+use host_tools::scene::Scene;
+use host_tools::scene_mesh::builtin_scene;
+use host_tools::vtk_out::VtkSeriesWriter;
+
+#[derive(Parser)]
+#[command(
+    name = "board-sim",
+    version,
+    about = "Run a compiled board array on host threads over emulated links"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run the images of DIR (written by `pe compile`).
+    Run {
+        dir: PathBuf,
+        /// node,x,y,z,ux,uy,uz of every mesh node at the end.
+        #[arg(long)]
+        output_nodes: Option<PathBuf>,
+        /// Run report (JSON): as `pe solve`, plus per-link traffic, waiting and the link model.
+        #[arg(long)]
+        report: Option<PathBuf>,
+        /// ParaView time series into this directory.
+        #[arg(long)]
+        vtk: Option<PathBuf>,
+        /// Stop after N steps.
+        #[arg(long)]
+        steps: Option<u64>,
+        /// Stop after this much simulated time (s).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Inject faults: seed=S,drop=P,corrupt=P,delay=MS,stall=X.Y.Z@STEP
+        #[arg(long)]
+        faults: Option<String>,
+        /// A link silent this long is a fault (s).
+        #[arg(long, default_value_t = 10.0)]
+        link_timeout_s: f64,
+        /// Link bandwidth for the timing model (bytes/s; default from the board profile).
+        #[arg(long)]
+        link_bandwidth: Option<f64>,
+        /// Link latency for the timing model (s).
+        #[arg(long)]
+        link_latency_s: Option<f64>,
+        #[arg(long)]
+        quiet: bool,
+    },
+}
+
+fn main() -> Result<()> {
+    let Cli { command } = Cli::parse();
+    let Command::Run {
+        dir,
+        output_nodes,
+        report,
+        vtk,
+        steps,
+        duration,
+        faults,
+        link_timeout_s,
+        link_bandwidth,
+        link_latency_s,
+        quiet,
+    } = command;
+    let manifest = host_tools::compile::read_manifest(&dir)?;
+    let mut opts = SimOptions {
+        link_timeout: Duration::from_secs_f64(link_timeout_s),
+        ..Default::default()
+    };
+    if let Some(f) = &faults {
+        let spec = FaultSpec::parse(f)?;
+        eprintln!(
+            "fault injection seed {} (replay with --faults {f})",
+            spec.seed
+        );
+        opts.faults = Some(spec);
+    }
+    opts.steps = match (steps, duration) {
+        (Some(n), _) => Some(n),
+        (None, Some(d)) => Some((d / manifest.dt_s).ceil() as u64),
+        _ => None,
+    };
+    let total = opts.steps.unwrap_or(manifest.steps).min(manifest.steps);
+    // The mesh, for outputs: from the scene the manifest names.
+    let problem = if output_nodes.is_some() || vtk.is_some() || report.is_some() {
+        let scene = match manifest.scene_source.strip_prefix("builtin:") {
+            Some(level) => builtin_scene(level)?,
+            None => Scene::from_file(std::path::Path::new(&manifest.scene_source))?,
+        };
+        let sdir = std::path::Path::new(&manifest.scene_source)
+            .parent()
+            .map(|p| p.to_path_buf())
+            .unwrap_or_default();
+        Some(
+            Problem::from_scene(&scene, &sdir)
+                .with_context(|| format!("loading scene {} for outputs", manifest.scene_source))?,
+        )
+    } else {
+        None
+    };
+    if vtk.is_some() {
+        opts.frame_every = ((0.04 / manifest.dt_s).round() as u64).max(1);
+    }
+    eprintln!(
+        "{}: {} boards ({}x{}x{}), {} steps of {:.3e} s",
+        manifest.scene,
+        manifest.boards.len(),
+        manifest.machine[0],
+        manifest.machine[1],
+        manifest.machine[2],
+        total,
+        manifest.dt_s
+    );
+    let bar = (!quiet).then(|| {
+        let b = indicatif::ProgressBar::new(total);
+        b.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:40} {pos}/{len} steps  {elapsed} (eta {eta})",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b
+    });
+    let out = run(&dir, &opts, &mut |s, _| {
+        if let Some(b) = &bar {
+            b.set_position(s);
+        }
+    });
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    let out = out?;
+    let elements = manifest_elements(&dir)?;
+    let sim_s = out.steps as f64 * manifest.dt_s;
+    let max = out
+        .displacements
+        .iter()
+        .enumerate()
+        .map(|(k, u)| (k, (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()))
+        .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
+    println!(
+        "{} steps on {} boards in {:.2} s: {:.1} steps/s, real-time factor {:.3}; max |u| = {:.4e} m; prescribed reaction = [{:.4e}, {:.4e}, {:.4e}] N",
+        out.steps, out.boards.len(), out.wall_s, out.steps as f64 / out.wall_s, sim_s / out.wall_s, max.1,
+        out.reaction_prescribed[0], out.reaction_prescribed[1], out.reaction_prescribed[2]
+    );
+    let profile =
+        pe_firmware::profile::profile(&manifest.profile).unwrap_or(pe_firmware::profile::PE_BOARD);
+    let mut timing = SimTiming::from_profile(&profile);
+    if let Some(b) = link_bandwidth {
+        timing.link_bytes_per_s = b;
+    }
+    if let Some(l) = link_latency_s {
+        timing.link_latency_s = l;
+    }
+    let modelled = model(&dir, manifest.machine, timing)?;
+    println!(
+        "link model ({}): a step takes {:.1} us on the slowest board ({:.1} us computing), dt = {:.1} us: {}",
+        profile.name, modelled.step_s * 1e6, modelled.compute_s * 1e6, modelled.dt_s * 1e6,
+        if modelled.real_time { "keeps real time" } else { "does NOT keep real time" }
+    );
+    if let (Some(p), Some(pr)) = (&output_nodes, &problem) {
+        write_nodes_csv(p, &pr.mesh, &out.displacements)?;
+    }
+    if let (Some(d), Some(pr)) = (&vtk, &problem) {
+        std::fs::create_dir_all(d)?;
+        let mut w = VtkSeriesWriter::new(d, &pr.mesh)?;
+        w.write_frame(0.0, &vec![[0.0; 3]; pr.mesh.nodes.len()])?;
+        for (s, u) in &out.frames {
+            w.write_frame(*s as f64 * manifest.dt_s, u)?;
+        }
+        w.write_frame(sim_s, &out.displacements)?;
+        w.finish()?;
+    }
+    if let Some(p) = report {
+        let links: Vec<serde_json::Value> = out
+            .boards
+            .iter()
+            .map(|b| serde_json::json!({ "board": b.board, "frames_sent": b.frames_sent, "bytes_sent": b.bytes_sent, "wait_s": b.wait_s }))
+            .collect();
+        let rep = serde_json::json!({
+            "scene": manifest.scene,
+            "machine": manifest.machine,
+            "precision": manifest.precision,
+            "integration": manifest.integration,
+            "steps": out.steps,
+            "dt_s": manifest.dt_s,
+            "simulated_s": sim_s,
+            "elements": elements,
+            "nodes": out.displacements.len(),
+            "wall_s": out.wall_s,
+            "element_steps_per_s": elements as f64 * out.steps as f64 / out.wall_s,
+            "real_time_factor": sim_s / out.wall_s,
+            "kinetic_energy_final": out.kinetic_energy,
+            "max_displacement": max.1,
+            "prescribed_reaction_n": out.reaction_prescribed,
+            "fixed_reaction_n": out.reaction_fixed,
+            "wait_s_total": out.boards.iter().map(|b| b.wait_s).sum::<f64>(),
+            "bytes_sent_total": out.boards.iter().map(|b| b.bytes_sent.iter().sum::<u64>()).sum::<u64>(),
+            "boards": links,
+            "link_model": modelled,
+            "faults_injected": out.injected,
+        });
+        std::fs::write(&p, serde_json::to_string_pretty(&rep)?)
+            .with_context(|| format!("writing {}", p.display()))?;
+    }
+    Ok(())
+}
+
+fn manifest_elements(dir: &std::path::Path) -> Result<usize> {
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json"))?)?;
+    Ok(r["elements"].as_u64().unwrap_or(0) as usize)
+}

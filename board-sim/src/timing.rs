@@ -1,0 +1,169 @@
+//! Link timing model: would the board array keep the scene's step rate on the real links?
+//!
+//! Replays one step of every board's schedule in model time: batches take
+//! `elements × cycles_per_element / clock`, a frame arrives `latency + bytes / bandwidth`
+//! after it is sent (links are full duplex, one frame at a time per direction), a receive
+//! waits for its frame. The cycles per element-step are an input: until measured on the
+//! board they are estimates (see `SimTiming::default`).
+
+use host_tools::compile::{decode_image, image_file_name, DecodedImage};
+use pe_firmware::image::Integration;
+use pe_firmware::profile::BoardProfile;
+use serde::Serialize;
+
+/// Model inputs.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct SimTiming {
+    pub clock_hz: f64,
+    pub cycles_per_element_reduced: f64,
+    pub cycles_per_element_full: f64,
+    pub cycles_per_node_update: f64,
+    pub link_bytes_per_s: f64,
+    pub link_latency_s: f64,
+}
+
+impl SimTiming {
+    /// From a board profile, with cycle estimates of 2000 (reduced) and 9000 (full) cycles
+    /// per element-step and 60 per node update (about 2.5x the counted flops, for loads and
+    /// stores; an estimate until the firmware's instruction counts replace it).
+    pub fn from_profile(p: &BoardProfile) -> Self {
+        SimTiming {
+            clock_hz: p.clock_hz as f64,
+            cycles_per_element_reduced: 2000.0,
+            cycles_per_element_full: 9000.0,
+            cycles_per_node_update: 60.0,
+            link_bytes_per_s: p.link_bytes_per_s as f64,
+            link_latency_s: p.link_latency_ns as f64 * 1e-9,
+        }
+    }
+}
+
+/// Model results.
+#[derive(Clone, Debug, Serialize)]
+pub struct StepTiming {
+    pub inputs: SimTiming,
+    /// Modelled time of one step on the slowest board (s).
+    pub step_s: f64,
+    /// Of which computing (s), on that board.
+    pub compute_s: f64,
+    /// The scene's time step (s) and whether the array keeps up with it.
+    pub dt_s: f64,
+    pub real_time: bool,
+    pub slowest_board: [usize; 3],
+}
+
+fn frame_s(t: &SimTiming, values: usize, width: usize) -> f64 {
+    if values == 0 {
+        return 0.0;
+    }
+    let bytes = link_proto::FRAME_HEADER_LEN + link_proto::CRC_LEN + values * width;
+    t.link_latency_s + bytes as f64 / t.link_bytes_per_s
+}
+
+/// Models one step of the machine whose images are in `dir`.
+pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::Result<StepTiming> {
+    let count = dims.iter().product::<usize>();
+    let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
+    let mut imgs: Vec<DecodedImage> = Vec::with_capacity(count);
+    for b in 0..count {
+        let c = [
+            b % dims[0],
+            (b / dims[0]) % dims[1],
+            b / (dims[0] * dims[1]),
+        ];
+        let p = dir.join(image_file_name(c));
+        let bytes = std::fs::read(&p)?;
+        imgs.push(decode_image(&bytes, None).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?);
+    }
+    let h = imgs[0].header;
+    let width = if h.precision == pe_firmware::image::Precision::F64 {
+        8
+    } else {
+        4
+    };
+    let cpe = if h.integration == Integration::Full {
+        t.cycles_per_element_full
+    } else {
+        t.cycles_per_element_reduced
+    };
+    let batch_s = |im: &DecodedImage, k: usize| {
+        let e = im.header.counts.batch_ends;
+        let n = if k == 0 { e[0] } else { e[k] - e[k - 1] };
+        n as f64 * cpe / t.clock_hz
+    };
+    let mut now = vec![0.0f64; count];
+    let mut compute = vec![0.0f64; count];
+    for b in 0..count {
+        now[b] = batch_s(&imgs[b], 0);
+        compute[b] = now[b];
+    }
+    for axis in 0..3 {
+        let rounds = h.counts.rounds[axis] as usize;
+        for r in 0..rounds {
+            // Sends of this round leave at each board's current time.
+            let sent_at = now.clone();
+            if r == 0 {
+                for b in 0..count {
+                    let c = batch_s(&imgs[b], axis + 1);
+                    now[b] += c;
+                    compute[b] += c;
+                }
+            }
+            for b in 0..count {
+                let c = [
+                    b % dims[0],
+                    (b / dims[0]) % dims[1],
+                    b / (dims[0] * dims[1]),
+                ];
+                let mut ready = now[b];
+                for f in 0..2 {
+                    let n_recv = imgs[b].rounds[axis]
+                        .get(r)
+                        .map(|x| x.recv[f].len())
+                        .unwrap_or(0);
+                    if n_recv == 0 {
+                        continue;
+                    }
+                    let mut d = c;
+                    if f == 0 {
+                        d[axis] += 1;
+                    } else {
+                        d[axis] -= 1;
+                    }
+                    let nb = index(d);
+                    ready = ready.max(sent_at[nb] + frame_s(&t, 3 * n_recv, width));
+                }
+                now[b] = ready;
+            }
+        }
+        if rounds == 0 {
+            for b in 0..count {
+                let c = batch_s(&imgs[b], axis + 1);
+                now[b] += c;
+                compute[b] += c;
+            }
+        }
+    }
+    let mut worst = (0.0, 0);
+    for b in 0..count {
+        let upd = imgs[b].header.counts.nodes as f64 * t.cycles_per_node_update / t.clock_hz;
+        now[b] += upd;
+        compute[b] += upd;
+        if now[b] > worst.0 {
+            worst = (now[b], b);
+        }
+    }
+    let b = worst.1;
+    Ok(StepTiming {
+        inputs: t,
+        step_s: worst.0,
+        compute_s: compute[b],
+        dt_s: h.params.dt_s,
+        real_time: worst.0 <= h.params.dt_s,
+        slowest_board: [
+            b % dims[0],
+            (b / dims[0]) % dims[1],
+            b / (dims[0] * dims[1]),
+        ],
+    })
+}
