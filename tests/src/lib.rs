@@ -1,7 +1,78 @@
 //! Shared helpers for the system tests.
-use std::path::PathBuf;
+#![allow(clippy::needless_range_loop)]
+
+use std::path::{Path, PathBuf};
+
+use host_tools::compile::compile_to_dir;
+use host_tools::partition::Machine;
+use host_tools::problem::Problem;
+use host_tools::scene::Scene;
+use host_tools::scene_mesh::builtin_scene;
+use pe_firmware::profile::PE_BOARD;
 
 /// `../shared/meshes` beside the checkout (tests read the organ meshes from there).
 pub fn shared_meshes_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/meshes")
+    let d = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/meshes");
+    assert!(
+        d.is_dir(),
+        "the shared meshes are missing: expected {} beside the checkout",
+        d.display()
+    );
+    d
+}
+
+pub fn scenes_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes")
+}
+
+/// A fresh temporary directory for one test.
+pub fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pe-systest-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d
+}
+
+/// The built-in scene at `level`, cut to `steps`.
+pub fn builtin_problem(level: &str, steps: u64) -> Problem {
+    let mut sc = builtin_scene(level).expect("builtin scene");
+    sc.solver.steps = Some(steps);
+    Problem::from_scene(&sc, Path::new(".")).expect("builtin problem")
+}
+
+/// A scene file from tests/scenes.
+pub fn file_problem(name: &str) -> (Problem, String) {
+    let p = scenes_dir().join(name);
+    let sc = Scene::from_file(&p).expect("scene parses");
+    let dir = p.parent().expect("dir").to_path_buf();
+    (
+        Problem::from_scene(&sc, &dir).expect("scene resolves"),
+        p.display().to_string(),
+    )
+}
+
+/// Compiles `problem` for `machine` into a fresh directory.
+pub fn compile(problem: &Problem, source: &str, machine: &str, name: &str) -> PathBuf {
+    let dir = temp_dir(name);
+    compile_to_dir(
+        name,
+        source,
+        problem,
+        Machine::parse(machine).expect("machine"),
+        &PE_BOARD,
+        &dir,
+    )
+    .expect("compiles");
+    dir
+}
+
+/// Largest |a − b| over all components, relative to the largest |a|.
+pub fn max_rel_diff(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    let d = a
+        .iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    d / scale
 }

@@ -1,0 +1,162 @@
+//! board-sim against the serial solver, determinism and fault injection.
+
+use std::time::Duration;
+
+use board_sim::links::FaultSpec;
+use board_sim::{run, SimFault, SimOptions};
+use host_tools::solver;
+use system_tests::*;
+
+fn sim(dir: &std::path::Path, opts: &SimOptions) -> board_sim::SimOutput {
+    run(dir, opts, &mut |_, _| {}).expect("board-sim run")
+}
+
+/// One board runs the same additions in the same order as the serial solver: bit for bit.
+#[test]
+fn one_board_equals_serial_bit_for_bit() {
+    let p = builtin_problem("coarse", 200);
+    let serial = solver::run(&p, "serial", &mut ()).unwrap().displacements;
+    let dir = compile(&p, "builtin:coarse", "1x1x1", "b111");
+    let out = sim(&dir, &SimOptions::default());
+    assert_eq!(out.steps, 200);
+    assert!(serial
+        .iter()
+        .zip(&out.displacements)
+        .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits)));
+}
+
+/// 2x2x2 and 4x4x4 (and a non-cubic 4x2x1) on the built-in scene equal the serial run to
+/// 1e-12 relative: only the order of the force sums differs (round-off ~1e-16 per step;
+/// measured 2e-14 after 300 steps).
+#[test]
+fn machines_equal_serial_on_the_builtin_scene() {
+    let p = builtin_problem("coarse", 300);
+    let serial = solver::run(&p, "serial", &mut ()).unwrap();
+    for m in ["2x2x2", "4x4x4", "4x2x1"] {
+        let dir = compile(&p, "builtin:coarse", m, &format!("builtin-{m}"));
+        let out = sim(&dir, &SimOptions::default());
+        let d = max_rel_diff(&serial.displacements, &out.displacements);
+        println!("{m}: max relative difference {d:e}");
+        assert!(d < 1e-12, "{m}: {d:e}");
+        // The probe's push, summed over owners, matches too.
+        let (a, b) = (
+            serial.report.prescribed_reaction_n[2],
+            out.reaction_prescribed[2],
+        );
+        assert!((a - b).abs() < 1e-9 * a.abs(), "{m}: reaction {a} vs {b}");
+    }
+}
+
+/// The same on a real mesh (the uterus reference mesh, two materials incl. Mooney-Rivlin,
+/// gravity): 1x1x1 bit-identical, 2x2x2 and 4x4x4 within 1e-12.
+#[test]
+fn machines_equal_serial_on_a_real_mesh() {
+    shared_meshes_dir();
+    let (p, src) = file_problem("uterus320.toml");
+    let serial = solver::run(&p, "serial", &mut ()).unwrap().displacements;
+    for m in ["1x1x1", "2x2x2", "4x4x4"] {
+        let dir = compile(&p, &src, m, &format!("uterus-{m}"));
+        let out = sim(&dir, &SimOptions::default());
+        let d = max_rel_diff(&serial, &out.displacements);
+        println!("{m}: max relative difference {d:e}");
+        if m == "1x1x1" {
+            assert_eq!(d, 0.0);
+        }
+        assert!(d < 1e-12, "{m}: {d:e}");
+    }
+}
+
+/// Two runs give identical bytes whatever the threads' timing: every sum's order is fixed
+/// by the schedule, not by arrival.
+#[test]
+fn two_runs_are_bit_identical() {
+    let p = builtin_problem("coarse", 150);
+    let dir = compile(&p, "builtin:coarse", "4x4x4", "repeat");
+    let a = sim(&dir, &SimOptions::default()).displacements;
+    let b = sim(&dir, &SimOptions::default()).displacements;
+    assert!(a
+        .iter()
+        .zip(&b)
+        .all(|(x, y)| x.map(f64::to_bits) == y.map(f64::to_bits)));
+}
+
+fn faulty(dir: &std::path::Path, spec: &str) -> SimFault {
+    let opts = SimOptions {
+        faults: Some(FaultSpec::parse(spec).unwrap()),
+        link_timeout: Duration::from_millis(500),
+        ..Default::default()
+    };
+    match run(dir, &opts, &mut |_, _| {}) {
+        Ok(_) => panic!("faults {spec}: the run must not finish silently"),
+        Err(e) => match e.downcast::<SimFault>() {
+            Ok(f) => f,
+            Err(e) => panic!("faults {spec}: not a fault report: {e}"),
+        },
+    }
+}
+
+/// A corrupted frame is detected by its CRC at the receiver: the run stops with a report
+/// naming the board, the link and the step of the injected corruption.
+#[test]
+fn corrupted_frames_are_detected_and_named() {
+    let p = builtin_problem("coarse", 200);
+    let dir = compile(&p, "builtin:coarse", "2x2x2", "corrupt");
+    let f = faulty(&dir, "seed=7,corrupt=0.01");
+    let first = &f.injected[0];
+    let root = &f.faults[0];
+    println!("{f}");
+    assert!(
+        matches!(root.kind, pe_firmware::runtime::FaultKind::BadFrame { .. }),
+        "{root}"
+    );
+    assert_eq!(
+        root.step, first.step as u64,
+        "detected at the step it was injected"
+    );
+    assert!(root.to_string().contains("link"), "{root}");
+}
+
+/// A lost frame is detected at the step it was lost, naming board, link and step: either
+/// the next step's frame arrives in its place (its step number gives it away) or, at the
+/// last exchange, the link times out.
+#[test]
+fn dropped_frames_are_detected_and_named() {
+    let p = builtin_problem("coarse", 200);
+    let dir = compile(&p, "builtin:coarse", "2x2x2", "drop");
+    let f = faulty(&dir, "seed=3,drop=0.01");
+    let first = &f.injected[0];
+    let root = &f.faults[0];
+    assert!(
+        matches!(
+            root.kind,
+            pe_firmware::runtime::FaultKind::LinkTimeout { .. }
+                | pe_firmware::runtime::FaultKind::UnexpectedFrame { .. }
+        ),
+        "{root}"
+    );
+    assert_eq!(root.step, first.step as u64);
+}
+
+/// A board that stalls is detected by its neighbours at that step.
+#[test]
+fn a_stalled_board_is_detected() {
+    let p = builtin_problem("coarse", 200);
+    let dir = compile(&p, "builtin:coarse", "2x2x2", "stall");
+    let f = faulty(&dir, "seed=1,stall=1.0.0@50");
+    assert_eq!(f.faults[0].step, 50, "{f}");
+    assert!(f
+        .injected
+        .iter()
+        .any(|i| i.board == [1, 0, 0] && i.what == "stall"));
+}
+
+/// The same seed replays the same faults (all randomness comes from the printed seed).
+#[test]
+fn fault_injection_replays_from_its_seed() {
+    let p = builtin_problem("coarse", 200);
+    let dir = compile(&p, "builtin:coarse", "2x2x2", "replay");
+    let a = faulty(&dir, "seed=11,corrupt=0.005");
+    let b = faulty(&dir, "seed=11,corrupt=0.005");
+    assert_eq!(a.injected[0], b.injected[0]);
+    assert_eq!(a.faults[0], b.faults[0]);
+}

@@ -1,0 +1,303 @@
+//! The schedule compiler: partition, replicas, exchange lists, images, fit check.
+
+use std::collections::BTreeSet;
+
+use host_tools::compile::{check_fit, compile_images, decode_image, plan, FACE_NAMES};
+use host_tools::partition::{partition, Machine};
+use host_tools::problem::Problem;
+use host_tools::scene::Scene;
+use pe_firmware::image::ImageError;
+use pe_firmware::profile::{BoardProfile, PE_BOARD};
+use system_tests::*;
+
+/// Every element is on exactly one board, and every board's element list is exactly the
+/// elements the partition gave it.
+#[test]
+fn every_element_is_assigned_once() {
+    let p = builtin_problem("medium", 10);
+    let plan = plan(&p, Machine::parse("4x4x4").unwrap()).unwrap();
+    let mut seen = vec![0u32; p.mesh.cells.len()];
+    for (b, bp) in plan.boards.iter().enumerate() {
+        for &e in &bp.elements {
+            seen[e as usize] += 1;
+            assert_eq!(plan.element_board[e as usize] as usize, b);
+        }
+        assert_eq!(bp.batch_ends[3], bp.elements.len());
+    }
+    assert!(
+        seen.iter().all(|&s| s == 1),
+        "an element is on {} boards",
+        seen.iter().max().unwrap()
+    );
+}
+
+/// Replicas: a board holds every node of its elements; every node is held exactly by the
+/// boards of the bounding box of the boards whose elements touch it (so the
+/// dimension-ordered exchange can reach them all), and is owned by exactly one of them.
+#[test]
+fn replicas_are_consistent() {
+    let p = builtin_problem("medium", 10);
+    let m = Machine::parse("4x4x4").unwrap();
+    let plan = plan(&p, m).unwrap();
+    let held: Vec<BTreeSet<u32>> = plan
+        .boards
+        .iter()
+        .map(|b| b.nodes.iter().copied().collect())
+        .collect();
+    for (b, bp) in plan.boards.iter().enumerate() {
+        for &e in &bp.elements {
+            for n in p.mesh.cells[e as usize] {
+                assert!(
+                    held[b].contains(&n),
+                    "board {b} lacks node {n} of its element {e}"
+                );
+            }
+        }
+    }
+    let around = host_tools::partition::node_elements(&p.mesh);
+    for (n, els) in around.iter().enumerate() {
+        let (lo, hi) = host_tools::partition::node_board_range(m, &plan.element_board, els);
+        let mut owners = 0;
+        for (b, bp) in plan.boards.iter().enumerate() {
+            let c = m.coords(b);
+            let inside = (0..3).all(|a| lo[a] <= c[a] && c[a] <= hi[a]);
+            assert_eq!(
+                held[b].contains(&(n as u32)),
+                inside,
+                "node {n} on board {c:?}"
+            );
+            if let Ok(k) = bp.nodes.binary_search(&(n as u32)) {
+                owners += bp.owner[k] as usize;
+            }
+        }
+        assert_eq!(owners, 1, "node {n} has {owners} owners");
+    }
+}
+
+/// For every link and round, what one side sends is, node for node, what the other side
+/// expects to receive (read back from the written images, in global numbering).
+#[test]
+fn send_order_equals_receive_order_on_every_link() {
+    let p = builtin_problem("medium", 10);
+    for machine in ["4x4x4", "4x2x1", "2x3x2"] {
+        let m = Machine::parse(machine).unwrap();
+        let plan = plan(&p, m).unwrap();
+        let images = compile_images(&p, &plan).unwrap();
+        let dec: Vec<_> = images
+            .iter()
+            .map(|im| decode_image(&im.bytes, Some(im.header.board)).unwrap())
+            .collect();
+        let mut checked = 0;
+        for (b, d) in dec.iter().enumerate() {
+            let c = m.coords(b);
+            for a in 0..3 {
+                if c[a] + 1 >= m.dims[a] {
+                    continue;
+                }
+                let mut nc = c;
+                nc[a] += 1;
+                let nd = &dec[m.index(nc)];
+                let g =
+                    |im: &host_tools::compile::DecodedImage, l: u16| im.nodes[l as usize].global;
+                assert_eq!(d.rounds[a].len(), nd.rounds[a].len());
+                for (r, (mine, theirs)) in d.rounds[a].iter().zip(&nd.rounds[a]).enumerate() {
+                    // + face of b against − face of its neighbour, both directions.
+                    let sent: Vec<u32> = mine.send[0].iter().map(|&l| g(d, l)).collect();
+                    let got: Vec<u32> = theirs.recv[1].iter().map(|e| g(nd, e.node)).collect();
+                    assert_eq!(
+                        sent,
+                        got,
+                        "{machine} board {c:?} {} round {r}",
+                        FACE_NAMES[2 * a]
+                    );
+                    let sent: Vec<u32> = theirs.send[1].iter().map(|&l| g(nd, l)).collect();
+                    let got: Vec<u32> = mine.recv[0].iter().map(|e| g(d, e.node)).collect();
+                    assert_eq!(
+                        sent,
+                        got,
+                        "{machine} board {nc:?} {} round {r}",
+                        FACE_NAMES[2 * a + 1]
+                    );
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 0);
+    }
+}
+
+/// Image round trip: the decoded image is the plan (nodes, owners, element connectivity in
+/// batch order), and the header carries the board, the machine and the counts.
+#[test]
+fn image_round_trip() {
+    let p = builtin_problem("coarse", 10);
+    let m = Machine::parse("2x2x2").unwrap();
+    let plan = plan(&p, m).unwrap();
+    let images = compile_images(&p, &plan).unwrap();
+    for (bp, im) in plan.boards.iter().zip(&images) {
+        let d = decode_image(&im.bytes, Some(bp.coords.map(|c| c as u8))).unwrap();
+        assert_eq!(d.header.machine, [2, 2, 2]);
+        let globals: Vec<u32> = d.nodes.iter().map(|n| n.global).collect();
+        assert_eq!(globals, bp.nodes);
+        let owners: Vec<bool> = d.nodes.iter().map(|n| n.owner).collect();
+        assert_eq!(owners, bp.owner);
+        for (k, &e) in bp.elements.iter().enumerate() {
+            let back = d.element_nodes[k].map(|l| bp.nodes[l as usize]);
+            assert_eq!(back, p.mesh.cells[e as usize]);
+        }
+        assert_eq!(d.header.counts.elements as usize, bp.elements.len());
+    }
+}
+
+/// A flipped bit anywhere, a wrong format version and a wrong board position are refused.
+#[test]
+fn corrupted_or_foreign_images_are_refused() {
+    let p = builtin_problem("coarse", 10);
+    let plan = plan(&p, Machine::parse("2x1x1").unwrap()).unwrap();
+    let images = compile_images(&p, &plan).unwrap();
+    let good = &images[0].bytes;
+    assert!(decode_image(good, Some([0, 0, 0])).is_ok());
+    // Every 97th bit (all bits would take long; the CRC detects every single-bit error).
+    for bit in (0..good.len() * 8).step_by(97) {
+        let mut bad = good.clone();
+        bad[bit / 8] ^= 1 << (bit % 8);
+        assert!(
+            decode_image(&bad, Some([0, 0, 0])).is_err(),
+            "bit {bit} not detected"
+        );
+    }
+    assert_eq!(
+        decode_image(good, Some([1, 0, 0])).unwrap_err(),
+        ImageError::WrongBoard {
+            image: [0, 0, 0],
+            expected: [1, 0, 0]
+        }
+    );
+    // Version: the first header byte after the magic (postcard varint of 1); fix the CRC.
+    let mut old = good.clone();
+    old[4] = 7;
+    let n = old.len();
+    let crc = link_proto::frame::crc32(&old[..n - 4]);
+    old[n - 4..].copy_from_slice(&crc.to_le_bytes());
+    assert_eq!(
+        decode_image(&old, None).unwrap_err(),
+        ImageError::WrongVersion {
+            found: 7,
+            expected: 1
+        }
+    );
+    assert!(matches!(
+        decode_image(&good[..good.len() - 9], None),
+        Err(ImageError::BadCrc { .. })
+    ));
+}
+
+/// A board profile too small for the schedule is reported naming the board and by how much.
+#[test]
+fn overflowing_a_small_board_is_reported() {
+    let p = builtin_problem("medium", 10);
+    let plan = plan(&p, Machine::parse("2x1x1").unwrap()).unwrap();
+    let images = compile_images(&p, &plan).unwrap();
+    let tiny = BoardProfile {
+        name: "tiny",
+        ram_bytes: 96 * 1024,
+        ram_reserved_bytes: 16 * 1024,
+        image_flash_bytes: 64 * 1024,
+        ..PE_BOARD
+    };
+    let e = check_fit(&images, &tiny).unwrap_err().to_string();
+    assert!(
+        e.contains("board (0,0,0)")
+            && e.contains("board (1,0,0)")
+            && e.contains("exceeds")
+            && e.contains("by "),
+        "{e}"
+    );
+    // On two boards each holds over 1024 nodes: more than the PE board's firmware holds.
+    let e = check_fit(&images, &PE_BOARD).unwrap_err().to_string();
+    assert!(
+        e.contains("nodes exceed the firmware's 1024 nodes per board"),
+        "{e}"
+    );
+    // On 4x2x2 it fits.
+    let plan = host_tools::compile::plan(&p, Machine::parse("4x2x2").unwrap()).unwrap();
+    assert!(check_fit(&compile_images(&p, &plan).unwrap(), &PE_BOARD).is_ok());
+}
+
+/// Partitions of the real meshes on 4x4x4 are balanced within 10% (elements per board,
+/// max/mean); the slab split gives ±1 element.
+#[test]
+fn real_mesh_partitions_are_balanced() {
+    let dir = shared_meshes_dir();
+    for f in [
+        "uterus_scaffold_hex2k.msh",
+        "sofaenv_liver_hex2k.msh",
+        "sofaenv_gallbladder_hex2k.msh",
+        "uterus_scaffold_hex20k.msh",
+    ] {
+        let mesh = host_tools::mesh_io::load_mesh(&dir.join(f)).unwrap();
+        let part = partition(&mesh, Machine::parse("4x4x4").unwrap()).unwrap();
+        let mut count = vec![0usize; 64];
+        for b in part {
+            count[b as usize] += 1;
+        }
+        let mean = mesh.cells.len() as f64 / 64.0;
+        let max = *count.iter().max().unwrap() as f64;
+        assert!(max / mean < 1.10, "{f}: imbalance {}", max / mean);
+    }
+}
+
+/// memory.x describes the same board as the compiler's profile (the fit check reads it).
+#[test]
+fn memory_x_matches_the_board_profile() {
+    let text =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../memory.x")).unwrap();
+    let len = |region: &str| -> u64 {
+        let line = text
+            .lines()
+            .find(|l| l.trim_start().starts_with(region))
+            .unwrap_or_else(|| panic!("{region} missing"));
+        let v = line
+            .split("LENGTH")
+            .nth(1)
+            .unwrap()
+            .trim_start_matches([' ', '='])
+            .trim();
+        let v = v.trim_end_matches(|c: char| !c.is_ascii_alphanumeric());
+        let (num, mul) = if let Some(k) = v.strip_suffix('K') {
+            (k, 1024)
+        } else if let Some(m) = v.strip_suffix('M') {
+            (m, 1 << 20)
+        } else {
+            (v, 1)
+        };
+        num.parse::<u64>().unwrap() * mul
+    };
+    assert_eq!(len("RAM"), PE_BOARD.ram_bytes);
+    assert_eq!(len("FLASH") + len("IMAGE"), PE_BOARD.flash_bytes);
+    assert_eq!(len("IMAGE"), PE_BOARD.image_flash_bytes);
+}
+
+/// Bad machine sizes and too many boards for the mesh are refused with a clear error.
+#[test]
+fn bad_machines_are_refused() {
+    assert!(Machine::parse("4x4").is_err());
+    assert!(Machine::parse("0x1x1").is_err());
+    let sc = Scene::from_toml(
+        r#"
+[mesh]
+generate = { kind = "box", size = [0.1, 0.02, 0.02], cells = [2, 1, 1] }
+[material]
+law = "neo-hookean"
+youngs_modulus = 3.0e3
+poisson_ratio = 0.45
+density = 1000.0
+"#,
+    )
+    .unwrap();
+    let p = Problem::from_scene(&sc, std::path::Path::new(".")).unwrap();
+    let e = plan(&p, Machine::parse("2x2x1").unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("2 elements cannot fill 4 boards"), "{e}");
+}
