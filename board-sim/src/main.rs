@@ -30,42 +30,150 @@ enum Command {
     /// Run the images of DIR (written by `pe compile`).
     Run {
         dir: PathBuf,
-        /// node,x,y,z,ux,uy,uz of every mesh node at the end.
-        #[arg(long)]
-        output_nodes: Option<PathBuf>,
-        /// Run report (JSON): as `pe solve`, plus per-link traffic, waiting and the link model.
-        #[arg(long)]
-        report: Option<PathBuf>,
-        /// ParaView time series into this directory.
-        #[arg(long)]
-        vtk: Option<PathBuf>,
+        #[command(flatten)]
+        args: RunArgs,
+    },
+    /// The main job: compile the built-in scene (uterus, tubes, probe) for a board mesh and
+    /// run it, writing OUT/images, OUT/frames (ParaView), OUT/report.json and a summary.
+    Builtin {
+        /// Mesh level: coarse | medium | fine.
+        #[arg(long, default_value = "medium")]
+        level: String,
+        /// Machine size.
+        #[arg(long, default_value = "4x4x4")]
+        boards: String,
+        /// Output directory.
+        #[arg(long, default_value = "out/builtin")]
+        out: PathBuf,
         /// Stop after N steps.
         #[arg(long)]
         steps: Option<u64>,
-        /// Stop after this much simulated time (s).
-        #[arg(long)]
-        duration: Option<f64>,
-        /// Inject faults: seed=S,drop=P,corrupt=P,delay=MS,stall=X.Y.Z@STEP
-        #[arg(long)]
-        faults: Option<String>,
-        /// A link silent this long is a fault (s).
-        #[arg(long, default_value_t = 10.0)]
-        link_timeout_s: f64,
-        /// Link bandwidth for the timing model (bytes/s; default from the board profile).
-        #[arg(long)]
-        link_bandwidth: Option<f64>,
-        /// Link latency for the timing model (s).
-        #[arg(long)]
-        link_latency_s: Option<f64>,
         #[arg(long)]
         quiet: bool,
     },
 }
 
+#[derive(clap::Args, Default)]
+struct RunArgs {
+    /// node,x,y,z,ux,uy,uz of every mesh node at the end.
+    #[arg(long)]
+    output_nodes: Option<PathBuf>,
+    /// Run report (JSON): as `pe solve`, plus per-link traffic, waiting and the link model.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// ParaView time series into this directory.
+    #[arg(long)]
+    vtk: Option<PathBuf>,
+    /// Stop after N steps.
+    #[arg(long)]
+    steps: Option<u64>,
+    /// Stop after this much simulated time (s).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Inject faults: seed=S,drop=P,corrupt=P,delay=MS,stall=X.Y.Z@STEP
+    #[arg(long)]
+    faults: Option<String>,
+    /// A link silent this long is a fault (s).
+    #[arg(long, default_value_t = 10.0)]
+    link_timeout_s: f64,
+    /// Link bandwidth for the timing model (bytes/s; default from the board profile).
+    #[arg(long)]
+    link_bandwidth: Option<f64>,
+    /// Link latency for the timing model (s).
+    #[arg(long)]
+    link_latency_s: Option<f64>,
+    #[arg(long)]
+    quiet: bool,
+}
+
 fn main() -> Result<()> {
     let Cli { command } = Cli::parse();
-    let Command::Run {
-        dir,
+    match command {
+        Command::Run { dir, args } => execute(&dir, args).map(|_| ()),
+        Command::Builtin {
+            level,
+            boards,
+            out,
+            steps,
+            quiet,
+        } => builtin(&level, &boards, &out, steps, quiet),
+    }
+}
+
+/// The main job (see `Command::Builtin`).
+fn builtin(
+    level: &str,
+    boards: &str,
+    out: &std::path::Path,
+    steps: Option<u64>,
+    quiet: bool,
+) -> Result<()> {
+    let scene = builtin_scene(level)?;
+    let problem = Problem::from_scene(&scene, std::path::Path::new("."))?;
+    let images = out.join("images");
+    let machine = host_tools::partition::Machine::parse(boards)?;
+    let name = format!("builtin:{level}");
+    let rep = host_tools::compile::compile_to_dir(
+        &name,
+        &name,
+        &problem,
+        machine,
+        &pe_firmware::profile::PE_BOARD,
+        &images,
+    )?;
+    print!("{}", host_tools::compile::summary(&rep));
+    let args = RunArgs {
+        output_nodes: Some(out.join("nodes.csv")),
+        report: Some(out.join("report.json")),
+        vtk: Some(out.join("frames")),
+        steps,
+        link_timeout_s: 10.0,
+        quiet,
+        ..Default::default()
+    };
+    let (sim, pr) = execute(&images, args)?;
+    // What a user of the trainer wants to know: what the probe did to the tube.
+    let tube_max = pr
+        .mesh
+        .cells
+        .iter()
+        .zip(&pr.mesh.cell_regions)
+        .filter(|(_, r)| **r == host_tools::builtin::REGION_RIGHT_OVIDUCT)
+        .flat_map(|(c, _)| c.iter().map(|&n| n as usize))
+        .map(|n| {
+            let u = sim.displacements[n];
+            (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()
+        })
+        .fold(0.0, f64::max);
+    let sim_s = sim.steps as f64 * sim.manifest.dt_s;
+    let f = sim.reaction_prescribed;
+    println!("summary:");
+    println!(
+        "  probe push on the right tube: [{:.4e}, {:.4e}, {:.4e}] N (|F| = {:.4e} N)",
+        f[0],
+        f[1],
+        f[2],
+        (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt()
+    );
+    println!(
+        "  right tube: largest displacement {:.3} mm",
+        tube_max * 1e3
+    );
+    println!(
+        "  {} steps, {:.3} s simulated in {:.2} s wall on {} emulated boards: real-time factor {:.3}",
+        sim.steps, sim_s, sim.wall_s, sim.boards.len(), sim_s / sim.wall_s
+    );
+    println!(
+        "  ParaView: {}; report: {}",
+        out.join("frames/series.pvd").display(),
+        out.join("report.json").display()
+    );
+    Ok(())
+}
+
+/// Runs a compiled machine and writes the requested outputs; returns the run and the scene.
+fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, Problem)> {
+    let RunArgs {
         output_nodes,
         report,
         vtk,
@@ -76,8 +184,8 @@ fn main() -> Result<()> {
         link_bandwidth,
         link_latency_s,
         quiet,
-    } = command;
-    let manifest = host_tools::compile::read_manifest(&dir)?;
+    } = a;
+    let manifest = host_tools::compile::read_manifest(dir)?;
     let mut opts = SimOptions {
         link_timeout: Duration::from_secs_f64(link_timeout_s),
         ..Default::default()
@@ -136,7 +244,7 @@ fn main() -> Result<()> {
         );
         b
     });
-    let out = run(&dir, &opts, &mut |s, _| {
+    let out = run(dir, &opts, &mut |s, _| {
         if let Some(b) = &bar {
             b.set_position(s);
         }
@@ -145,7 +253,7 @@ fn main() -> Result<()> {
         b.finish_and_clear();
     }
     let out = out?;
-    let elements = manifest_elements(&dir)?;
+    let elements = manifest_elements(dir)?;
     let sim_s = out.steps as f64 * manifest.dt_s;
     let max = out
         .displacements
@@ -167,7 +275,7 @@ fn main() -> Result<()> {
     if let Some(l) = link_latency_s {
         timing.link_latency_s = l;
     }
-    let modelled = model(&dir, manifest.machine, timing)?;
+    let modelled = model(dir, manifest.machine, timing)?;
     println!(
         "link model ({}): a step takes {:.1} us on the slowest board ({:.1} us computing), dt = {:.1} us: {}",
         profile.name, modelled.step_s * 1e6, modelled.compute_s * 1e6, modelled.dt_s * 1e6,
@@ -218,7 +326,8 @@ fn main() -> Result<()> {
         std::fs::write(&p, serde_json::to_string_pretty(&rep)?)
             .with_context(|| format!("writing {}", p.display()))?;
     }
-    Ok(())
+    let problem = problem.ok_or_else(|| anyhow::anyhow!("no scene"))?;
+    Ok((out, problem))
 }
 
 fn manifest_elements(dir: &std::path::Path) -> Result<usize> {
