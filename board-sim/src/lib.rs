@@ -30,6 +30,9 @@ pub struct SimOptions {
     pub link_timeout: Duration,
     /// Collect every mesh node's displacement every this many steps (0 = only the end).
     pub frame_every: u64,
+    /// Host threads the boards are multiplexed over (default: the machine's cores; as many
+    /// as boards gives one thread per board).
+    pub workers: Option<usize>,
 }
 
 impl Default for SimOptions {
@@ -39,6 +42,7 @@ impl Default for SimOptions {
             faults: None,
             link_timeout: Duration::from_secs(10),
             frame_every: 0,
+            workers: None,
         }
     }
 }
@@ -213,22 +217,39 @@ struct BoardCtx {
     stop: Arc<std::sync::atomic::AtomicBool>,
 }
 
-fn run_board<T: WireReal, E: HexElement<T> + DeserializeOwned + Copy>(
-    ctx: BoardCtx,
+/// Runs a worker's boards: each is polled in turn as far as its links allow; when no board
+/// can move, the worker waits on its doorbell.
+fn run_worker<T: WireReal, E: HexElement<T> + DeserializeOwned + Copy>(
+    boards: Vec<BoardCtx>,
     element: E,
-    links: &mut impl Links,
+    links: &mut [Box<dyn Links + Send>],
     env: &mut ThreadEnv,
     out: &mpsc::Sender<Report>,
 ) -> Result<(), Fault> {
-    let coords8 = ctx.coords.map(|c| c as u8);
-    let load_fault = |e| Fault {
-        board: coords8,
-        step: 0,
-        kind: pe_firmware::runtime::FaultKind::Image(e),
+    let load_fault = |c: [usize; 3]| {
+        move |e| Fault {
+            board: c.map(|v| v as u8),
+            step: 0,
+            kind: pe_firmware::runtime::FaultKind::Image(e),
+        }
     };
-    let mut storage = OwnedStorage::<T, E>::new(&ctx.image, element).map_err(load_fault)?;
-    let mut rt: Runtime<'_, T, E> =
-        Runtime::load(&ctx.image, coords8, storage.storage(), ctx.config).map_err(load_fault)?;
+    let mut storages = Vec::with_capacity(boards.len());
+    for ctx in &boards {
+        storages
+            .push(OwnedStorage::<T, E>::new(&ctx.image, element).map_err(load_fault(ctx.coords))?);
+    }
+    let mut rts: Vec<Runtime<'_, T, E>> = Vec::with_capacity(boards.len());
+    for (st, ctx) in storages.iter_mut().zip(&boards) {
+        rts.push(
+            Runtime::load(
+                &ctx.image,
+                ctx.coords.map(|c| c as u8),
+                st.storage(),
+                ctx.config,
+            )
+            .map_err(load_fault(ctx.coords))?,
+        );
+    }
     let send_frame = |rt: &Runtime<'_, T, E>, step: u64| {
         let nodes = rt
             .nodes()
@@ -239,35 +260,74 @@ fn run_board<T: WireReal, E: HexElement<T> + DeserializeOwned + Copy>(
             .collect();
         let _ = out.send(Report::Frame { step, nodes });
     };
-    while rt.step_index() < ctx.steps {
-        if ctx.stop.load(Ordering::Relaxed) {
-            break;
+    let mut done = vec![false; boards.len()];
+    let mut idle_sweeps = 0u32;
+    loop {
+        let mut progressed = false;
+        let mut all_done = true;
+        for (i, ctx) in boards.iter().enumerate() {
+            if done[i] {
+                continue;
+            }
+            all_done = false;
+            let rt = &mut rts[i];
+            loop {
+                if rt.step_index() >= ctx.steps {
+                    send_frame(rt, rt.step_index());
+                    let st: LinkStats = rt.stats;
+                    let _ = out.send(Report::Done {
+                        board: ctx.index,
+                        result: BoardResult {
+                            board: ctx.coords,
+                            steps: rt.step_index(),
+                            frames_sent: st.frames_sent,
+                            bytes_sent: st.bytes_sent,
+                            wait_s: st.wait_ns as f64 * 1e-9,
+                        },
+                        reaction_prescribed: rt.reaction_prescribed,
+                        reaction_fixed: rt.reaction_fixed,
+                        kinetic_energy: rt.kinetic_energy,
+                    });
+                    done[i] = true;
+                    progressed = true;
+                    break;
+                }
+                let before = rt.progress();
+                let mut link: &mut (dyn Links + Send) = &mut *links[i];
+                let complete = rt.poll_step(&mut link, env)?;
+                if rt.progress() != before {
+                    progressed = true;
+                }
+                if !complete {
+                    break;
+                }
+                let s = rt.step_index();
+                if ctx.index == 0 {
+                    ctx.progress.store(s, Ordering::Relaxed);
+                }
+                if ctx.frame_every > 0 && s.is_multiple_of(ctx.frame_every) && s < ctx.steps {
+                    send_frame(rt, s);
+                }
+            }
         }
-        rt.step(links, env)?;
-        let s = rt.step_index();
-        if ctx.index == 0 {
-            ctx.progress.store(s, Ordering::Relaxed);
+        if all_done
+            || boards
+                .first()
+                .is_some_and(|c| c.stop.load(Ordering::Relaxed))
+        {
+            return Ok(());
         }
-        if ctx.frame_every > 0 && s.is_multiple_of(ctx.frame_every) && s < ctx.steps {
-            send_frame(&rt, s);
+        if progressed {
+            idle_sweeps = 0;
+        } else {
+            idle_sweeps += 1;
+            if idle_sweeps < 64 {
+                std::hint::spin_loop();
+            } else {
+                env.bell.wait(Duration::from_millis(1));
+            }
         }
     }
-    send_frame(&rt, rt.step_index());
-    let st: LinkStats = rt.stats;
-    let _ = out.send(Report::Done {
-        board: ctx.index,
-        result: BoardResult {
-            board: ctx.coords,
-            steps: rt.step_index(),
-            frames_sent: st.frames_sent,
-            bytes_sent: st.bytes_sent,
-            wait_s: st.wait_ns as f64 * 1e-9,
-        },
-        reaction_prescribed: rt.reaction_prescribed,
-        reaction_fixed: rt.reaction_fixed,
-        kinetic_energy: rt.kinetic_energy,
-    });
-    Ok(())
 }
 
 /// Runs the compiled machine in `dir`. `on_progress(step, total)` is called from the
@@ -307,7 +367,20 @@ pub fn run(
         .unwrap_or(header.params.steps)
         .min(header.params.steps.max(opts.steps.unwrap_or(0)));
     let n_nodes = header.scene_nodes as usize;
-    let (links, bells) = build_links(dims);
+    let workers = opts
+        .workers
+        .unwrap_or_else(|| {
+            std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(2)
+        })
+        .clamp(1, count);
+    let bells: Vec<Arc<links::Doorbell>> = (0..workers)
+        .map(|_| Arc::new(links::Doorbell::default()))
+        .collect();
+    let board_bells: Vec<Arc<links::Doorbell>> =
+        (0..count).map(|b| bells[b % workers].clone()).collect();
+    let links = build_links(dims, &board_bells);
     let (tx, rx) = mpsc::channel::<Report>();
     let progress = Arc::new(AtomicU64::new(0));
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
@@ -316,7 +389,8 @@ pub fn run(
         link_timeout_ns: opts.link_timeout.as_nanos() as u64,
     };
     let start = Instant::now();
-    let mut handles = Vec::new();
+    let mut per_worker: Vec<(Vec<BoardCtx>, Vec<Box<dyn Links + Send>>)> =
+        (0..workers).map(|_| (Vec::new(), Vec::new())).collect();
     for (b, (image, link)) in images.into_iter().zip(links).enumerate() {
         let coords = [
             b % dims[0],
@@ -333,44 +407,42 @@ pub fn run(
             progress: progress.clone(),
             stop: stop.clone(),
         };
+        let l: Box<dyn Links + Send> = match &opts.faults {
+            Some(spec) => Box::new(FaultyLinks::new(
+                link,
+                coords,
+                b,
+                spec.clone(),
+                injected.clone(),
+            )),
+            None => Box::new(link),
+        };
+        per_worker[b % workers].0.push(ctx);
+        per_worker[b % workers].1.push(l);
+    }
+    let mut handles = Vec::new();
+    for (w, (ctxs, mut ls)) in per_worker.into_iter().enumerate() {
         let out = tx.clone();
-        let bell = bells[b].clone();
-        let faults = opts.faults.clone();
-        let inj = injected.clone();
+        let bell = bells[w].clone();
         let stop2 = stop.clone();
         let h = std::thread::Builder::new()
-            .name(format!("board-{}-{}-{}", coords[0], coords[1], coords[2]))
-            .stack_size(8 << 20)
+            .name(format!("board-worker-{w}"))
+            .stack_size(16 << 20)
             .spawn(move || {
                 let mut env = ThreadEnv::new(bell);
-                let mut plain = link;
-                let r = match faults {
-                    Some(spec) => {
-                        let mut fl = FaultyLinks::new(plain, coords, b, spec, inj);
-                        dispatch(
-                            ctx,
-                            &mut fl,
-                            &mut env,
-                            &out,
-                            header.precision,
-                            header.integration,
-                        )
-                    }
-                    None => dispatch(
-                        ctx,
-                        &mut plain,
-                        &mut env,
-                        &out,
-                        header.precision,
-                        header.integration,
-                    ),
-                };
-                if let Err(f) = r {
+                if let Err(f) = dispatch(
+                    ctxs,
+                    &mut ls,
+                    &mut env,
+                    &out,
+                    header.precision,
+                    header.integration,
+                ) {
                     stop2.store(true, Ordering::Relaxed);
                     let _ = out.send(Report::Failed(f));
                 }
             })
-            .context("spawning a board thread")?;
+            .context("spawning a worker thread")?;
         handles.push(h);
     }
     drop(tx);
@@ -459,8 +531,8 @@ pub fn run(
 }
 
 fn dispatch(
-    ctx: BoardCtx,
-    links: &mut impl Links,
+    ctx: Vec<BoardCtx>,
+    links: &mut [Box<dyn Links + Send>],
     env: &mut ThreadEnv,
     out: &mpsc::Sender<Report>,
     precision: Precision,
@@ -488,10 +560,14 @@ fn dispatch(
         }
     }
     match (precision, integration) {
-        (Precision::F64, Integration::Reduced) => run_board(ctx, reduced::<f64>(), links, env, out),
-        (Precision::F64, Integration::Full) => run_board(ctx, full::<f64>(), links, env, out),
-        (Precision::F32, Integration::Reduced) => run_board(ctx, reduced::<f32>(), links, env, out),
-        (Precision::F32, Integration::Full) => run_board(ctx, full::<f32>(), links, env, out),
+        (Precision::F64, Integration::Reduced) => {
+            run_worker(ctx, reduced::<f64>(), links, env, out)
+        }
+        (Precision::F64, Integration::Full) => run_worker(ctx, full::<f64>(), links, env, out),
+        (Precision::F32, Integration::Reduced) => {
+            run_worker(ctx, reduced::<f32>(), links, env, out)
+        }
+        (Precision::F32, Integration::Full) => run_worker(ctx, full::<f32>(), links, env, out),
     }
 }
 

@@ -95,10 +95,10 @@ impl Links for EmuLinks {
     }
 }
 
-/// Builds the links of a machine: `links[b]` for board `b` (x fastest).
-pub fn build_links(dims: [usize; 3]) -> (Vec<EmuLinks>, Vec<Arc<Doorbell>>) {
+/// Builds the links of a machine: `links[b]` for board `b` (x fastest); a frame for board
+/// `b` rings `bells[b]` (boards sharing a worker thread share its doorbell).
+pub fn build_links(dims: [usize; 3], bells: &[Arc<Doorbell>]) -> Vec<EmuLinks> {
     let count = dims.iter().product::<usize>();
-    let bells: Vec<Arc<Doorbell>> = (0..count).map(|_| Arc::new(Doorbell::default())).collect();
     let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
     let mut links: Vec<EmuLinks> = (0..count)
         .map(|_| EmuLinks {
@@ -136,7 +136,7 @@ pub fn build_links(dims: [usize; 3]) -> (Vec<EmuLinks>, Vec<Arc<Doorbell>>) {
             links[nb].rx[face.opposite().index()] = Some(ch);
         }
     }
-    (links, bells)
+    links
 }
 
 /// Time and waiting for a board thread.

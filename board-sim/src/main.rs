@@ -33,6 +33,16 @@ enum Command {
         #[command(flatten)]
         args: RunArgs,
     },
+    /// Benchmark: steps per second of the serial solver and of board-sim on the same scene,
+    /// in one run, as a ratio.
+    Bench {
+        #[arg(long, default_value = "medium")]
+        level: String,
+        #[arg(long, default_value = "4x4x4")]
+        boards: String,
+        #[arg(long, default_value_t = 1000)]
+        steps: u64,
+    },
     /// The main job: compile the built-in scene (uterus, tubes, probe) for a board mesh and
     /// run it, writing OUT/images, OUT/frames (ParaView), OUT/report.json and a summary.
     Builtin {
@@ -82,6 +92,10 @@ struct RunArgs {
     /// Link latency for the timing model (s).
     #[arg(long)]
     link_latency_s: Option<f64>,
+    /// Host threads to multiplex the boards over (default: the machine's cores; as many as
+    /// boards runs one thread per board).
+    #[arg(long)]
+    workers: Option<usize>,
     #[arg(long)]
     quiet: bool,
 }
@@ -97,7 +111,55 @@ fn main() -> Result<()> {
             steps,
             quiet,
         } => builtin(&level, &boards, &out, steps, quiet),
+        Command::Bench {
+            level,
+            boards,
+            steps,
+        } => bench(&level, &boards, steps),
     }
+}
+
+fn bench(level: &str, boards: &str, steps: u64) -> Result<()> {
+    let mut scene = builtin_scene(level)?;
+    scene.solver.steps = Some(steps);
+    let problem = Problem::from_scene(&scene, std::path::Path::new("."))?;
+    let t = std::time::Instant::now();
+    let serial = host_tools::solver::run(&problem, "serial", &mut ())?;
+    let serial_s = t.elapsed().as_secs_f64();
+    let dir = std::env::temp_dir().join(format!("board-sim-bench-{}", std::process::id()));
+    let name = format!("builtin:{level}");
+    let machine = host_tools::partition::Machine::parse(boards)?;
+    host_tools::compile::compile_to_dir(
+        &name,
+        &name,
+        &problem,
+        machine,
+        &pe_firmware::profile::PE_BOARD,
+        &dir,
+    )?;
+    let cores = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(2);
+    println!(
+        "{name}, {} elements, {steps} steps, {boards} boards, {cores} cores",
+        problem.mesh.cells.len()
+    );
+    println!("  serial solver: {:.1} steps/s", steps as f64 / serial_s);
+    for workers in [cores, machine.count()] {
+        let opts = SimOptions {
+            workers: Some(workers),
+            ..Default::default()
+        };
+        let out = run(&dir, &opts, &mut |_, _| {})?;
+        let d = host_tools::compile::max_rel_diff(&serial.displacements, &out.displacements);
+        println!(
+            "  board-sim, {workers} worker threads: {:.1} steps/s = {:.2}x the serial run's time (max relative difference {d:.1e})",
+            steps as f64 / out.wall_s,
+            out.wall_s / serial_s
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
 }
 
 /// The main job (see `Command::Builtin`).
@@ -183,11 +245,13 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
         link_timeout_s,
         link_bandwidth,
         link_latency_s,
+        workers,
         quiet,
     } = a;
     let manifest = host_tools::compile::read_manifest(dir)?;
     let mut opts = SimOptions {
         link_timeout: Duration::from_secs_f64(link_timeout_s),
+        workers,
         ..Default::default()
     };
     if let Some(f) = &faults {
@@ -205,7 +269,7 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
     };
     let total = opts.steps.unwrap_or(manifest.steps).min(manifest.steps);
     // The mesh, for outputs: from the scene the manifest names.
-    let problem = if output_nodes.is_some() || vtk.is_some() || report.is_some() {
+    let problem = {
         let scene = match manifest.scene_source.strip_prefix("builtin:") {
             Some(level) => builtin_scene(level)?,
             None => Scene::from_file(std::path::Path::new(&manifest.scene_source))?,
@@ -218,8 +282,6 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
             Problem::from_scene(&scene, &sdir)
                 .with_context(|| format!("loading scene {} for outputs", manifest.scene_source))?,
         )
-    } else {
-        None
     };
     if vtk.is_some() {
         opts.frame_every = ((0.04 / manifest.dt_s).round() as u64).max(1);

@@ -1060,3 +1060,18 @@ pub fn inspect(dir: &Path, board: [usize; 3]) -> Result<String> {
     }
     Ok(s)
 }
+
+/// Largest `|a − b|` over all components, relative to the largest `|a|`.
+pub fn max_rel_diff(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    let d = a
+        .iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    if scale > 0.0 {
+        d / scale
+    } else {
+        d
+    }
+}

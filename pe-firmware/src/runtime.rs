@@ -177,6 +177,22 @@ impl<
     }
 }
 
+/// One operation of a step's fixed sequence (the seed's interleaved schedule).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Op {
+    Begin,
+    Batch(u8),
+    External(u8),
+    /// (axis, round, face 0 = +axis / 1 = −axis)
+    Send(u8, u8, u8),
+    Recv(u8, u8, u8),
+    Update,
+}
+
+/// Most operations in a step: begin, 4 batches, 4 external stages, 3 axes × rounds × 2
+/// faces × (send + receive), update.
+const OPS_MAX: usize = 10 + 3 * ROUNDS_PER_AXIS_MAX * 4;
+
 /// Ranges of one round's lists in the flat `sends` / `recvs` arrays, per face (+, −).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct RoundRanges {
@@ -212,6 +228,12 @@ pub struct LinkStats {
 /// One board running its schedule image. `E` is the element type (reduced or full).
 pub struct Runtime<'a, T, E> {
     pub header: ImageHeader,
+    ops: [Op; OPS_MAX],
+    ops_len: usize,
+    /// Next operation of the current step.
+    pc: usize,
+    /// When the current operation started waiting (ns), if it is waiting.
+    waiting_since: Option<u64>,
     st: Storage<'a, T, E>,
     rounds: [[RoundRanges; ROUNDS_PER_AXIS_MAX]; 3],
     cd: CentralDifference<T>,
@@ -379,8 +401,13 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
                 record: "trailing bytes",
             });
         }
+        let (ops, ops_len) = program(&c.rounds);
         Ok(Runtime {
             header: h,
+            ops,
+            ops_len,
+            pc: 0,
+            waiting_since: None,
             st,
             rounds,
             cd: CentralDifference::new(h.params.dt_s, h.params.damping_per_s),
@@ -398,6 +425,11 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
 
     pub fn step_index(&self) -> u64 {
         self.step
+    }
+
+    /// (step, operation): changes whenever the runtime moves on.
+    pub fn progress(&self) -> (u64, usize) {
+        (self.step, self.pc)
     }
 
     pub fn is_finished(&self) -> bool {
@@ -471,175 +503,164 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
         }
     }
 
-    fn send(
+    /// Sends one face's frame of a round; `Ok(false)` if the link's queue is full.
+    fn send_face(
         &mut self,
         links: &mut impl Links,
-        env: &mut impl Environment,
         axis: usize,
         round: usize,
-    ) -> Result<(), Fault> {
-        let rr = self.rounds[axis][round];
-        for f in 0..2 {
-            let (s, e) = rr.send[f];
-            if s == e {
-                continue;
-            }
-            let face = Face::from_index(2 * axis + f)
-                .ok_or(self.fault(FaultKind::Physics(PhysicsError::BadIndex { element: 0 })))?;
-            let mut m = 0;
-            for &k in &self.st.sends[s as usize..e as usize] {
-                let v = self.st.force[k as usize];
-                self.scratch[m..m + 3].copy_from_slice(&v);
-                m += 3;
-            }
-            let len = emit_values(
-                FrameKind::Forces,
-                self.step as u32,
-                T::wire(&self.scratch[..m]),
-                &mut self.tx,
-            )
-            .map_err(|_| {
-                self.fault(FaultKind::SendFailed {
-                    face,
-                    error: link_proto::SendError::TooLong,
-                })
-            })?;
-            let start = env.now_ns();
-            loop {
-                match links.try_send(face, &self.tx[..len]) {
-                    Ok(()) => break,
-                    Err(link_proto::SendError::WouldBlock) => {
-                        if env.now_ns().saturating_sub(start) > self.config.link_timeout_ns {
-                            return Err(self.fault(FaultKind::LinkTimeout { face }));
-                        }
-                        env.idle();
-                    }
-                    Err(error) => return Err(self.fault(FaultKind::SendFailed { face, error })),
-                }
-            }
-            self.stats.frames_sent[face.index()] += 1;
-            self.stats.bytes_sent[face.index()] += len as u64;
+        f: usize,
+    ) -> Result<bool, Fault> {
+        let (s, e) = self.rounds[axis][round].send[f];
+        if s == e {
+            return Ok(true);
         }
-        Ok(())
+        let face = face_of(axis, f);
+        let mut m = 0;
+        for &k in &self.st.sends[s as usize..e as usize] {
+            let v = self.st.force[k as usize];
+            self.scratch[m..m + 3].copy_from_slice(&v);
+            m += 3;
+        }
+        let len = emit_values(
+            FrameKind::Forces,
+            self.step as u32,
+            T::wire(&self.scratch[..m]),
+            &mut self.tx,
+        )
+        .map_err(|_| {
+            self.fault(FaultKind::SendFailed {
+                face,
+                error: link_proto::SendError::TooLong,
+            })
+        })?;
+        match links.try_send(face, &self.tx[..len]) {
+            Ok(()) => {
+                self.stats.frames_sent[face.index()] += 1;
+                self.stats.bytes_sent[face.index()] += len as u64;
+                Ok(true)
+            }
+            Err(link_proto::SendError::WouldBlock) => Ok(false),
+            Err(error) => Err(self.fault(FaultKind::SendFailed { face, error })),
+        }
     }
 
-    fn receive(
+    /// Receives and combines one face's frame of a round; `Ok(false)` if it has not arrived.
+    fn recv_face(
+        &mut self,
+        links: &mut impl Links,
+        axis: usize,
+        round: usize,
+        f: usize,
+    ) -> Result<bool, Fault> {
+        let (s, e) = self.rounds[axis][round].recv[f];
+        if s == e {
+            return Ok(true);
+        }
+        let face = face_of(axis, f);
+        let len = match links.try_recv(face, &mut self.rx) {
+            Ok(Some(len)) => len,
+            Ok(None) => return Ok(false),
+            Err(error) => return Err(self.fault(FaultKind::LinkError { face, error })),
+        };
+        self.stats.frames_received[face.index()] += 1;
+        let repr = FrameRepr::parse_bytes(&self.rx[..len])
+            .map_err(|error| self.fault(FaultKind::BadFrame { face, error }))?;
+        let expected = 3 * (e - s) as usize;
+        if repr.kind != FrameKind::Forces
+            || repr.step != self.step as u32
+            || repr.payload.len() != expected
+            || repr.payload.precision() != T::wire(&[]).precision()
+        {
+            return Err(self.fault(FaultKind::UnexpectedFrame {
+                face,
+                expected_step: self.step as u32,
+                step: repr.step,
+                expected_values: expected as u16,
+                values: repr.payload.len() as u16,
+            }));
+        }
+        for (j, entry) in self.st.recvs[s as usize..e as usize].iter().enumerate() {
+            let k = entry.node as usize;
+            for i in 0..3 {
+                let v = T::from_f64(repr.payload.get(3 * j + i).unwrap_or(f64::NAN));
+                let cur = self.st.force[k][i];
+                self.st.force[k][i] = match entry.combine {
+                    Combine::Before => v + cur,
+                    Combine::After => cur + v,
+                    Combine::Replace => v,
+                };
+            }
+        }
+        Ok(true)
+    }
+
+    /// Advances the current step as far as the links allow without waiting. Returns
+    /// `Ok(true)` when the step is complete, `Ok(false)` when it waits for a link (call
+    /// again later). A link that keeps it waiting longer than the timeout is a fault.
+    pub fn poll_step(
         &mut self,
         links: &mut impl Links,
         env: &mut impl Environment,
-        axis: usize,
-        round: usize,
-    ) -> Result<(), Fault> {
-        let rr = self.rounds[axis][round];
-        // The −axis face first: the summation trees put the lower board's value on the left.
-        for f in [1, 0] {
-            let (s, e) = rr.recv[f];
-            if s == e {
-                continue;
-            }
-            let face = Face::from_index(2 * axis + f)
-                .ok_or(self.fault(FaultKind::Physics(PhysicsError::BadIndex { element: 0 })))?;
-            let start = env.now_ns();
-            let len = loop {
-                match links.try_recv(face, &mut self.rx) {
-                    Ok(Some(len)) => break len,
-                    Ok(None) => {
-                        if env.now_ns().saturating_sub(start) > self.config.link_timeout_ns {
-                            return Err(self.fault(FaultKind::LinkTimeout { face }));
-                        }
-                        env.idle();
+    ) -> Result<bool, Fault> {
+        let n = self.header.counts.nodes as usize;
+        let t = self.step as f64 * self.header.params.dt_s;
+        while self.pc < self.ops_len {
+            let done = match self.ops[self.pc] {
+                Op::Begin => {
+                    for f in self.st.force[..n].iter_mut() {
+                        *f = [T::ZERO; 3];
                     }
-                    Err(error) => return Err(self.fault(FaultKind::LinkError { face, error })),
+                    true
+                }
+                Op::Batch(k) => {
+                    self.batch(k as usize)?;
+                    true
+                }
+                Op::External(stage) => {
+                    self.external(stage, t);
+                    true
+                }
+                Op::Send(a, r, f) => self.send_face(links, a as usize, r as usize, f as usize)?,
+                Op::Recv(a, r, f) => self.recv_face(links, a as usize, r as usize, f as usize)?,
+                Op::Update => {
+                    self.update(t + self.header.params.dt_s)?;
+                    true
                 }
             };
-            self.stats.wait_ns += env.now_ns().saturating_sub(start);
-            self.stats.frames_received[face.index()] += 1;
-            let repr = FrameRepr::parse_bytes(&self.rx[..len])
-                .map_err(|error| self.fault(FaultKind::BadFrame { face, error }))?;
-            let expected = 3 * (e - s) as usize;
-            if repr.kind != FrameKind::Forces
-                || repr.step != self.step as u32
-                || repr.payload.len() != expected
-                || repr.payload.precision() != T::wire(&[]).precision()
-            {
-                return Err(self.fault(FaultKind::UnexpectedFrame {
-                    face,
-                    expected_step: self.step as u32,
-                    step: repr.step,
-                    expected_values: expected as u16,
-                    values: repr.payload.len() as u16,
-                }));
-            }
-            for (j, entry) in self.st.recvs[s as usize..e as usize].iter().enumerate() {
-                let k = entry.node as usize;
-                for i in 0..3 {
-                    let v = T::from_f64(repr.payload.get(3 * j + i).unwrap_or(f64::NAN));
-                    let cur = self.st.force[k][i];
-                    self.st.force[k][i] = match entry.combine {
-                        Combine::Before => v + cur,
-                        Combine::After => cur + v,
-                        Combine::Replace => v,
+            if !done {
+                let now = env.now_ns();
+                let since = *self.waiting_since.get_or_insert(now);
+                if now.saturating_sub(since) > self.config.link_timeout_ns {
+                    let face = match self.ops[self.pc] {
+                        Op::Send(a, _, f) | Op::Recv(a, _, f) => face_of(a as usize, f as usize),
+                        _ => Face::PosX,
                     };
+                    return Err(self.fault(FaultKind::LinkTimeout { face }));
                 }
+                return Ok(false);
             }
+            if let Some(since) = self.waiting_since.take() {
+                self.stats.wait_ns += env.now_ns().saturating_sub(since);
+            }
+            self.pc += 1;
         }
-        Ok(())
+        self.pc = 0;
+        Ok(true)
     }
 
-    fn exchange_rest(
-        &mut self,
-        links: &mut impl Links,
-        env: &mut impl Environment,
-        axis: usize,
-    ) -> Result<(), Fault> {
-        self.receive(links, env, axis, 0)?;
-        for round in 1..self.header.counts.rounds[axis] as usize {
-            self.send(links, env, axis, round)?;
-            self.receive(links, env, axis, round)?;
-        }
-        Ok(())
-    }
-
-    /// One explicit step by the seed's interleaved schedule.
+    /// One explicit step by the seed's interleaved schedule, waiting (through
+    /// `env.idle()`) for the links as needed.
     pub fn step(
         &mut self,
         links: &mut impl Links,
         env: &mut impl Environment,
     ) -> Result<(), Fault> {
-        let n = self.header.counts.nodes as usize;
-        let dt = self.header.params.dt_s;
-        let t = self.step as f64 * dt;
-        for f in self.st.force[..n].iter_mut() {
-            *f = [T::ZERO; 3];
+        while !self.poll_step(links, env)? {
+            links.poll();
+            env.idle();
         }
-        let rounds = self.header.counts.rounds;
-        self.batch(0)?;
-        self.external(0, t);
-        if rounds[0] > 0 {
-            self.send(links, env, 0, 0)?;
-        }
-        self.batch(1)?;
-        if rounds[0] > 0 {
-            self.exchange_rest(links, env, 0)?;
-        }
-        self.external(1, t);
-        if rounds[1] > 0 {
-            self.send(links, env, 1, 0)?;
-        }
-        self.batch(2)?;
-        if rounds[1] > 0 {
-            self.exchange_rest(links, env, 1)?;
-        }
-        self.external(2, t);
-        if rounds[2] > 0 {
-            self.send(links, env, 2, 0)?;
-        }
-        self.batch(3)?;
-        if rounds[2] > 0 {
-            self.exchange_rest(links, env, 2)?;
-        }
-        self.external(3, t);
-        self.update(t + dt)
+        Ok(())
     }
 
     /// Central-difference update of every held node from its total force; the same
@@ -705,6 +726,47 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
         self.step += 1;
         Ok(())
     }
+}
+
+/// The step's operations: batch x; send ±x; batch y; receive ±x (and further x rounds);
+/// send ±y; batch z; receive ±y...; send ±z; inner batch; receive ±z...; update. External
+/// forces of owned nodes go in just before their first exchange.
+fn program(rounds: &[u8; 3]) -> ([Op; OPS_MAX], usize) {
+    let mut ops = [Op::Update; OPS_MAX];
+    let mut n = 0;
+    let mut push = |op| {
+        if n < OPS_MAX {
+            ops[n] = op;
+            n += 1;
+        }
+    };
+    push(Op::Begin);
+    push(Op::Batch(0));
+    for axis in 0..3u8 {
+        let r = rounds[axis as usize].min(ROUNDS_PER_AXIS_MAX as u8);
+        push(Op::External(axis));
+        if r > 0 {
+            push(Op::Send(axis, 0, 0));
+            push(Op::Send(axis, 0, 1));
+        }
+        push(Op::Batch(axis + 1));
+        for round in 0..r {
+            if round > 0 {
+                push(Op::Send(axis, round, 0));
+                push(Op::Send(axis, round, 1));
+            }
+            // The −axis face first: the summation trees put the lower board on the left.
+            push(Op::Recv(axis, round, 1));
+            push(Op::Recv(axis, round, 0));
+        }
+    }
+    push(Op::External(3));
+    push(Op::Update);
+    (ops, n)
+}
+
+fn face_of(axis: usize, f: usize) -> Face {
+    Face::from_index(2 * axis + f).unwrap_or(Face::PosX)
 }
 
 /// The two element kinds a runtime can be built for.

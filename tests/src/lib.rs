@@ -66,13 +66,4 @@ pub fn compile(problem: &Problem, source: &str, machine: &str, name: &str) -> Pa
     dir
 }
 
-/// Largest |a − b| over all components, relative to the largest |a|.
-pub fn max_rel_diff(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
-    let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
-    let d = a
-        .iter()
-        .flatten()
-        .zip(b.iter().flatten())
-        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
-    d / scale
-}
+pub use host_tools::compile::max_rel_diff;
