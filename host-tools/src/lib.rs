@@ -13,4 +13,5 @@ pub mod problem;
 pub mod scene;
 pub mod scene_mesh;
 pub mod solver;
+pub mod stability;
 pub mod vtk_out;

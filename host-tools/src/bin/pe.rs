@@ -90,6 +90,18 @@ enum Command {
         #[arg(long, default_value_t = 200)]
         steps: u64,
     },
+    /// Run the stability suite and write a readable report.
+    Stability {
+        /// Markdown report (printed when not given).
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+        /// Also run the slow cases (a 1e7-step run in f64 and f32).
+        #[arg(long)]
+        long: bool,
+        /// Run only the cases whose name contains this.
+        #[arg(long)]
+        only: Option<String>,
+    },
 }
 
 struct Progress {
@@ -203,6 +215,9 @@ fn main() -> Result<()> {
             print!("{}", sc.to_toml()?);
         }
         Command::Bench { elements, steps } => host_tools::bench::run_cli(elements, steps)?,
+        Command::Stability { output, long, only } => {
+            host_tools::stability::run_cli(output.as_deref(), long, only.as_deref())?
+        }
     }
     Ok(())
 }
