@@ -14,4 +14,5 @@ pub mod scene;
 pub mod scene_mesh;
 pub mod solver;
 pub mod stability;
+pub mod tradeoff;
 pub mod vtk_out;
