@@ -15,4 +15,6 @@ pub mod problem;
 pub mod scene;
 pub mod scene_mesh;
 pub mod solver;
+pub mod stability;
+pub mod tradeoff;
 pub mod vtk_out;

@@ -336,6 +336,18 @@ impl Problem {
         if !(s.dt_safety > 0.0) || !(s.hourglass >= 0.0) || !(s.damping >= 0.0) {
             bail!("[solver] dt_safety must be > 0, hourglass and damping >= 0");
         }
+        if s.dt_recheck_interval == Some(0) {
+            bail!("[solver] dt_recheck_interval must be at least 1 (or left out)");
+        }
+        if s.dt_recheck_interval.is_some() && s.dt_recheck_iterations == 0 {
+            bail!("[solver] dt_recheck_iterations must be at least 1");
+        }
+        if !(s.speed_limit > 0.0) {
+            bail!(
+                "[solver] speed_limit must be positive, got {}",
+                s.speed_limit
+            );
+        }
         Ok(Problem {
             mesh,
             node_sets,

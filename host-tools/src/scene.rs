@@ -182,6 +182,16 @@ pub struct SolverSpec {
     pub speed_limit: f64,
     /// Seconds of simulated time between ParaView frames (with --vtk).
     pub output_interval: f64,
+    /// Every this many steps, re-estimate the critical step about the current (deformed)
+    /// state by a warm-started power iteration; `None`: never (the step found at rest is
+    /// kept). Large deformation can shrink the stable step (compressed elements).
+    pub dt_recheck_interval: Option<u64>,
+    /// Power iterations per re-check (warm-started from the previous estimate's vector).
+    pub dt_recheck_iterations: usize,
+    /// When a re-check finds `dt` above `dt_safety ×` the new critical step: `false` stops
+    /// the run with an error naming the step and the new critical step; `true` lowers `dt`
+    /// to `dt_safety ×` the new critical step (the central-difference history is rescaled).
+    pub adapt_dt: bool,
 }
 
 impl Default for SolverSpec {
@@ -199,6 +209,9 @@ impl Default for SolverSpec {
             steps: None,
             speed_limit: 100.0,
             output_interval: 0.04,
+            dt_recheck_interval: None,
+            dt_recheck_iterations: 20,
+            adapt_dt: false,
         }
     }
 }

@@ -93,8 +93,12 @@ pub struct Model<'p, T> {
     pub u_prev: Vec<[T; 3]>,
     pub f_int: Vec<[T; 3]>,
     pub f_ext: Vec<[T; 3]>,
-    /// Steps taken so far; the state is at time `step · dt`.
+    /// Steps taken so far.
     pub step: u64,
+    /// Time (s) and step at which the current `dt_s` took effect: the state is at
+    /// `time_base_s + (step − step_base) · dt_s` (exactly `step · dt` until `dt` changes).
+    pub time_base_s: f64,
+    pub step_base: u64,
     /// Kinetic energy at the previous step's time (J), from the central velocity.
     pub kinetic_energy: f64,
     /// Sum over prescribed (and fixed) nodes of `f_int − f_ext`: the force the constraints
@@ -144,6 +148,8 @@ impl<'p, T: Real> Model<'p, T> {
             f_int: vec![[T::ZERO; 3]; n],
             f_ext: vec![[T::ZERO; 3]; n],
             step: 0,
+            time_base_s: 0.0,
+            step_base: 0,
             kinetic_energy: 0.0,
             reaction_prescribed: [0.0; 3],
             reaction_fixed: [0.0; 3],
@@ -151,7 +157,28 @@ impl<'p, T: Real> Model<'p, T> {
     }
 
     pub fn time_s(&self) -> f64 {
-        self.step as f64 * self.dt_s
+        self.time_base_s + (self.step - self.step_base) as f64 * self.dt_s
+    }
+
+    /// Changes the time step mid-run. The central difference keeps the half-step velocity
+    /// `v = (u − u_prev)/dt` in its history, so the previous state is rescaled to keep it:
+    /// `u_prev := u − (dt_new/dt_old)(u − u_prev)`; the update coefficients and the per-node
+    /// gains are rebuilt for the new step.
+    pub fn set_dt(&mut self, dt_new: f64) {
+        let r = dt_new / self.dt_s;
+        for (u, up) in self.u.iter().zip(self.u_prev.iter_mut()) {
+            *up = core::array::from_fn(|i| {
+                let (a, b) = (u[i].to_f64(), up[i].to_f64());
+                T::from_f64(a - r * (a - b))
+            });
+        }
+        self.time_base_s = self.time_s();
+        self.step_base = self.step;
+        self.dt_s = dt_new;
+        self.cd = CentralDifference::<T>::new(dt_new, self.problem.solver.damping);
+        let ms = self.problem.solver.mass_scaling;
+        let cd = self.cd;
+        self.gain = self.problem.mass.iter().map(|m| cd.gain(m * ms)).collect();
     }
 
     /// External forces at time `t`: gravity plus ramped loads.
@@ -267,6 +294,14 @@ pub struct RunReport {
     /// Force the prescribed nodes exert on the tissue at the end (N): the probe push.
     pub prescribed_reaction_n: [f64; 3],
     pub fixed_reaction_n: [f64; 3],
+    /// Step at the end (differs from `dt_s` only when `adapt_dt` lowered it).
+    pub dt_final_s: f64,
+    /// Smallest critical step found by the re-checks (`dt_recheck_interval`), s; the
+    /// initial one when re-checks are off.
+    pub dt_critical_min_s: f64,
+    /// Re-checks done and how many of them lowered `dt`.
+    pub dt_rechecks: u64,
+    pub dt_reductions: u64,
 }
 
 /// Result of a run: final displacements (f64) and the report.
@@ -304,11 +339,23 @@ pub fn run_typed<T: Real>(
     observer: &mut dyn Observer,
 ) -> Result<RunOutput> {
     let (dt, dt_crit) = problem.time_step()?;
-    let steps = problem.steps(dt);
+    let mut steps = problem.steps(dt);
     let mut model = Model::<T>::new(problem, dt);
+    let mut monitor = DtMonitor::new(problem, dt_crit);
     let start = Instant::now();
-    for _ in 0..steps {
-        model.advance().map_err(|e| anyhow!("{name}: {e}"))?;
+    while model.step < steps {
+        model
+            .advance()
+            .map_err(|e| anyhow!("{name}: {}", describe_step_error(problem, &e)))?;
+        if monitor.due(model.step) && model.step < steps {
+            if let Some(dt_new) = monitor.check(&model).map_err(|e| anyhow!("{name}: {e}"))? {
+                model.set_dt(dt_new);
+                if problem.solver.steps.is_none() {
+                    let left = problem.solver.duration.unwrap_or(1.0) - model.time_s();
+                    steps = model.step + (left / dt_new).ceil().max(0.0) as u64;
+                }
+            }
+        }
         let m = &model;
         observer.after_step(m.step, m.time_s(), steps, &|| m.displacements());
     }
@@ -327,23 +374,144 @@ pub fn run_typed<T: Real>(
         steps,
         dt_s: dt,
         dt_critical_s: dt_crit,
-        simulated_s: steps as f64 * dt,
+        simulated_s: model.time_s(),
         elements,
         nodes: problem.mesh.nodes.len(),
         wall_s,
         element_steps_per_s: (elements as f64 * steps as f64) / wall_s.max(1e-12),
-        real_time_factor: steps as f64 * dt / wall_s.max(1e-12),
+        real_time_factor: model.time_s() / wall_s.max(1e-12),
         kinetic_energy_final: model.kinetic_energy,
         stored_energy_final: model.stored_energy()?,
         max_displacement: max_disp,
         max_displacement_node: problem.mesh.node_tags.get(max_node).copied().unwrap_or(0),
         prescribed_reaction_n: model.reaction_prescribed,
         fixed_reaction_n: model.reaction_fixed,
+        dt_final_s: model.dt_s,
+        dt_critical_min_s: monitor.dt_critical_min_s,
+        dt_rechecks: monitor.rechecks,
+        dt_reductions: monitor.reductions,
     };
     Ok(RunOutput {
         displacements,
         report,
     })
+}
+
+/// A step failure in words a user can act on: the step and time, and the mesh's own name
+/// (tag) and position of the node, or the nodes of the element.
+pub fn describe_step_error(problem: &Problem, e: &StepError) -> String {
+    let tag = |n: u32| {
+        problem
+            .mesh
+            .node_tags
+            .get(n as usize)
+            .copied()
+            .unwrap_or(n as u64 + 1)
+    };
+    let at = |n: u32| {
+        problem
+            .mesh
+            .nodes
+            .get(n as usize)
+            .map(|p| format!(" at [{:.4e}, {:.4e}, {:.4e}] m", p[0], p[1], p[2]))
+            .unwrap_or_default()
+    };
+    let detail = match e.error {
+        PhysicsError::NonFinite { node } | PhysicsError::SpeedLimit { node, .. } => {
+            format!(
+                " (node index {node} = mesh node tag {}{})",
+                tag(node),
+                at(node)
+            )
+        }
+        PhysicsError::InvertedElement { element, .. } | PhysicsError::BadIndex { element } => {
+            match problem.mesh.cells.get(element as usize) {
+                Some(c) => format!(
+                    " (element {element} = mesh cell {element}, nodes {:?}{})",
+                    c.map(tag),
+                    at(c[0]).replace(" at", ", first node at")
+                ),
+                None => String::new(),
+            }
+        }
+    };
+    format!("{e}{detail}")
+}
+
+/// Re-estimates the critical step during a run (`[solver] dt_recheck_interval`).
+pub struct DtMonitor {
+    interval: Option<u64>,
+    iterations: usize,
+    /// Warm start of the power iteration: the last dominant mode.
+    vector: Option<Vec<[f64; 3]>>,
+    pub dt_critical_initial_s: f64,
+    pub dt_critical_min_s: f64,
+    pub rechecks: u64,
+    pub reductions: u64,
+}
+
+impl DtMonitor {
+    pub fn new(problem: &Problem, dt_critical_s: f64) -> Self {
+        DtMonitor {
+            interval: problem.solver.dt_recheck_interval,
+            iterations: problem.solver.dt_recheck_iterations.max(1),
+            vector: None,
+            dt_critical_initial_s: dt_critical_s,
+            dt_critical_min_s: dt_critical_s,
+            rechecks: 0,
+            reductions: 0,
+        }
+    }
+
+    pub fn due(&self, step: u64) -> bool {
+        self.interval.is_some_and(|n| step.is_multiple_of(n))
+    }
+
+    /// The critical step about the model's current state: `2/ω_max` by a warm-started
+    /// power iteration, never above the initial critical step (which may be the smaller
+    /// `L_e/c` estimate). Returns the step to continue with: `None` to keep `dt`, or a
+    /// lower one (`adapt_dt`); without `adapt_dt`, a step above `dt_safety ×` the new
+    /// critical step (explicit `dt`: above the critical step) is an error. 1% of slack
+    /// absorbs the estimate's own noise.
+    pub fn check<T: Real>(&mut self, model: &Model<'_, T>) -> Result<Option<f64>> {
+        let p = model.problem;
+        let mut v = self.vector.take().unwrap_or_else(|| model.start_vector());
+        // A cold start needs more iterations to find the top of the spectrum.
+        let iters = if self.rechecks == 0 {
+            self.iterations.max(100)
+        } else {
+            self.iterations
+        };
+        let omega = model.max_frequency_from(&mut v, iters)?;
+        self.vector = Some(v);
+        self.rechecks += 1;
+        let crit = if omega > 0.0 {
+            (2.0 / omega).min(self.dt_critical_initial_s)
+        } else {
+            self.dt_critical_initial_s
+        };
+        self.dt_critical_min_s = self.dt_critical_min_s.min(crit);
+        let safety = if p.solver.dt.is_some() {
+            1.0
+        } else {
+            p.solver.dt_safety
+        };
+        if model.dt_s <= 1.01 * safety * crit {
+            return Ok(None);
+        }
+        if p.solver.adapt_dt {
+            self.reductions += 1;
+            return Ok(Some(safety * crit));
+        }
+        anyhow::bail!(
+            "step {}: t = {:.4e} s: the critical step about the deformed state has fallen to {crit:.4e} s ({:.3} of the {:.4e} s at rest); dt = {:.4e} s is above {safety} of it: the run would go unstable. Lower dt_safety, or set adapt_dt = true",
+            model.step,
+            model.time_s(),
+            crit / self.dt_critical_initial_s,
+            self.dt_critical_initial_s,
+            model.dt_s
+        )
+    }
 }
 
 impl<'p, T: Real> Model<'p, T> {
@@ -352,6 +520,31 @@ impl<'p, T: Real> Model<'p, T> {
     /// internal forces). The stable central-difference step is `2/ω_max` (undamped).
     /// Costs about two force evaluations per iteration.
     pub fn max_frequency(&self, iterations: usize) -> Result<f64> {
+        let mut v = self.start_vector();
+        self.max_frequency_from(&mut v, iterations)
+    }
+
+    /// Deterministic start vector of the power iteration, every free component excited.
+    pub fn start_vector(&self) -> Vec<[f64; 3]> {
+        self.problem
+            .node_kind
+            .iter()
+            .enumerate()
+            .map(|(k, kind)| {
+                core::array::from_fn(|i| {
+                    if *kind == crate::problem::NodeKind::Free {
+                        (((k * 3 + i) as f64) * 0.7548776662).fract() - 0.5
+                    } else {
+                        0.0
+                    }
+                })
+            })
+            .collect()
+    }
+
+    /// [`Model::max_frequency`] from the start vector `v` (warm start: the dominant mode of
+    /// an earlier call); leaves the last iterate in `v` for the next call.
+    pub fn max_frequency_from(&self, v: &mut Vec<[f64; 3]>, iterations: usize) -> Result<f64> {
         let n = self.u.len();
         let free: Vec<bool> = self
             .problem
@@ -365,25 +558,19 @@ impl<'p, T: Real> Model<'p, T> {
             .iter()
             .map(|m| m * self.problem.solver.mass_scaling)
             .collect();
-        // Deterministic start with every component excited.
-        let mut v: Vec<[f64; 3]> = (0..n)
-            .map(|k| {
-                core::array::from_fn(|i| {
-                    if free[k] {
-                        (((k * 3 + i) as f64) * 0.7548776662).fract() - 0.5
-                    } else {
-                        0.0
-                    }
-                })
-            })
-            .collect();
+        if v.len() != n {
+            *v = self.start_vector();
+        }
         let scale = self
             .problem
             .reference
             .iter()
             .map(|r| r.characteristic_length)
             .fold(f64::INFINITY, f64::min);
-        let eps = 1e-7 * scale;
+        // The finite-difference probe must stand well above the scalar's resolution of the
+        // displacements: 1e-7 of the smallest element in f64, 1e-3 in f32 (ε_f32 ≈ 6e-8).
+        let low_precision = T::from_f64(1.0 + 1e-10).to_f64() == 1.0;
+        let eps = if low_precision { 1e-3 } else { 1e-7 } * scale;
         let mut lambda = 0.0;
         let mut fp = vec![[T::ZERO; 3]; n];
         let mut fm = vec![[T::ZERO; 3]; n];
@@ -394,18 +581,22 @@ impl<'p, T: Real> Model<'p, T> {
                 .map(|(a, mm)| mm * (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]))
                 .sum::<f64>()
                 .sqrt();
+            if !(norm > 0.0) {
+                // No free node (or a lost vector): no mode to limit the step.
+                return Ok(0.0);
+            }
             v.iter_mut()
                 .for_each(|a| a.iter_mut().for_each(|x| *x /= norm));
             let up: Vec<[T; 3]> = self
                 .u
                 .iter()
-                .zip(&v)
+                .zip(v.iter())
                 .map(|(u, d)| core::array::from_fn(|i| T::from_f64(u[i].to_f64() + eps * d[i])))
                 .collect();
             let um: Vec<[T; 3]> = self
                 .u
                 .iter()
-                .zip(&v)
+                .zip(v.iter())
                 .map(|(u, d)| core::array::from_fn(|i| T::from_f64(u[i].to_f64() - eps * d[i])))
                 .collect();
             fp.iter_mut().for_each(|f| *f = [T::ZERO; 3]);
@@ -429,7 +620,7 @@ impl<'p, T: Real> Model<'p, T> {
                 }
             }
             lambda = vkv; // v is M-normalised: Rayleigh quotient
-            v = w;
+            *v = w;
         }
         Ok(lambda.max(0.0).sqrt())
     }

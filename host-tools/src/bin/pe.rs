@@ -118,6 +118,30 @@ enum Command {
         #[arg(long, default_value_t = 200)]
         steps: u64,
     },
+    /// Run a scene over a grid of solver configurations; write cost and error against the
+    /// most accurate configuration to DIR/tradeoff.csv, .md and .png.
+    Tradeoff {
+        #[command(flatten)]
+        scene: SceneArgs,
+        /// Output directory.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Add the fine built-in level (slow: minutes) or a 4× box level.
+        #[arg(long)]
+        fine: bool,
+    },
+    /// Run the stability suite and write a readable report.
+    Stability {
+        /// Markdown report (printed when not given).
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+        /// Also run the slow cases (a 1e7-step run in f64 and f32).
+        #[arg(long)]
+        long: bool,
+        /// Run only the cases whose name contains this.
+        #[arg(long)]
+        only: Option<String>,
+    },
 }
 
 struct Progress {
@@ -282,6 +306,21 @@ fn main() -> Result<()> {
             );
         }
         Command::Bench { elements, steps } => host_tools::bench::run_cli(elements, steps)?,
+        Command::Tradeoff {
+            scene,
+            output,
+            fine,
+        } => {
+            let (sc, dir, name) = scene.load()?;
+            let opts = host_tools::tradeoff::Options {
+                fine,
+                level: scene.builtin.then(|| scene.level.clone()),
+            };
+            host_tools::tradeoff::run_cli(&sc, &dir, &name, &opts, &output)?
+        }
+        Command::Stability { output, long, only } => {
+            host_tools::stability::run_cli(output.as_deref(), long, only.as_deref())?
+        }
     }
     Ok(())
 }
