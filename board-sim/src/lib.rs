@@ -189,6 +189,9 @@ impl<T: WireReal, E: Copy> OwnedStorage<T, E> {
     }
 }
 
+/// A board's links as the worker threads hold them.
+type BoxedLinks = Box<dyn Links + Send>;
+
 /// Messages from board threads to the collector.
 enum Report {
     /// Owned nodes' displacements at a step: (global, u).
@@ -389,7 +392,7 @@ pub fn run(
         link_timeout_ns: opts.link_timeout.as_nanos() as u64,
     };
     let start = Instant::now();
-    let mut per_worker: Vec<(Vec<BoardCtx>, Vec<Box<dyn Links + Send>>)> =
+    let mut per_worker: Vec<(Vec<BoardCtx>, Vec<BoxedLinks>)> =
         (0..workers).map(|_| (Vec::new(), Vec::new())).collect();
     for (b, (image, link)) in images.into_iter().zip(links).enumerate() {
         let coords = [
