@@ -21,6 +21,11 @@ pub struct BoardProfile {
     pub link_latency_ns: u64,
     /// Global network bandwidth into one board (bytes/s).
     pub global_bytes_per_s: u64,
+    /// Address of the schedule image region (`ORIGIN(IMAGE)` in the memory map), where
+    /// `pe image` says to flash a board's schedule blob.
+    pub image_origin: u64,
+    /// probe-rs `--chip` of the board's MCU (empty for an emulation profile).
+    pub probe_chip: &'static str,
 }
 
 /// The custom PE board: STM32H7-class Cortex-M7 at 480 MHz with a double-precision FPU,
@@ -36,6 +41,8 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
     link_bytes_per_s: 25_000_000,
     link_latency_ns: 2_000,
     global_bytes_per_s: 12_500_000,
+    image_origin: 0x0810_0000,
+    probe_chip: "STM32H743ZITx",
 };
 
 /// QEMU's `mps2-an500` (Cortex-M7, FLASH at 0x0 and RAM at 0x20000000, 4 MiB each), the
@@ -50,6 +57,8 @@ pub const QEMU_MPS2_AN500: BoardProfile = BoardProfile {
     link_bytes_per_s: 25_000_000,
     link_latency_ns: 2_000,
     global_bytes_per_s: 12_500_000,
+    image_origin: 0x0020_0000,
+    probe_chip: "",
 };
 
 pub const PROFILES: [BoardProfile; 2] = [PE_BOARD, QEMU_MPS2_AN500];
