@@ -248,7 +248,7 @@ fn run_board<T: WireReal, E: HexElement<T> + DeserializeOwned + Copy>(
         if ctx.index == 0 {
             ctx.progress.store(s, Ordering::Relaxed);
         }
-        if ctx.frame_every > 0 && s % ctx.frame_every == 0 && s < ctx.steps {
+        if ctx.frame_every > 0 && s.is_multiple_of(ctx.frame_every) && s < ctx.steps {
             send_frame(&rt, s);
         }
     }

@@ -163,7 +163,7 @@ impl Environment for ThreadEnv {
     fn idle(&mut self) {
         // Spin briefly (a frame is often about to arrive), then park on the doorbell.
         self.spins += 1;
-        if self.spins % 64 != 0 {
+        if !self.spins.is_multiple_of(64) {
             std::hint::spin_loop();
             std::thread::yield_now();
         } else {

@@ -329,9 +329,10 @@ mod tests {
         elf[20..32].copy_from_slice(IDENTITY_MARKER);
         elf[32..36].copy_from_slice(&[0, 0, 0, 0xA5]);
         let p = patch_identity(&elf, [1, 2, 3]).unwrap();
-        assert_eq!(&p[32..36], &[1, 2, 3, 1 ^ 2 ^ 3 ^ 0xA5]);
+        assert_eq!(&p[32..36], &[1, 2, 3, 0xA5]); // 1 ^ 2 ^ 3 == 0
         assert_eq!(p.len(), elf.len());
         elf[40..52].copy_from_slice(IDENTITY_MARKER);
+        elf[52..56].copy_from_slice(&[0, 0, 0, 0xA5]);
         assert!(patch_identity(&elf, [1, 2, 3]).is_err());
         assert!(patch_identity(&[0u8; 8], [0; 3]).is_err());
     }

@@ -9,8 +9,11 @@
 #![no_std]
 #![deny(unsafe_op_in_unsafe_fn)]
 
-#[macro_use]
 pub mod fmt;
+
+// The defmt global logger (RTT), for every binary of the crate.
+#[cfg(feature = "defmt")]
+use defmt_rtt as _;
 
 pub mod clock;
 pub mod config;

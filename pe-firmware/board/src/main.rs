@@ -13,9 +13,6 @@ use pe_board::{clock, links, report, storage};
 use pe_firmware::physics::Real;
 use pe_firmware::runtime::{Fault, FaultKind, Runtime, RuntimeConfig};
 
-#[cfg(feature = "defmt")]
-use defmt_rtt as _;
-
 /// Board position before the identity is read (for reports).
 const UNKNOWN: [u8; 3] = [0xFF; 3];
 

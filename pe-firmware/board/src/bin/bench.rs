@@ -58,7 +58,7 @@ fn main() -> ! {
     let image = schedule_image().unwrap_or_else(|_| fail("no schedule image"));
     let store = storage::take().unwrap_or_else(|| fail("storage"));
     let mut rt = Runtime::<Scalar, Element>::load(image, board, store, RuntimeConfig::default())
-        .unwrap_or_else(|_| fail("image refused"));
+        .unwrap_or_else(|e| report::fault(board, format_args!("bench: image refused: {e}")));
     let links = links::take().unwrap_or_else(|| fail("links"));
     let mut env = CallClock(0);
     let steps = rt.header.params.steps;
@@ -78,26 +78,27 @@ fn main() -> ! {
             fail("too many materials");
         }
     }
-    let mut sample: [Option<(Element, [[Scalar; 3]; 8])>; SAMPLES] = [None; SAMPLES];
+    // Stack-frugal: the elements are large (1.6 KB for f64 full) and the statics fill RAM.
+    let mut list: heapless::Vec<Element, SAMPLES> = heapless::Vec::new();
+    let mut ues: heapless::Vec<[[Scalar; 3]; 8], SAMPLES> = heapless::Vec::new();
     let u = rt.displacements();
     for k in 0..ne {
         let e: Element = reader.next("element").unwrap_or_else(|_| fail("element"));
-        if k % (ne / SAMPLES).max(1) == 0 {
-            if let Some(slot) = sample.iter_mut().find(|s| s.is_none()) {
-                let ue = e
-                    .nodes()
-                    .map(|n| u.get(n as usize).copied().unwrap_or([Scalar::ZERO; 3]));
-                *slot = Some((e, ue));
-            }
+        if k % (ne / SAMPLES).max(1) == 0 && !list.is_full() {
+            let ue = e
+                .nodes()
+                .map(|n| u.get(n as usize).copied().unwrap_or([Scalar::ZERO; 3]));
+            let _ = ues.push(ue);
+            let _ = list.push(e);
         }
     }
-    let measured = sample.iter().flatten().count();
+    let measured = list.len();
 
     bench_mark(0);
     bench_mark(1);
 
     bench_mark(2);
-    for (e, ue) in sample.iter().flatten() {
+    for (e, ue) in list.iter().zip(&ues) {
         let law = laws
             .get(e.material())
             .unwrap_or_else(|| fail("material index"));
@@ -107,22 +108,15 @@ fn main() -> ! {
     bench_mark(3);
 
     // The same elements renumbered onto their own node arrays, for the element loop.
-    let mut elems = [None; SAMPLES];
     let mut ul = [[Scalar::ZERO; 3]; 8 * SAMPLES];
     let mut fl = [[Scalar::ZERO; 3]; 8 * SAMPLES];
-    for (j, (e, ue)) in sample.iter().flatten().enumerate() {
-        let mut e = *e;
+    for (j, (e, ue)) in list.iter_mut().zip(&ues).enumerate() {
         e.nodes = core::array::from_fn(|a| (8 * j + a) as u32);
-        elems[j] = Some(e);
         ul[8 * j..8 * j + 8].copy_from_slice(ue);
-    }
-    let mut list = [elems[0].unwrap_or_else(|| fail("no element")); SAMPLES];
-    for (d, e) in list.iter_mut().zip(elems.iter().flatten()) {
-        *d = *e;
     }
     bench_mark(4);
     let r = accumulate_internal_forces(
-        black_box(&list[..measured]),
+        black_box(&list[..]),
         0,
         black_box(&laws),
         black_box(&ul),
