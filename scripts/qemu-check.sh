@@ -13,6 +13,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
 export RUST_BACKTRACE=0
+# The schedule comes from the loader here, never linked into the ELF.
+unset PE_SCHEDULE_IMAGE
 
 if ! command -v qemu-system-arm >/dev/null 2>&1; then
     echo "qemu-check: installing qemu-system-arm"

@@ -63,7 +63,9 @@ pub fn repo_root() -> PathBuf {
 /// Cargo features of the firmware for a manifest's precision, integration and profile.
 pub fn firmware_features(precision: &str, integration: &str, profile: &str) -> Vec<&'static str> {
     let mut f = Vec::new();
-    if profile != pe_firmware::profile::PE_BOARD.name {
+    if profile == pe_firmware::profile::PE_BOARD.name {
+        f.push("defmt"); // logs and fault messages over RTT (probe-rs attach)
+    } else {
         f.push("qemu");
     }
     if precision == "f32" {
@@ -85,6 +87,7 @@ pub fn build_firmware(features: &[&str], bin: &str) -> Result<PathBuf> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let status = Command::new(cargo)
         .current_dir(&root)
+        .env_remove("PE_SCHEDULE_IMAGE")
         .args(["build", "--release", "--target", "thumbv7em-none-eabihf"])
         .arg("--manifest-path")
         .arg(root.join("pe-firmware/board/Cargo.toml"))
