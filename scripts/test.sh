@@ -11,3 +11,7 @@ RUSTFLAGS="-C target-cpu=cortex-m7" cargo build --release --target thumbv7em-non
 
 # Host tests (optimised: the physics tests run 1e5-step simulations).
 cargo test --workspace --release
+
+# The board firmware on an emulated Cortex-M7 (QEMU mps2-an500): bit-identical to `pe solve`
+# and board-sim (f64, f32), faults reported. Installs qemu-system-arm if missing.
+bash scripts/qemu-check.sh

@@ -3,12 +3,13 @@
 //! Replays one step of every board's schedule in model time: batches take
 //! `elements × cycles_per_element / clock`, a frame arrives `latency + bytes / bandwidth`
 //! after it is sent (links are full duplex, one frame at a time per direction), a receive
-//! waits for its frame. The cycles per element-step are an input: until measured on the
-//! board they are estimates (see `SimTiming::default`).
+//! waits for its frame. The cycles per element-step and per node update are the firmware's
+//! instruction counts measured under QEMU (`pe_firmware::profile::MEASURED_COST`, from
+//! `scripts/board-cost.sh`), taking one instruction per cycle.
 
 use host_tools::compile::{decode_image, image_file_name, DecodedImage};
-use pe_firmware::image::Integration;
-use pe_firmware::profile::BoardProfile;
+use pe_firmware::image::{Integration, Precision};
+use pe_firmware::profile::{measured_cost, BoardProfile};
 use serde::Serialize;
 
 /// Model inputs.
@@ -23,15 +24,22 @@ pub struct SimTiming {
 }
 
 impl SimTiming {
-    /// From a board profile, with cycle estimates of 2000 (reduced) and 9000 (full) cycles
-    /// per element-step and 60 per node update (about 2.5x the counted flops, for loads and
-    /// stores; an estimate until the firmware's instruction counts replace it).
+    /// From a board profile, with the measured f64 instruction counts (the seed's double
+    /// precision) at one instruction per cycle.
     pub fn from_profile(p: &BoardProfile) -> Self {
+        Self::for_precision(p, Precision::F64)
+    }
+
+    /// From a board profile and the measured instruction counts of `precision` (one
+    /// instruction per cycle; the node update is the reduced variant's, the larger).
+    pub fn for_precision(p: &BoardProfile, precision: Precision) -> Self {
+        let reduced = measured_cost(precision, Integration::Reduced);
+        let full = measured_cost(precision, Integration::Full);
         SimTiming {
             clock_hz: p.clock_hz as f64,
-            cycles_per_element_reduced: 2000.0,
-            cycles_per_element_full: 9000.0,
-            cycles_per_node_update: 60.0,
+            cycles_per_element_reduced: reduced.per_element_step as f64,
+            cycles_per_element_full: full.per_element_step as f64,
+            cycles_per_node_update: reduced.per_node_update.max(full.per_node_update) as f64,
             link_bytes_per_s: p.link_bytes_per_s as f64,
             link_latency_s: p.link_latency_ns as f64 * 1e-9,
         }

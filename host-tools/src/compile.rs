@@ -626,7 +626,29 @@ pub struct CompileReport {
     pub link_utilisation_max: f64,
     pub image_bytes_max: usize,
     pub ram_bytes_max: u64,
+    /// Board compute capacity from the firmware's measured instruction counts
+    /// (`pe_firmware::profile::MEASURED_COST`), one instruction per cycle.
+    pub capacity: Capacity,
     pub boards: Vec<BoardSummary>,
+}
+
+/// What the scene asks of the busiest board's processor, from measured instruction counts.
+#[derive(Clone, Debug, Serialize)]
+pub struct Capacity {
+    pub clock_hz: u64,
+    pub instructions_per_element_step: u32,
+    pub instructions_per_node_update: u32,
+    /// Instructions of one step on the busiest board (no exchange).
+    pub step_instructions_max: f64,
+    /// That step's time at one instruction per cycle (s), against the scene's `dt_s`.
+    pub step_compute_s_max: f64,
+    pub compute_keeps_real_time: bool,
+    /// Elements one board computes per step at the scene's rate and at 10 kHz, with this
+    /// scene's nodes per element on its busiest board.
+    pub elements_per_board_at_scene_rate: f64,
+    pub elements_per_board_at_10_khz: f64,
+    /// Boards the scene needs at 10 kHz (compute only).
+    pub boards_needed_at_10_khz: usize,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -694,6 +716,41 @@ pub fn report(
     let frame_bytes_max = link_bytes.iter().copied().max().unwrap_or(0);
     let bytes_total: usize = link_bytes.iter().sum();
     let rate = 1.0 / dt;
+    let cost = pe_firmware::profile::measured_cost(
+        if problem.solver.precision == "f32" {
+            Precision::F32
+        } else {
+            Precision::F64
+        },
+        if problem.solver.integration == "full" {
+            Integration::Full
+        } else {
+            Integration::Reduced
+        },
+    );
+    let busiest = plan
+        .boards
+        .iter()
+        .map(|b| cost.step_instructions(b.elements.len(), b.nodes.len()))
+        .fold(0.0f64, f64::max);
+    let npe = plan
+        .boards
+        .iter()
+        .max_by_key(|b| b.elements.len())
+        .map(|b| b.nodes.len() as f64 / b.elements.len().max(1) as f64)
+        .unwrap_or(2.0);
+    let at_10k = cost.elements_per_board(profile, 1e4, npe);
+    let capacity = Capacity {
+        clock_hz: profile.clock_hz,
+        instructions_per_element_step: cost.per_element_step,
+        instructions_per_node_update: cost.per_node_update,
+        step_instructions_max: busiest,
+        step_compute_s_max: busiest / profile.clock_hz as f64,
+        compute_keeps_real_time: busiest / profile.clock_hz as f64 <= dt,
+        elements_per_board_at_scene_rate: cost.elements_per_board(profile, rate, npe),
+        elements_per_board_at_10_khz: at_10k,
+        boards_needed_at_10_khz: (problem.mesh.cells.len() as f64 / at_10k).ceil() as usize,
+    };
     let boards = plan
         .boards
         .iter()
@@ -747,6 +804,7 @@ pub fn report(
         link_utilisation_max: frame_bytes_max as f64 * rate / profile.link_bytes_per_s as f64,
         image_bytes_max: images.iter().map(|i| i.bytes.len()).max().unwrap_or(0),
         ram_bytes_max: images.iter().map(|i| i.ram_bytes).max().unwrap_or(0),
+        capacity,
         boards,
     })
 }
@@ -791,6 +849,14 @@ pub fn summary(r: &CompileReport) -> String {
     s += &format!(
         "  largest image {} bytes, largest run-time state {} bytes ({} profile)\n",
         r.image_bytes_max, r.ram_bytes_max, r.profile
+    );
+    let c = &r.capacity;
+    s += &format!(
+        "  board compute ({} profile, {:.0} MHz, measured {} instructions per element-step and {} per node update, one instruction per cycle assumed): busiest board {:.1} us per step against dt = {:.1} us ({}); {:.1} elements per board at this scene's rate, {:.1} at 10 kHz, so {} boards for this scene at 10 kHz\n",
+        r.profile, c.clock_hz as f64 / 1e6, c.instructions_per_element_step, c.instructions_per_node_update,
+        c.step_compute_s_max * 1e6, r.dt_s * 1e6,
+        if c.compute_keeps_real_time { "keeps real time" } else { "does NOT keep real time" },
+        c.elements_per_board_at_scene_rate, c.elements_per_board_at_10_khz, c.boards_needed_at_10_khz
     );
     s += "  seed's reference case: 2000 elements on 4x4x4 boards at dt = 100 us: 5600 force vectors per step, 1.35 GB/s in all\n";
     s += &format!(

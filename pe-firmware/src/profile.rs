@@ -21,6 +21,11 @@ pub struct BoardProfile {
     pub link_latency_ns: u64,
     /// Global network bandwidth into one board (bytes/s).
     pub global_bytes_per_s: u64,
+    /// Address of the schedule image region (`ORIGIN(IMAGE)` in the memory map), where
+    /// `pe image` says to flash a board's schedule blob.
+    pub image_origin: u64,
+    /// probe-rs `--chip` of the board's MCU (empty for an emulation profile).
+    pub probe_chip: &'static str,
 }
 
 /// The custom PE board: STM32H7-class Cortex-M7 at 480 MHz with a double-precision FPU,
@@ -36,6 +41,8 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
     link_bytes_per_s: 25_000_000,
     link_latency_ns: 2_000,
     global_bytes_per_s: 12_500_000,
+    image_origin: 0x0810_0000,
+    probe_chip: "STM32H743ZITx",
 };
 
 /// QEMU's `mps2-an500` (Cortex-M7, FLASH at 0x0 and RAM at 0x20000000, 4 MiB each), the
@@ -50,6 +57,8 @@ pub const QEMU_MPS2_AN500: BoardProfile = BoardProfile {
     link_bytes_per_s: 25_000_000,
     link_latency_ns: 2_000,
     global_bytes_per_s: 12_500_000,
+    image_origin: 0x0020_0000,
+    probe_chip: "",
 };
 
 pub const PROFILES: [BoardProfile; 2] = [PE_BOARD, QEMU_MPS2_AN500];
@@ -57,4 +66,96 @@ pub const PROFILES: [BoardProfile; 2] = [PE_BOARD, QEMU_MPS2_AN500];
 /// Looks a profile up by name.
 pub fn profile(name: &str) -> Option<BoardProfile> {
     PROFILES.iter().copied().find(|p| p.name == name)
+}
+
+/// Executed instructions of the board firmware per element and per node in one step,
+/// measured under QEMU (mps2-an500, Cortex-M7 with FPU, `-C target-cpu=cortex-m7`) with an
+/// exact instruction counter by `scripts/board-cost.sh` on the built-in coarse scene (319
+/// elements, 656 nodes, 1x1x1). Instructions, not cycles: capacity figures take one
+/// instruction per cycle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FirmwareCost {
+    pub precision: crate::image::Precision,
+    pub integration: crate::image::Integration,
+    /// One element's internal forces (the physics kernel alone).
+    pub kernel_per_element: u32,
+    /// Per element of the element loop: kernel, gathering displacements, scattering forces.
+    pub per_element_step: u32,
+    /// Per node and step: external forces, central-difference update, checks.
+    pub per_node_update: u32,
+    /// A whole step divided by the elements, on the measured scene (2.06 nodes per element).
+    pub step_per_element: u32,
+}
+
+impl FirmwareCost {
+    /// Instructions of one step of a board holding `elements` and `nodes` (no exchange).
+    pub fn step_instructions(&self, elements: usize, nodes: usize) -> f64 {
+        elements as f64 * self.per_element_step as f64 + nodes as f64 * self.per_node_update as f64
+    }
+
+    /// Elements one board of `profile` computes at `rate_hz` steps per second, with
+    /// `nodes_per_element` nodes per element, taking one instruction per cycle.
+    pub fn elements_per_board(
+        &self,
+        profile: &BoardProfile,
+        rate_hz: f64,
+        nodes_per_element: f64,
+    ) -> f64 {
+        profile.clock_hz as f64
+            / rate_hz
+            / (self.per_element_step as f64 + nodes_per_element * self.per_node_update as f64)
+    }
+}
+
+/// The measured table (scripts/board-cost.sh; update it from that script's output).
+pub const MEASURED_COST: [FirmwareCost; 4] = {
+    use crate::image::{Integration::*, Precision::*};
+    [
+        FirmwareCost {
+            precision: F64,
+            integration: Reduced,
+            kernel_per_element: 1200,
+            per_element_step: 1425,
+            per_node_update: 243,
+            step_per_element: 1924,
+        },
+        FirmwareCost {
+            precision: F64,
+            integration: Full,
+            kernel_per_element: 4809,
+            per_element_step: 5032,
+            per_node_update: 243,
+            step_per_element: 5531,
+        },
+        FirmwareCost {
+            precision: F32,
+            integration: Reduced,
+            kernel_per_element: 949,
+            per_element_step: 1201,
+            per_node_update: 167,
+            step_per_element: 1543,
+        },
+        FirmwareCost {
+            precision: F32,
+            integration: Full,
+            kernel_per_element: 3612,
+            per_element_step: 3866,
+            per_node_update: 176,
+            step_per_element: 4229,
+        },
+    ]
+};
+
+/// The measured cost of a variant.
+pub fn measured_cost(
+    precision: crate::image::Precision,
+    integration: crate::image::Integration,
+) -> FirmwareCost {
+    let mut c = MEASURED_COST[0];
+    for m in MEASURED_COST {
+        if m.precision == precision && m.integration == integration {
+            c = m;
+        }
+    }
+    c
 }

@@ -278,6 +278,53 @@ fn memory_x_matches_the_board_profile() {
     assert_eq!(len("IMAGE"), PE_BOARD.image_flash_bytes);
 }
 
+/// memory-qemu.x (the firmware's emulation memory map) matches the QEMU profile, and both
+/// maps put the schedule region where the profiles (and so `pe image`) say.
+#[test]
+fn memory_maps_match_the_profiles_origins() {
+    use pe_firmware::profile::QEMU_MPS2_AN500;
+    let field = |text: &str, region: &str, key: &str| -> u64 {
+        let line = text
+            .lines()
+            .find(|l| l.trim_start().starts_with(region))
+            .unwrap_or_else(|| panic!("{region} missing"));
+        let v = line
+            .split(key)
+            .nth(1)
+            .unwrap()
+            .trim_start_matches([' ', '=']);
+        let v: String = v
+            .chars()
+            .take_while(|c| c.is_ascii_alphanumeric())
+            .collect();
+        if let Some(h) = v.strip_prefix("0x") {
+            u64::from_str_radix(h, 16).unwrap()
+        } else if let Some(m) = v.strip_suffix('M') {
+            m.parse::<u64>().unwrap() << 20
+        } else if let Some(k) = v.strip_suffix('K') {
+            k.parse::<u64>().unwrap() << 10
+        } else {
+            v.parse().unwrap()
+        }
+    };
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+    for (file, p) in [("memory.x", PE_BOARD), ("memory-qemu.x", QEMU_MPS2_AN500)] {
+        let text = std::fs::read_to_string(format!("{root}/{file}")).unwrap();
+        assert_eq!(field(&text, "RAM", "LENGTH"), p.ram_bytes, "{file}");
+        assert_eq!(
+            field(&text, "FLASH", "LENGTH") + field(&text, "IMAGE", "LENGTH"),
+            p.flash_bytes,
+            "{file}"
+        );
+        assert_eq!(
+            field(&text, "IMAGE", "LENGTH"),
+            p.image_flash_bytes,
+            "{file}"
+        );
+        assert_eq!(field(&text, "IMAGE", "ORIGIN"), p.image_origin, "{file}");
+    }
+}
+
 /// Bad machine sizes and too many boards for the mesh are refused with a clear error.
 #[test]
 fn bad_machines_are_refused() {

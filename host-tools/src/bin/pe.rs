@@ -100,7 +100,28 @@ enum Command {
         /// Override the scene's step count.
         #[arg(long)]
         steps: Option<u64>,
+        /// Override the scene's integration (reduced | full).
+        #[arg(long)]
+        integration: Option<String>,
     },
+    /// Flashable artefacts per board of a compiled schedule: the firmware ELF with the
+    /// board's position, the schedule blob, and OUT/manifest.json with the commands that
+    /// flash (probe-rs) or run (QEMU) each board.
+    Image {
+        /// Directory written by `pe compile`.
+        dir: PathBuf,
+        /// Output directory.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// A prebuilt firmware ELF (pe-firmware/board, built with the features matching the
+        /// schedule: qemu for the emulation profile, f32, full). Without it, cargo builds it.
+        #[arg(long)]
+        firmware: Option<PathBuf>,
+    },
+    /// Compare final displacements bit for bit: REFERENCE is a nodes CSV (`pe solve
+    /// --output-nodes`), OTHER a nodes CSV (board-sim) or a board's semihosting report.
+    /// Fails on any difference.
+    Compare { reference: PathBuf, other: PathBuf },
     /// Show a board's compiled schedule: batches and exchange lists.
     Inspect {
         /// Directory written by `pe compile`.
@@ -261,10 +282,14 @@ fn main() -> Result<()> {
             output,
             precision,
             steps,
+            integration,
         } => {
             let (mut sc, dir, name) = scene.load()?;
             if let Some(p) = precision {
                 sc.solver.precision = p;
+            }
+            if let Some(i) = integration {
+                sc.solver.integration = i;
             }
             if let Some(n) = steps {
                 sc.solver.steps = Some(n);
@@ -290,6 +315,56 @@ fn main() -> Result<()> {
                 "  wrote {} images, manifest.json and report.json to {}",
                 rep.boards.len(),
                 output.display()
+            );
+        }
+        Command::Image {
+            dir,
+            output,
+            firmware,
+        } => {
+            let m = host_tools::firmware::image_dir(&dir, &output, firmware.as_deref())?;
+            println!(
+                "{} boards of {} ({}, {} {}): firmware {} (features {})",
+                m.boards.len(),
+                m.scene,
+                m.profile,
+                m.precision,
+                m.integration,
+                m.firmware,
+                m.firmware_features.join(",")
+            );
+            for b in &m.boards {
+                println!(
+                    "  board ({},{},{}): {} + {} at {}",
+                    b.board[0], b.board[1], b.board[2], b.elf, b.schedule, b.schedule_address
+                );
+            }
+            println!("  wrote {}", output.join("manifest.json").display());
+        }
+        Command::Compare { reference, other } => {
+            let c = host_tools::firmware::compare(&reference, &other)?;
+            if c.differing > 0 {
+                for (n, i, a, b) in &c.first {
+                    eprintln!(
+                        "  node {n} component {i}: reference {a:e} ({:016x}), other {b:e} ({:016x})",
+                        a.to_bits(),
+                        b.to_bits()
+                    );
+                }
+                anyhow::bail!(
+                    "MISMATCH: {} of {} components differ between {} and {} (max |diff| {:.3e} m)",
+                    c.differing,
+                    3 * c.nodes,
+                    reference.display(),
+                    other.display(),
+                    c.max_abs_diff
+                );
+            }
+            println!(
+                "bit-identical: {} nodes of {} and {}",
+                c.nodes,
+                reference.display(),
+                other.display()
             );
         }
         Command::Inspect { dir, board } => {

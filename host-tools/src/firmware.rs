@@ -1,0 +1,394 @@
+//! Board firmware artefacts and checks on the host: `pe image` (per board: the firmware ELF
+//! with the board's position written in, and the schedule blob with the address to flash it
+//! at), and `pe compare` (a board's semihosting report or a nodes CSV against `pe solve`'s,
+//! bit for bit).
+//!
+//! The firmware is the crate `pe-firmware/board` (its own workspace, built only for
+//! `thumbv7em-none-eabihf`). Its schedule region at `ORIGIN(IMAGE)` holds a `u32` length
+//! (little-endian) and the schedule image; its identity record is the 16 bytes
+//! `PE-BOARD-ID\0`, x, y, z, `x ^ y ^ z ^ 0xA5`.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+
+use crate::compile::{image_file_name, read_manifest};
+
+/// The marker of the firmware's identity record (exactly once in the ELF).
+pub const IDENTITY_MARKER: &[u8; 12] = b"PE-BOARD-ID\0";
+
+/// The schedule region's content for an image: `u32` length (LE) then the image.
+pub fn schedule_blob(image: &[u8]) -> Vec<u8> {
+    let mut b = Vec::with_capacity(image.len() + 4);
+    b.extend_from_slice(&(image.len() as u32).to_le_bytes());
+    b.extend_from_slice(image);
+    b
+}
+
+/// A copy of the firmware ELF that believes it is board `board`.
+pub fn patch_identity(elf: &[u8], board: [u8; 3]) -> Result<Vec<u8>> {
+    let hits: Vec<usize> = elf
+        .windows(IDENTITY_MARKER.len())
+        .enumerate()
+        .filter(|(k, w)| {
+            *w == IDENTITY_MARKER
+                && elf
+                    .get(k + 12..k + 16)
+                    .is_some_and(|id| id[0] ^ id[1] ^ id[2] ^ 0xA5 == id[3])
+        })
+        .map(|(k, _)| k)
+        .collect();
+    let [at] = hits[..] else {
+        bail!(
+            "the firmware ELF holds {} identity records (expected exactly one): not a pe-board ELF?",
+            hits.len()
+        );
+    };
+    let mut out = elf.to_vec();
+    let [x, y, z] = board;
+    let id = at + IDENTITY_MARKER.len();
+    out.get_mut(id..id + 4)
+        .context("identity record cut off at the end of the ELF")?
+        .copy_from_slice(&[x, y, z, x ^ y ^ z ^ 0xA5]);
+    Ok(out)
+}
+
+/// The repository root (for building the firmware).
+pub fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// Cargo features of the firmware for a manifest's precision, integration and profile.
+pub fn firmware_features(precision: &str, integration: &str, profile: &str) -> Vec<&'static str> {
+    let mut f = Vec::new();
+    if profile == pe_firmware::profile::PE_BOARD.name {
+        f.push("defmt"); // logs and fault messages over RTT (probe-rs attach)
+    } else {
+        f.push("qemu");
+    }
+    if precision == "f32" {
+        f.push("f32");
+    }
+    if integration == "full" {
+        f.push("full");
+    }
+    f
+}
+
+/// Builds the firmware with cargo (release, thumbv7em-none-eabihf, -C target-cpu=cortex-m7
+/// from the repository's .cargo/config.toml); returns the ELF's path.
+pub fn build_firmware(features: &[&str], bin: &str) -> Result<PathBuf> {
+    let root = repo_root();
+    let target_dir = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("target"));
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let status = Command::new(cargo)
+        .current_dir(&root)
+        .env_remove("PE_SCHEDULE_IMAGE")
+        .args(["build", "--release", "--target", "thumbv7em-none-eabihf"])
+        .arg("--manifest-path")
+        .arg(root.join("pe-firmware/board/Cargo.toml"))
+        .arg("--target-dir")
+        .arg(&target_dir)
+        .args(["--bin", bin, "--no-default-features"])
+        .args(["--features", &features.join(",")])
+        .status()
+        .context("running cargo to build the board firmware")?;
+    if !status.success() {
+        bail!("building the board firmware failed ({status})");
+    }
+    Ok(target_dir.join("thumbv7em-none-eabihf/release").join(bin))
+}
+
+/// One board's flashable artefacts.
+#[derive(Clone, Debug, Serialize)]
+pub struct ImageBoard {
+    pub board: [usize; 3],
+    /// The firmware with this board's position (OUT/board-X-Y-Z.elf).
+    pub elf: String,
+    /// The schedule blob (OUT/board-X-Y-Z.sched) and where it goes.
+    pub schedule: String,
+    pub schedule_address: String,
+    pub schedule_bytes: usize,
+    /// Commands that flash this board (probe-rs), or run it (QEMU profile).
+    pub flash: Vec<String>,
+}
+
+/// `OUT/manifest.json` of `pe image`.
+#[derive(Clone, Debug, Serialize)]
+pub struct ImageManifest {
+    pub scene: String,
+    pub machine: [usize; 3],
+    pub profile: String,
+    pub precision: String,
+    pub integration: String,
+    pub steps: u64,
+    /// The firmware ELF the per-board copies were made from, and its cargo features.
+    pub firmware: String,
+    pub firmware_features: Vec<String>,
+    pub boards: Vec<ImageBoard>,
+}
+
+/// `pe image DIR -o OUT [--firmware ELF]`.
+pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<ImageManifest> {
+    let m = read_manifest(dir)?;
+    let profile = pe_firmware::profile::profile(&m.profile)
+        .with_context(|| format!("{}: unknown profile {:?}", dir.display(), m.profile))?;
+    let features = firmware_features(&m.precision, &m.integration, &m.profile);
+    let elf_path = match firmware {
+        Some(p) => p.to_path_buf(),
+        None => build_firmware(&features, "pe-board")?,
+    };
+    let elf = std::fs::read(&elf_path)
+        .with_context(|| format!("reading the firmware {}", elf_path.display()))?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut boards = Vec::new();
+    for b in &m.boards {
+        let c = b.board;
+        let p = dir.join(&b.file);
+        let image = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
+        let pos = c.map(|v| v as u8);
+        crate::compile::decode_image(&image, Some(pos))
+            .map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?;
+        let stem = image_file_name(c);
+        let stem = stem.trim_end_matches(".bin");
+        let elf_name = format!("{stem}.elf");
+        let sched_name = format!("{stem}.sched");
+        std::fs::write(out.join(&elf_name), patch_identity(&elf, pos)?)
+            .with_context(|| format!("writing {}", out.join(&elf_name).display()))?;
+        let blob = schedule_blob(&image);
+        std::fs::write(out.join(&sched_name), &blob)
+            .with_context(|| format!("writing {}", out.join(&sched_name).display()))?;
+        let addr = format!("{:#010x}", profile.image_origin);
+        let flash = if profile.probe_chip.is_empty() {
+            vec![format!(
+                "qemu-system-arm -cpu cortex-m7 -machine mps2-an500 -nographic -semihosting-config enable=on,target=native -kernel {elf_name} -device loader,file={sched_name},addr={addr}"
+            )]
+        } else {
+            let chip = profile.probe_chip;
+            vec![
+                format!("probe-rs download --chip {chip} {elf_name}"),
+                format!(
+                    "probe-rs download --chip {chip} --binary-format bin --base-address {addr} {sched_name}"
+                ),
+                format!("probe-rs reset --chip {chip}"),
+            ]
+        };
+        boards.push(ImageBoard {
+            board: c,
+            elf: elf_name,
+            schedule: sched_name,
+            schedule_address: addr,
+            schedule_bytes: blob.len(),
+            flash,
+        });
+    }
+    let manifest = ImageManifest {
+        scene: m.scene,
+        machine: m.machine,
+        profile: m.profile,
+        precision: m.precision,
+        integration: m.integration,
+        steps: m.steps,
+        firmware: elf_path.display().to_string(),
+        firmware_features: features.iter().map(|s| s.to_string()).collect(),
+        boards,
+    };
+    let p = out.join("manifest.json");
+    std::fs::write(&p, serde_json::to_string_pretty(&manifest)?)
+        .with_context(|| format!("writing {}", p.display()))?;
+    Ok(manifest)
+}
+
+/// Final displacements by mesh node index, from a nodes CSV (`pe solve --output-nodes`,
+/// rows in mesh node order) or a board report (semihosting lines `u,GLOBAL,UX,UY,UZ` with
+/// the f64 bits in hex, between `pe-board: begin nodes` and `pe-board: end nodes`).
+pub fn read_displacements(path: &Path) -> Result<Vec<Option<[f64; 3]>>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut out: Vec<Option<[f64; 3]>> = Vec::new();
+    if text.starts_with("node,") {
+        for (k, line) in text.lines().skip(1).enumerate() {
+            let f: Vec<&str> = line.split(',').collect();
+            if f.len() != 7 {
+                bail!("{}:{}: expected 7 fields", path.display(), k + 2);
+            }
+            let v = |i: usize| -> Result<f64> {
+                f[i].trim()
+                    .parse()
+                    .with_context(|| format!("{}:{}: bad number {:?}", path.display(), k + 2, f[i]))
+            };
+            out.push(Some([v(4)?, v(5)?, v(6)?]));
+        }
+        return Ok(out);
+    }
+    let (mut begun, mut ended) = (false, false);
+    for (k, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.contains("pe-board: FAULT") {
+            bail!("{}: the board reported a fault: {line}", path.display());
+        }
+        if line == "pe-board: begin nodes" {
+            begun = true;
+        } else if line == "pe-board: end nodes" {
+            ended = true;
+        } else if let Some(rest) = line.strip_prefix("u,") {
+            let f: Vec<&str> = rest.split(',').collect();
+            let bad = || format!("{}:{}: bad node line {line:?}", path.display(), k + 1);
+            if f.len() != 4 || !begun || ended {
+                bail!(bad());
+            }
+            let n: usize = f[0].parse().with_context(bad)?;
+            let mut u = [0.0; 3];
+            for i in 0..3 {
+                u[i] = f64::from_bits(u64::from_str_radix(f[i + 1], 16).with_context(bad)?);
+            }
+            if out.len() <= n {
+                out.resize(n + 1, None);
+            }
+            if out[n].replace(u).is_some() {
+                bail!("{}: node {n} reported twice", path.display());
+            }
+        }
+    }
+    if !begun || !ended {
+        bail!(
+            "{}: no complete node report (missing 'pe-board: begin nodes'/'end nodes'): the run did not finish",
+            path.display()
+        );
+    }
+    Ok(out)
+}
+
+/// Outcome of a comparison.
+#[derive(Clone, Debug)]
+pub struct Comparison {
+    pub nodes: usize,
+    /// Components whose bits differ.
+    pub differing: usize,
+    /// Largest |a − b| (m) over all components.
+    pub max_abs_diff: f64,
+    /// The first differences: (node, component, reference, other).
+    pub first: Vec<(usize, usize, f64, f64)>,
+}
+
+/// Compares every node of `reference` with `other`, bit for bit; nodes missing from
+/// `other` or extra in it are errors.
+pub fn compare(reference: &Path, other: &Path) -> Result<Comparison> {
+    let a = read_displacements(reference)?;
+    let b = read_displacements(other)?;
+    if b.len() > a.len() {
+        bail!(
+            "{} reports node {} but the reference has only {} nodes",
+            other.display(),
+            b.len() - 1,
+            a.len()
+        );
+    }
+    let mut c = Comparison {
+        nodes: a.len(),
+        differing: 0,
+        max_abs_diff: 0.0,
+        first: Vec::new(),
+    };
+    let mut missing = Vec::new();
+    for (n, ua) in a.iter().enumerate() {
+        let Some(ua) = ua else { continue };
+        let Some(ub) = b.get(n).copied().flatten() else {
+            missing.push(n);
+            continue;
+        };
+        for i in 0..3 {
+            if ua[i].to_bits() != ub[i].to_bits() {
+                c.differing += 1;
+                c.max_abs_diff = c.max_abs_diff.max((ua[i] - ub[i]).abs());
+                if c.first.len() < 10 {
+                    c.first.push((n, i, ua[i], ub[i]));
+                }
+            }
+        }
+    }
+    if !missing.is_empty() {
+        bail!(
+            "{}: {} nodes missing (first: {:?})",
+            other.display(),
+            missing.len(),
+            &missing[..missing.len().min(10)]
+        );
+    }
+    Ok(c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn identity_is_patched_once() {
+        let mut elf = vec![0u8; 64];
+        elf[20..32].copy_from_slice(IDENTITY_MARKER);
+        elf[32..36].copy_from_slice(&[0, 0, 0, 0xA5]);
+        let p = patch_identity(&elf, [1, 2, 3]).unwrap();
+        assert_eq!(&p[32..36], &[1, 2, 3, 0xA5]); // 1 ^ 2 ^ 3 == 0
+        assert_eq!(p.len(), elf.len());
+        elf[40..52].copy_from_slice(IDENTITY_MARKER);
+        elf[52..56].copy_from_slice(&[0, 0, 0, 0xA5]);
+        assert!(patch_identity(&elf, [1, 2, 3]).is_err());
+        assert!(patch_identity(&[0u8; 8], [0; 3]).is_err());
+    }
+
+    #[test]
+    fn blob_is_length_prefixed() {
+        assert_eq!(schedule_blob(b"PESIxy"), b"\x06\0\0\0PESIxy");
+    }
+
+    #[test]
+    fn board_reports_compare_bitwise() {
+        let d = std::env::temp_dir().join(format!("pe-fw-compare-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        let csv = d.join("ref.csv");
+        std::fs::write(
+            &csv,
+            "node,x,y,z,ux,uy,uz\n1,0,0,0,1.5e-3,0,-2.0e-4\n2,0,0,0,0,0,0\n",
+        )
+        .unwrap();
+        let bits = |v: f64| format!("{:016x}", v.to_bits());
+        let log = |uz: f64| {
+            format!(
+                "pe-board: begin nodes\nu,1,{},{},{}\nu,0,{},{},{}\npe-board: end nodes\n",
+                bits(0.0),
+                bits(0.0),
+                bits(0.0),
+                bits(1.5e-3),
+                bits(0.0),
+                bits(uz)
+            )
+        };
+        let same = d.join("same.txt");
+        std::fs::write(&same, log(-2.0e-4)).unwrap();
+        let c = compare(&csv, &same).unwrap();
+        assert_eq!((c.nodes, c.differing), (2, 0));
+        let off = d.join("off.txt");
+        std::fs::write(&off, log(f64::from_bits((-2.0e-4f64).to_bits() + 1))).unwrap();
+        let c = compare(&csv, &off).unwrap();
+        assert_eq!(c.differing, 1);
+        assert_eq!(c.first[0].0, 0);
+        let cut = d.join("cut.txt");
+        std::fs::write(&cut, "pe-board: begin nodes\n").unwrap();
+        assert!(compare(&csv, &cut).is_err());
+        let fault = d.join("fault.txt");
+        std::fs::write(
+            &fault,
+            "pe-board: FAULT board (0,0,0) step 3: element 1 inverted\n",
+        )
+        .unwrap();
+        assert!(compare(&csv, &fault)
+            .unwrap_err()
+            .to_string()
+            .contains("inverted"));
+        let _ = std::fs::remove_dir_all(&d);
+    }
+}

@@ -1,0 +1,151 @@
+//! On-board cost measurement (run under QEMU with the insncount plugin, see
+//! `scripts/board-cost.sh`). Loads the schedule image like the firmware, runs all steps but
+//! the last, then brackets with calls of `bench_mark` (the plugin prints the executed
+//! instruction count at each call, numbered from 0):
+//!
+//! * marks 0→1: two back-to-back marks, the marker's own overhead;
+//! * marks 2→3: `internal_forces` of `SAMPLES` elements spread over the mesh (the element
+//!   kernel: strain, stress, forces, hourglass control), on the deformed state;
+//! * marks 4→5: `accumulate_internal_forces` over the same elements (kernel plus gathering
+//!   displacements and scattering forces: the per-element part of a step);
+//! * marks 6→7: one whole step of the runtime (gather, kernel, scatter, external forces,
+//!   update; no exchange on a 1x1x1 machine).
+//!
+//! Then prints `bench,VARIANT,ELEMENTS,NODES,SAMPLES` via semihosting and exits. Inputs pass
+//! through `black_box` so nothing is folded at build time. No SysTick: nothing but the
+//! measured code runs between marks.
+#![no_std]
+#![no_main]
+
+use core::hint::black_box;
+
+use cortex_m_rt::entry;
+use pe_board::config::{Element, Scalar, MATERIALS, VARIANT};
+use pe_board::region::{board_position, schedule_image};
+use pe_board::{links, report, storage};
+use pe_firmware::image::ImageReader;
+use pe_firmware::physics::{accumulate_internal_forces, HexElement, MaterialLaw, Real};
+use pe_firmware::runtime::{Environment, Runtime, RuntimeConfig};
+
+/// Elements sampled for the kernel measurement.
+const SAMPLES: usize = 16;
+
+#[inline(never)]
+#[no_mangle]
+pub extern "C" fn bench_mark(id: u32) {
+    black_box(id);
+}
+
+/// A clock that only counts calls (no interrupts during the measurement; a 1x1x1 machine
+/// never waits for a link).
+struct CallClock(u64);
+
+impl Environment for CallClock {
+    fn now_ns(&mut self) -> u64 {
+        self.0 += 1;
+        self.0
+    }
+    fn idle(&mut self) {}
+}
+
+fn fail(what: &str) -> ! {
+    report::fault([0; 3], format_args!("bench: {what}"))
+}
+
+#[entry]
+fn main() -> ! {
+    let board = board_position().unwrap_or_else(|| fail("identity"));
+    let image = schedule_image().unwrap_or_else(|_| fail("no schedule image"));
+    let store = storage::take().unwrap_or_else(|| fail("storage"));
+    let mut rt = Runtime::<Scalar, Element>::load(image, board, store, RuntimeConfig::default())
+        .unwrap_or_else(|e| report::fault(board, format_args!("bench: image refused: {e}")));
+    let links = links::take().unwrap_or_else(|| fail("links"));
+    let mut env = CallClock(0);
+    let steps = rt.header.params.steps;
+    while rt.step_index() + 1 < steps {
+        if rt.step(links, &mut env).is_err() {
+            fail("fault while warming up");
+        }
+    }
+
+    // The sampled elements and the law, decoded from the image again.
+    let ne = rt.header.counts.elements as usize;
+    let mut reader = ImageReader::new(image, None).unwrap_or_else(|_| fail("image"));
+    let mut laws: heapless::Vec<MaterialLaw<Scalar>, MATERIALS> = heapless::Vec::new();
+    for _ in 0..rt.header.counts.materials {
+        let l: MaterialLaw<f64> = reader.next("material").unwrap_or_else(|_| fail("material"));
+        if laws.push(l.cast()).is_err() {
+            fail("too many materials");
+        }
+    }
+    // Stack-frugal: the elements are large (1.6 KB for f64 full) and the statics fill RAM.
+    let mut list: heapless::Vec<Element, SAMPLES> = heapless::Vec::new();
+    let mut ues: heapless::Vec<[[Scalar; 3]; 8], SAMPLES> = heapless::Vec::new();
+    let u = rt.displacements();
+    for k in 0..ne {
+        let e: Element = reader.next("element").unwrap_or_else(|_| fail("element"));
+        if k % (ne / SAMPLES).max(1) == 0 && !list.is_full() {
+            let ue = e
+                .nodes()
+                .map(|n| u.get(n as usize).copied().unwrap_or([Scalar::ZERO; 3]));
+            let _ = ues.push(ue);
+            let _ = list.push(e);
+        }
+    }
+    let measured = list.len();
+
+    bench_mark(0);
+    bench_mark(1);
+
+    bench_mark(2);
+    for (e, ue) in list.iter().zip(&ues) {
+        let law = laws
+            .get(e.material())
+            .unwrap_or_else(|| fail("material index"));
+        let f = black_box(e).internal_forces(black_box(law), black_box(ue));
+        black_box(&f);
+    }
+    bench_mark(3);
+
+    // The same elements renumbered onto their own node arrays, for the element loop.
+    let mut ul = [[Scalar::ZERO; 3]; 8 * SAMPLES];
+    let mut fl = [[Scalar::ZERO; 3]; 8 * SAMPLES];
+    for (j, (e, ue)) in list.iter_mut().zip(&ues).enumerate() {
+        e.nodes = core::array::from_fn(|a| (8 * j + a) as u32);
+        ul[8 * j..8 * j + 8].copy_from_slice(ue);
+    }
+    bench_mark(4);
+    let r = accumulate_internal_forces(
+        black_box(&list[..]),
+        0,
+        black_box(&laws),
+        black_box(&ul),
+        black_box(&mut fl),
+    );
+    bench_mark(5);
+    black_box(&fl);
+    if r.is_err() {
+        fail("fault in the element loop");
+    }
+
+    bench_mark(6);
+    let r = rt.step(links, &mut env);
+    bench_mark(7);
+    if r.is_err() {
+        fail("fault in the measured step");
+    }
+
+    pe_board::log_info!(
+        "bench,{},{},{},{}",
+        VARIANT,
+        ne,
+        rt.header.counts.nodes,
+        measured
+    );
+    report::exit(true)
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    report::fault([0; 3], format_args!("bench panic: {info}"))
+}

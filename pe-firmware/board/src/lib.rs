@@ -1,0 +1,24 @@
+//! The PE board firmware's support code, shared by the firmware (`src/main.rs`) and the
+//! on-board benchmark (`src/bin/bench.rs`): build-time configuration, the schedule image
+//! region, run-time storage, link drivers, time, logging and fault reports.
+//!
+//! Only built for `thumbv7em-none-eabihf` (this crate is outside the host workspace). The
+//! few `unsafe` blocks (memory-mapped registers, linker-provided regions, the one-time
+//! take of the static buffers) live here, each with its argument; `pe-firmware` stays
+//! `#![forbid(unsafe_code)]`.
+#![no_std]
+#![deny(unsafe_op_in_unsafe_fn)]
+
+pub mod fmt;
+
+// The defmt global logger (RTT), for every binary of the crate.
+#[cfg(feature = "defmt")]
+use defmt_rtt as _;
+
+pub mod clock;
+pub mod config;
+pub mod links;
+pub mod region;
+pub mod report;
+pub mod storage;
+pub mod uart;

@@ -1,0 +1,114 @@
+//! Link drivers: byte streams for `link_proto::StreamLinks` through `embedded-io`.
+//!
+//! [`CmsdkUart`] drives the ARM CMSDK APB UART of the MPS2 FPGA images (and of QEMU's
+//! `mps2-an500`): DATA at +0x0, STATE at +0x4 (bit 0 TX full, bit 1 RX full), CTRL at +0x8
+//! (bit 0 TX enable, bit 1 RX enable), BAUDDIV at +0x10. Nothing blocks: `write_ready` and
+//! `read_ready` say whether a byte can move, as `StreamPort` expects. On the PE board the
+//! links are LVDS UARTs of the MCU; their HAL's serial types implement the same
+//! `embedded-io` traits and plug into `StreamLinks` unchanged.
+
+use embedded_io::{ErrorKind, ErrorType, Read, ReadReady, Write, WriteReady};
+
+const DATA: usize = 0x0;
+const STATE: usize = 0x4;
+const CTRL: usize = 0x8;
+const BAUDDIV: usize = 0x10;
+const STATE_TX_FULL: u32 = 1 << 0;
+const STATE_RX_FULL: u32 = 1 << 1;
+const CTRL_TX_EN: u32 = 1 << 0;
+const CTRL_RX_EN: u32 = 1 << 1;
+
+/// Base addresses of the five CMSDK UARTs of mps2-an500.
+pub const MPS2_UART_BASES: [usize; 5] = [
+    0x4000_4000,
+    0x4000_5000,
+    0x4000_6000,
+    0x4000_7000,
+    0x4000_9000,
+];
+
+/// One CMSDK APB UART.
+#[derive(Debug)]
+pub struct CmsdkUart {
+    base: usize,
+}
+
+/// The UART never reports errors (overruns lose bytes, which the framing's CRC catches).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct UartError;
+
+impl embedded_io::Error for UartError {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Other
+    }
+}
+
+impl CmsdkUart {
+    /// Takes the UART at `base` (one of [`MPS2_UART_BASES`]) and enables TX and RX.
+    ///
+    /// # Safety
+    /// `base` must be a CMSDK UART's register block that nothing else drives.
+    pub unsafe fn new(base: usize) -> Self {
+        let u = CmsdkUart { base };
+        u.write_reg(BAUDDIV, 16);
+        u.write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN);
+        u
+    }
+
+    fn read_reg(&self, offset: usize) -> u32 {
+        // SAFETY: `new`'s contract: `base + offset` is a register of this UART.
+        unsafe { core::ptr::read_volatile((self.base + offset) as *const u32) }
+    }
+
+    fn write_reg(&self, offset: usize, value: u32) {
+        // SAFETY: as in `read_reg`.
+        unsafe { core::ptr::write_volatile((self.base + offset) as *mut u32, value) }
+    }
+}
+
+impl ErrorType for CmsdkUart {
+    type Error = UartError;
+}
+
+impl Read for CmsdkUart {
+    /// Reads the bytes waiting (at most one: the UART has a one-byte buffer); 0 if none.
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, UartError> {
+        match buf.first_mut() {
+            Some(b) if self.read_reg(STATE) & STATE_RX_FULL != 0 => {
+                *b = self.read_reg(DATA) as u8;
+                Ok(1)
+            }
+            _ => Ok(0),
+        }
+    }
+}
+
+impl ReadReady for CmsdkUart {
+    fn read_ready(&mut self) -> Result<bool, UartError> {
+        Ok(self.read_reg(STATE) & STATE_RX_FULL != 0)
+    }
+}
+
+impl Write for CmsdkUart {
+    /// Writes at most one byte (when the transmitter has room); 0 otherwise.
+    fn write(&mut self, buf: &[u8]) -> Result<usize, UartError> {
+        match buf.first() {
+            Some(&b) if self.read_reg(STATE) & STATE_TX_FULL == 0 => {
+                self.write_reg(DATA, b as u32);
+                Ok(1)
+            }
+            Some(_) => Ok(0),
+            None => Ok(0),
+        }
+    }
+
+    fn flush(&mut self) -> Result<(), UartError> {
+        Ok(())
+    }
+}
+
+impl WriteReady for CmsdkUart {
+    fn write_ready(&mut self) -> Result<bool, UartError> {
+        Ok(self.read_reg(STATE) & STATE_TX_FULL == 0)
+    }
+}

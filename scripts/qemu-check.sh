@@ -1,0 +1,133 @@
+#!/usr/bin/env bash
+# QEMU check: the board firmware runs the built-in coarse scene on one emulated Cortex-M7
+# (QEMU mps2-an500) and its final state, reported via semihosting, must be bit-identical to
+# `pe solve` and to board-sim for the same scene and precision (f64 and f32, reduced
+# integration). Then the firmware must refuse a corrupted image, an image for another
+# board, a schedule that needs links it has no driver for, and an unstable scene (the same
+# numerical fault as the serial solver) -- each with a fault report
+# and a failing exit, never a hang. Fails loudly on any mismatch.
+#
+# Installs what it needs: qemu-system-arm (apt, only if missing) and the thumbv7em target.
+# Env: STEPS (default 300), OUT (default $CARGO_TARGET_DIR/qemu-check or target/qemu-check).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+export RUST_BACKTRACE=0
+# The schedule comes from the loader here, never linked into the ELF.
+unset PE_SCHEDULE_IMAGE
+
+if ! command -v qemu-system-arm >/dev/null 2>&1; then
+    echo "qemu-check: installing qemu-system-arm"
+    apt-get update -qq && apt-get install -y -qq qemu-system-arm >/dev/null
+fi
+rustup target add thumbv7em-none-eabihf >/dev/null 2>&1 || rustup target add thumbv7em-none-eabihf
+
+TARGET_DIR=${CARGO_TARGET_DIR:-$ROOT/target}
+STEPS=${STEPS:-300}
+OUT=${OUT:-$TARGET_DIR/qemu-check}
+rm -rf "$OUT" && mkdir -p "$OUT"
+
+cargo build --release -q -p host-tools -p board-sim --bins
+PE=$TARGET_DIR/release/pe
+SIM=$TARGET_DIR/release/board-sim
+QEMU=(timeout 120 qemu-system-arm -cpu cortex-m7 -machine mps2-an500 -nographic
+      -semihosting-config enable=on,target=native)
+ORIGIN=0x00200000   # ORIGIN(IMAGE) of memory-qemu.x (pe image's manifest says the same)
+
+build_firmware() { # FEATURES -> prints the ELF path (a copy per variant)
+    cargo build --release -q --target thumbv7em-none-eabihf \
+        --manifest-path pe-firmware/board/Cargo.toml --target-dir "$TARGET_DIR" \
+        --bin pe-board --no-default-features --features "$1"
+    local elf=$OUT/pe-board-${1//,/-}.elf
+    cp "$TARGET_DIR/thumbv7em-none-eabihf/release/pe-board" "$elf"
+    echo "$elf"
+}
+
+for PREC in f64 f32; do
+    D=$OUT/$PREC
+    echo "qemu-check: built-in coarse scene, 1x1x1, $PREC reduced, $STEPS steps"
+    "$PE" compile --builtin --level coarse --boards 1x1x1 --profile qemu-mps2-an500 \
+        --precision "$PREC" --steps "$STEPS" -o "$D/compiled" >/dev/null
+    "$PE" solve --builtin --level coarse --steps "$STEPS" --precision "$PREC" --quiet \
+        --output-nodes "$D/solve.csv" >/dev/null 2>&1
+    "$SIM" run "$D/compiled" --quiet --output-nodes "$D/board-sim.csv" >/dev/null
+    FEATURES=qemu
+    [ "$PREC" = f32 ] && FEATURES=qemu,f32
+    ELF=$(build_firmware "$FEATURES")
+    "$PE" image "$D/compiled" -o "$D/image" --firmware "$ELF" >/dev/null
+    set +e
+    (cd "$D/image" && "${QEMU[@]}" -kernel board-0-0-0.elf \
+        -device loader,file=board-0-0-0.sched,addr=$ORIGIN) >"$D/qemu.txt" 2>"$D/qemu.err"
+    RC=$?
+    set -e
+    if [ $RC -ne 0 ]; then
+        echo "qemu-check: FAILED: the firmware exited with $RC ($PREC); its output:" >&2
+        tail -5 "$D/qemu.txt" "$D/qemu.err" >&2
+        exit 1
+    fi
+    "$PE" compare "$D/solve.csv" "$D/qemu.txt"
+    "$PE" compare "$D/solve.csv" "$D/board-sim.csv"
+done
+
+# Faults end the run with a report and a failing exit.
+expect_fault() { # NAME PATTERN QEMU-ARGS...
+    local name=$1 pattern=$2
+    shift 2
+    set +e
+    "${QEMU[@]}" "$@" >"$OUT/fault-$name.txt" 2>&1
+    local rc=$?
+    set -e
+    if [ $rc -eq 0 ] || [ $rc -eq 124 ] || ! grep -q "pe-board: FAULT.*$pattern" "$OUT/fault-$name.txt"; then
+        echo "qemu-check: FAILED: $name: expected a fault report matching '$pattern' and exit 1, got exit $rc:" >&2
+        cat "$OUT/fault-$name.txt" >&2
+        exit 1
+    fi
+    echo "qemu-check: $name refused: $(grep -o 'FAULT.*' "$OUT/fault-$name.txt")"
+}
+I=$OUT/f64/image
+python3 - "$I/board-0-0-0.sched" "$OUT/corrupt.sched" <<'PY'
+import sys
+b = bytearray(open(sys.argv[1], "rb").read())
+b[len(b) // 2] ^= 0x10
+open(sys.argv[2], "wb").write(b)
+PY
+expect_fault corrupted-image "CRC mismatch" -kernel "$I/board-0-0-0.elf" \
+    -device loader,file="$OUT/corrupt.sched",addr=$ORIGIN
+expect_fault no-image "no schedule image" -kernel "$I/board-0-0-0.elf"
+"$PE" compile --builtin --level coarse --boards 2x1x1 --profile qemu-mps2-an500 \
+    --steps 10 -o "$OUT/two/compiled" >/dev/null
+"$PE" image "$OUT/two/compiled" -o "$OUT/two/image" --firmware "$OUT/pe-board-qemu.elf" >/dev/null
+expect_fault wrong-board "is for board (0,0,0) but this is board (1,0,0)" \
+    -kernel "$OUT/two/image/board-1-0-0.elf" \
+    -device loader,file="$OUT/two/image/board-0-0-0.sched",addr=$ORIGIN
+expect_fault missing-link-driver "no driver" -kernel "$OUT/two/image/board-0-0-0.elf" \
+    -device loader,file="$OUT/two/image/board-0-0-0.sched",addr=$ORIGIN
+# A numerical fault (an explicit step twice the critical one): the board names the same
+# step and element as the serial solver.
+mkdir -p "$OUT/unstable"
+cat >"$OUT/unstable/scene.toml" <<'TOML'
+[mesh]
+generate = { kind = "box", size = [0.1, 0.02, 0.02], cells = [10, 2, 2] }
+[material]
+law = "neo-hookean"
+youngs_modulus = 3.0e3
+poisson_ratio = 0.45
+density = 1000.0
+[[fixed]]
+box = [[-1e-9, -1.0, -1.0], [1e-9, 1.0, 1.0]]
+[[prescribed]]
+box = [[0.099, -1.0, -1.0], [1.0, 1.0, 1.0]]
+path = [[0.0, 0.0, 0.0, 0.0], [0.01, 0.0, 0.0, -0.005]]
+[solver]
+dt = 5e-3
+force_dt = true
+steps = 2000
+TOML
+SERIAL=$("$PE" solve "$OUT/unstable/scene.toml" --quiet 2>&1 | grep -o 'step [0-9]*: .*' || true)
+[ -n "$SERIAL" ] || { echo "qemu-check: FAILED: the serial solver did not fail on the unstable scene" >&2; exit 1; }
+"$PE" compile "$OUT/unstable/scene.toml" --boards 1x1x1 --profile qemu-mps2-an500 \
+    -o "$OUT/unstable/compiled" >/dev/null
+"$PE" image "$OUT/unstable/compiled" -o "$OUT/unstable/image" --firmware "$OUT/pe-board-qemu.elf" >/dev/null
+expect_fault numerical-fault "$SERIAL" -kernel "$OUT/unstable/image/board-0-0-0.elf" \
+    -device loader,file="$OUT/unstable/image/board-0-0-0.sched",addr=$ORIGIN
+echo "qemu-check: passed (f64 and f32 bit-identical to pe solve and board-sim; faults reported)"
