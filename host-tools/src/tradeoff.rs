@@ -31,7 +31,8 @@ use crate::scene::Scene;
 use crate::solver;
 
 /// Board instructions per element-step: not measured until the board firmware exists.
-pub const BOARD_NA: &str = "n/a until the board firmware issue lands";
+/// Where the board column comes from.
+pub const BOARD_NOTE: &str = "instructions per element-step of a whole board step (elements, gather/scatter, node updates; `pe_firmware::profile::MEASURED_COST`, measured under QEMU with `scripts/board-cost.sh`), and the board real-time factor at 480 MHz taking one instruction per cycle, for the whole scene on one board";
 
 /// One configuration of the grid.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -430,7 +431,23 @@ fn run_one(base: &Scene, dir: &Path, levels: &Levels, c: &Config, name: &str) ->
         wall_s: r.wall_s,
         host_ns_per_element_step: r.wall_s * 1e9 / (r.elements as f64 * r.steps as f64),
         real_time_factor: r.real_time_factor,
-        board_instructions_per_element_step: String::new(),
+        board_instructions_per_element_step: {
+            use pe_firmware::image::{Integration, Precision};
+            let p = if r.precision == "f32" {
+                Precision::F32
+            } else {
+                Precision::F64
+            };
+            let i = if r.integration == "full" {
+                Integration::Full
+            } else {
+                Integration::Reduced
+            };
+            let c = pe_firmware::profile::measured_cost(p, i);
+            let step_s = c.step_instructions(r.elements, r.nodes)
+                / pe_firmware::profile::PE_BOARD.clock_hz as f64;
+            format!("{} (board RTF {:.3})", c.step_per_element, r.dt_s / step_s)
+        },
         compared_nodes: 0,
         u_err_max_m: 0.0,
         u_err_rms_m: 0.0,
@@ -669,7 +686,7 @@ pub fn to_markdown(rows: &[Row], name: &str) -> String {
     if let Some(r) = rows.first() {
         let _ = writeln!(
             s,
-            "Reference: {} {} integration, level {}, dt safety {}, mass scaling {} ({} elements, {} steps, {:.1} s wall). Errors are at the end of {:.3} s simulated, relative ones over the reference's largest displacement (u) or its value (quantity of interest `{}`, energy = stored + kinetic). Cost: host wall time on one thread of this machine. `board instr/elem-step`: {BOARD_NA}. `*` marks the Pareto front of (wall s per simulated s, RMS displacement error).\n",
+            "Reference: {} {} integration, level {}, dt safety {}, mass scaling {} ({} elements, {} steps, {:.1} s wall). Errors are at the end of {:.3} s simulated, relative ones over the reference's largest displacement (u) or its value (quantity of interest `{}`, energy = stored + kinetic). Cost: host wall time on one thread of this machine. `board instr/elem-step`: {BOARD_NOTE}. `*` marks the Pareto front of (wall s per simulated s, RMS displacement error).\n",
             r.precision, r.integration, r.level, r.dt_safety, r.mass_scaling, r.elements, r.steps, r.wall_s, r.simulated_s, r.qoi
         );
     }
@@ -683,7 +700,7 @@ pub fn to_markdown(rows: &[Row], name: &str) -> String {
         };
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.2} | {:.0} | {:.3} | n/a | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.2} | {:.0} | {:.3} | {} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {} |",
             r.varied,
             r.precision,
             r.integration,
@@ -696,6 +713,7 @@ pub fn to_markdown(rows: &[Row], name: &str) -> String {
             r.wall_s,
             r.host_ns_per_element_step,
             r.real_time_factor,
+            r.board_instructions_per_element_step,
             r.u_err_max_rel,
             r.u_err_rms_rel,
             r.qoi_err_rel,
