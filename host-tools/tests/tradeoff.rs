@@ -146,10 +146,28 @@ fn tradeoff_grid_on_a_box_scene() {
             find(&|r| is(r, factor, v) && is(r, "integration", "reduced"));
         }
     }
-    // Board column empty until the firmware reports instruction counts.
-    assert!(rows
-        .iter()
-        .all(|r| r[col("board_instructions_per_element_step")].is_empty()));
+    // Board column: the measured firmware cost of the row's precision and integration.
+    for r in &rows {
+        use pe_firmware::image::{Integration, Precision};
+        let p = if r[col("precision")] == "f32" {
+            Precision::F32
+        } else {
+            Precision::F64
+        };
+        let i = if r[col("integration")] == "full" {
+            Integration::Full
+        } else {
+            Integration::Reduced
+        };
+        let expected = pe_firmware::profile::measured_cost(p, i)
+            .step_per_element
+            .to_string();
+        let cell = &r[col("board_instructions_per_element_step")];
+        assert!(
+            cell.starts_with(&format!("{expected} ")),
+            "{cell} vs {expected}"
+        );
+    }
     // Refinement: the coarser mesh is farther from the reference (spatial convergence).
     let lv = |l: &str| {
         find(&|r| {
