@@ -123,7 +123,9 @@ dt = 5e-3
 force_dt = true
 steps = 2000
 TOML
-SERIAL=$("$PE" solve "$OUT/unstable/scene.toml" --quiet 2>&1 | grep -o 'step [0-9]*: .*' || true)
+# The board must name the same step and element as the serial solver (the serial message
+# goes on with the cell's mesh nodes and position, which the board does not hold).
+SERIAL=$("$PE" solve "$OUT/unstable/scene.toml" --quiet 2>&1 | grep -o 'step [0-9]*: element [0-9]* inverted' | head -n 1 || true)
 [ -n "$SERIAL" ] || { echo "qemu-check: FAILED: the serial solver did not fail on the unstable scene" >&2; exit 1; }
 "$PE" compile "$OUT/unstable/scene.toml" --boards 1x1x1 --profile qemu-mps2-an500 \
     -o "$OUT/unstable/compiled" >/dev/null
