@@ -5,7 +5,7 @@
 pub mod links;
 pub mod timing;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
@@ -572,9 +572,4 @@ fn dispatch(
         }
         (Precision::F32, Integration::Full) => run_worker(ctx, full::<f32>(), links, env, out),
     }
-}
-
-/// Directory helper for callers.
-pub fn default_out(dir: &Path) -> PathBuf {
-    dir.join("sim")
 }

@@ -161,7 +161,7 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
         })
         .collect();
     let trees: Vec<Vec<Transfer>> = (0..machine.dims.iter().copied().max().unwrap_or(1))
-        .map(line_transfers_or_empty)
+        .map(line_transfers)
         .collect();
     for (n, &(lo, hi)) in node_box.iter().enumerate() {
         let n32 = n as u32;
@@ -264,14 +264,6 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
         rounds,
         boards,
     })
-}
-
-fn line_transfers_or_empty(m: usize) -> Vec<Transfer> {
-    if m == 0 {
-        Vec::new()
-    } else {
-        line_transfers(m)
-    }
 }
 
 /// Bytes of RAM the runtime needs for a board's image contents and state.
