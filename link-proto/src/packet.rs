@@ -14,7 +14,8 @@
 //! | 8       | `n`  | payload (opaque bytes, meaning set by the kind)        |
 //! | 8 + `n` | 4    | CRC-32/ISO-HDLC over bytes `0 .. 8 + n`                |
 //!
-//! Kind codes: 0x01 collision exchange, 0x02 graphics surface, 0x10 control
+//! Kind codes: 0x01 collision exchange, 0x02 graphics surface, 0x03 bounding box,
+//! 0x04 tool force, 0x10 control
 //! start, 0x11 control stop, 0x12 control step-done, 0x20 fault report; any
 //! other code parses as [`PacketKind::Unknown`].
 //!
@@ -76,6 +77,10 @@ pub enum PacketKind {
     CollisionExchange,
     /// Surface nodes for the graphics engine.
     GraphicsSurface,
+    /// A board's bounding box of its contact nodes (every check interval).
+    BoundingBox,
+    /// A board's share of a tool's contact force (to the host / haptic device).
+    ToolForce,
     /// Control: start, stop, step done.
     Control(Control),
     /// A board reports a fault.
@@ -90,6 +95,8 @@ impl PacketKind {
         match self {
             PacketKind::CollisionExchange => 0x01,
             PacketKind::GraphicsSurface => 0x02,
+            PacketKind::BoundingBox => 0x03,
+            PacketKind::ToolForce => 0x04,
             PacketKind::Control(Control::Start) => 0x10,
             PacketKind::Control(Control::Stop) => 0x11,
             PacketKind::Control(Control::StepDone) => 0x12,
@@ -103,6 +110,8 @@ impl PacketKind {
         match code {
             0x01 => PacketKind::CollisionExchange,
             0x02 => PacketKind::GraphicsSurface,
+            0x03 => PacketKind::BoundingBox,
+            0x04 => PacketKind::ToolForce,
             0x10 => PacketKind::Control(Control::Start),
             0x11 => PacketKind::Control(Control::Stop),
             0x12 => PacketKind::Control(Control::StepDone),

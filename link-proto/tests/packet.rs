@@ -69,6 +69,8 @@ fn kind_codes() {
     let known = [
         (PacketKind::CollisionExchange, 0x01),
         (PacketKind::GraphicsSurface, 0x02),
+        (PacketKind::BoundingBox, 0x03),
+        (PacketKind::ToolForce, 0x04),
         (PacketKind::Control(Control::Start), 0x10),
         (PacketKind::Control(Control::Stop), 0x11),
         (PacketKind::Control(Control::StepDone), 0x12),

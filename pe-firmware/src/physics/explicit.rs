@@ -26,6 +26,22 @@ pub enum PhysicsError {
     SpeedLimit { node: u32, speed_m_per_s: f64 },
     /// An element names a node or material outside the model (a corrupted model).
     BadIndex { element: u32 },
+    /// A contact record names a node, face, pair or tool outside the contact tables.
+    BadContactIndex { index: u32 },
+    /// A node sank deeper into a tool or a master surface than the scene's tolerance (m):
+    /// the penalty is too soft for the load (raise `penalty`, or slow the tool).
+    Penetration {
+        node: u32,
+        depth_m: f64,
+        tolerance_m: f64,
+    },
+    /// A contact-surface node moved farther between two bounding-box checks than the
+    /// scene's speed bound allows: a contact could be missed (raise `speed_bound`).
+    ContactSpeedBound {
+        node: u32,
+        moved_m: f64,
+        allowed_m: f64,
+    },
 }
 
 impl core::fmt::Display for PhysicsError {
@@ -50,6 +66,25 @@ impl core::fmt::Display for PhysicsError {
                     "element {element} refers to a node or material outside the model"
                 )
             }
+            PhysicsError::BadContactIndex { index } => {
+                write!(f, "contact record refers to index {index} outside the contact tables")
+            }
+            PhysicsError::Penetration {
+                node,
+                depth_m,
+                tolerance_m,
+            } => write!(
+                f,
+                "node {node}: penetration {depth_m:.3e} m exceeds the contact tolerance {tolerance_m:.3e} m (penalty too soft for the load: raise penalty or slow the tool)"
+            ),
+            PhysicsError::ContactSpeedBound {
+                node,
+                moved_m,
+                allowed_m,
+            } => write!(
+                f,
+                "node {node}: moved {moved_m:.3e} m since the last bounding-box check, more than the {allowed_m:.3e} m the contact speed bound allows (a contact could be missed: raise speed_bound)"
+            ),
         }
     }
 }

@@ -1,5 +1,6 @@
 //! Physics shared by the board and the host: scalar type, tensors, hyperelastic laws, the
 //! Total Lagrangian hexahedron and explicit time integration. Physics never touches links.
+pub mod contact;
 pub mod explicit;
 pub mod hex;
 pub mod material;

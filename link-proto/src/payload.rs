@@ -1,0 +1,323 @@
+//! Payloads of the global packets the board runtime sends: bounding boxes and contact-node
+//! displacements (collision exchange between distant boards), tool forces (to the host,
+//! which drives the haptic device) and surface chunks (to the graphics engine).
+//!
+//! Fixed little-endian layouts:
+//!
+//! | payload | layout |
+//! |---|---|
+//! | [`BoxPayload`] ([`PacketKind::BoundingBox`](crate::PacketKind)) | step u32, min 3×f64, max 3×f64 (52 bytes) |
+//! | nodes ([`PacketKind::CollisionExchange`](crate::PacketKind)) | step u32, last u8 (1: the sender's last packet of the step), count u16, then count × (contact-node index u32, displacement 3×f64) |
+//! | [`ToolForcePayload`] ([`PacketKind::ToolForce`](crate::PacketKind)) | step u32, tool u8, force 3×f64 (29 bytes) |
+//! | surface ([`PacketKind::GraphicsSurface`](crate::PacketKind)) | frame u32, step u32, chunk u8, chunks u8, count u16, then count × (mesh node u32, displacement 3×f32) |
+//!
+//! # Panics
+//!
+//! Never: parsing checks every length first, emitting checks the buffer.
+
+use crate::error::{Error, Result};
+use crate::limits::PACKET_PAYLOAD_LEN_MAX;
+
+fn u32_at(b: &[u8], at: usize) -> Result<u32> {
+    match b.get(at..at + 4) {
+        Some(&[a, c, d, e]) => Ok(u32::from_le_bytes([a, c, d, e])),
+        _ => Err(Error::Truncated),
+    }
+}
+fn f64_at(b: &[u8], at: usize) -> Result<f64> {
+    let s = b.get(at..at + 8).ok_or(Error::Truncated)?;
+    let mut a = [0u8; 8];
+    a.copy_from_slice(s);
+    Ok(f64::from_le_bytes(a))
+}
+fn f32_at(b: &[u8], at: usize) -> Result<f32> {
+    u32_at(b, at).map(f32::from_bits)
+}
+fn put(buf: &mut [u8], at: usize, bytes: &[u8]) -> Result<()> {
+    buf.get_mut(at..at + bytes.len())
+        .ok_or(Error::BufferTooSmall)?
+        .copy_from_slice(bytes);
+    Ok(())
+}
+
+/// A board's bounding box of its contact nodes at a check step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoxPayload {
+    /// Step of the check.
+    pub step: u32,
+    /// Lower corner (m).
+    pub min: [f64; 3],
+    /// Upper corner (m).
+    pub max: [f64; 3],
+}
+
+impl BoxPayload {
+    /// Payload length.
+    pub const LEN: usize = 52;
+
+    /// Writes the payload; returns its length.
+    pub fn emit(&self, buf: &mut [u8]) -> Result<usize> {
+        put(buf, 0, &self.step.to_le_bytes())?;
+        for i in 0..3 {
+            put(buf, 4 + 8 * i, &self.min[i].to_le_bytes())?;
+            put(buf, 28 + 8 * i, &self.max[i].to_le_bytes())?;
+        }
+        Ok(Self::LEN)
+    }
+
+    /// Reads a payload of exactly [`BoxPayload::LEN`] bytes.
+    pub fn parse(b: &[u8]) -> Result<Self> {
+        if b.len() != Self::LEN {
+            return Err(if b.len() < Self::LEN {
+                Error::Truncated
+            } else {
+                Error::BadLength
+            });
+        }
+        let mut p = BoxPayload {
+            step: u32_at(b, 0)?,
+            min: [0.0; 3],
+            max: [0.0; 3],
+        };
+        for i in 0..3 {
+            p.min[i] = f64_at(b, 4 + 8 * i)?;
+            p.max[i] = f64_at(b, 28 + 8 * i)?;
+        }
+        Ok(p)
+    }
+}
+
+/// Header of a contact-node displacement payload.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NodesHeader {
+    /// Step whose displacements these are.
+    pub step: u32,
+    /// The sender's last packet for this step.
+    pub last: bool,
+    /// Entries that follow.
+    pub count: u16,
+}
+
+/// Header length of a node payload.
+pub const NODES_HEADER_LEN: usize = 7;
+/// Length of one node entry.
+pub const NODE_ENTRY_LEN: usize = 28;
+/// Most node entries in one packet.
+pub const NODES_PER_PACKET_MAX: usize = (PACKET_PAYLOAD_LEN_MAX - NODES_HEADER_LEN) / NODE_ENTRY_LEN;
+
+impl NodesHeader {
+    /// Writes the header; the entries go after it with [`emit_node_entry`].
+    pub fn emit(&self, buf: &mut [u8]) -> Result<usize> {
+        put(buf, 0, &self.step.to_le_bytes())?;
+        put(buf, 4, &[self.last as u8])?;
+        put(buf, 5, &self.count.to_le_bytes())?;
+        Ok(NODES_HEADER_LEN + usize::from(self.count) * NODE_ENTRY_LEN)
+    }
+
+    /// Reads the header and checks that exactly `count` entries follow.
+    pub fn parse(b: &[u8]) -> Result<Self> {
+        let step = u32_at(b, 0)?;
+        let last = match b.get(4) {
+            Some(0) => false,
+            Some(1) => true,
+            Some(_) => return Err(Error::BadLength),
+            None => return Err(Error::Truncated),
+        };
+        let count = match b.get(5..7) {
+            Some(&[x, y]) => u16::from_le_bytes([x, y]),
+            _ => return Err(Error::Truncated),
+        };
+        let need = NODES_HEADER_LEN + usize::from(count) * NODE_ENTRY_LEN;
+        match b.len() {
+            n if n < need => Err(Error::Truncated),
+            n if n > need => Err(Error::BadLength),
+            _ => Ok(NodesHeader { step, last, count }),
+        }
+    }
+}
+
+/// Writes node entry `k` (contact-node index, displacement).
+pub fn emit_node_entry(buf: &mut [u8], k: usize, index: u32, u: [f64; 3]) -> Result<()> {
+    let at = NODES_HEADER_LEN + k * NODE_ENTRY_LEN;
+    put(buf, at, &index.to_le_bytes())?;
+    for i in 0..3 {
+        put(buf, at + 4 + 8 * i, &u[i].to_le_bytes())?;
+    }
+    Ok(())
+}
+
+/// Reads node entry `k` of a payload whose header parsed.
+pub fn node_entry(b: &[u8], k: usize) -> Result<(u32, [f64; 3])> {
+    let at = NODES_HEADER_LEN + k * NODE_ENTRY_LEN;
+    Ok((
+        u32_at(b, at)?,
+        [
+            f64_at(b, at + 4)?,
+            f64_at(b, at + 12)?,
+            f64_at(b, at + 20)?,
+        ],
+    ))
+}
+
+/// A board's share of a tool's contact force at a step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ToolForcePayload {
+    /// Step.
+    pub step: u32,
+    /// Tool index in the scene.
+    pub tool: u8,
+    /// Force of the tissue on the tool (N).
+    pub force: [f64; 3],
+}
+
+impl ToolForcePayload {
+    /// Payload length.
+    pub const LEN: usize = 29;
+
+    /// Writes the payload; returns its length.
+    pub fn emit(&self, buf: &mut [u8]) -> Result<usize> {
+        put(buf, 0, &self.step.to_le_bytes())?;
+        put(buf, 4, &[self.tool])?;
+        for i in 0..3 {
+            put(buf, 5 + 8 * i, &self.force[i].to_le_bytes())?;
+        }
+        Ok(Self::LEN)
+    }
+
+    /// Reads a payload of exactly [`ToolForcePayload::LEN`] bytes.
+    pub fn parse(b: &[u8]) -> Result<Self> {
+        if b.len() != Self::LEN {
+            return Err(if b.len() < Self::LEN {
+                Error::Truncated
+            } else {
+                Error::BadLength
+            });
+        }
+        Ok(ToolForcePayload {
+            step: u32_at(b, 0)?,
+            tool: b[4],
+            force: [f64_at(b, 5)?, f64_at(b, 13)?, f64_at(b, 21)?],
+        })
+    }
+}
+
+/// Header of a graphics surface chunk.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SurfaceHeader {
+    /// Graphics frame number (0, 1, ... every graphics interval).
+    pub frame: u32,
+    /// Step whose displacements the chunk carries.
+    pub step: u32,
+    /// Chunk number and chunk count of this board's frame.
+    pub chunk: u8,
+    /// Chunks of this board's frame.
+    pub chunks: u8,
+    /// Entries that follow.
+    pub count: u16,
+}
+
+/// Header length of a surface payload.
+pub const SURFACE_HEADER_LEN: usize = 12;
+/// Length of one surface entry.
+pub const SURFACE_ENTRY_LEN: usize = 16;
+/// Most surface entries in one packet.
+pub const SURFACE_NODES_PER_PACKET_MAX: usize =
+    (PACKET_PAYLOAD_LEN_MAX - SURFACE_HEADER_LEN) / SURFACE_ENTRY_LEN;
+
+impl SurfaceHeader {
+    /// Writes the header; entries follow with [`emit_surface_entry`]. Returns the payload length.
+    pub fn emit(&self, buf: &mut [u8]) -> Result<usize> {
+        put(buf, 0, &self.frame.to_le_bytes())?;
+        put(buf, 4, &self.step.to_le_bytes())?;
+        put(buf, 8, &[self.chunk, self.chunks])?;
+        put(buf, 10, &self.count.to_le_bytes())?;
+        Ok(SURFACE_HEADER_LEN + usize::from(self.count) * SURFACE_ENTRY_LEN)
+    }
+
+    /// Reads the header and checks that exactly `count` entries follow.
+    pub fn parse(b: &[u8]) -> Result<Self> {
+        let (chunk, chunks, count) = match b.get(8..12) {
+            Some(&[c, n, x, y]) => (c, n, u16::from_le_bytes([x, y])),
+            _ => return Err(Error::Truncated),
+        };
+        let need = SURFACE_HEADER_LEN + usize::from(count) * SURFACE_ENTRY_LEN;
+        match b.len() {
+            n if n < need => Err(Error::Truncated),
+            n if n > need => Err(Error::BadLength),
+            _ => Ok(SurfaceHeader {
+                frame: u32_at(b, 0)?,
+                step: u32_at(b, 4)?,
+                chunk,
+                chunks,
+                count,
+            }),
+        }
+    }
+}
+
+/// Writes surface entry `k` (mesh node, displacement as f32).
+pub fn emit_surface_entry(buf: &mut [u8], k: usize, node: u32, u: [f32; 3]) -> Result<()> {
+    let at = SURFACE_HEADER_LEN + k * SURFACE_ENTRY_LEN;
+    put(buf, at, &node.to_le_bytes())?;
+    for i in 0..3 {
+        put(buf, at + 4 + 4 * i, &u[i].to_bits().to_le_bytes())?;
+    }
+    Ok(())
+}
+
+/// Reads surface entry `k` of a payload whose header parsed.
+pub fn surface_entry(b: &[u8], k: usize) -> Result<(u32, [f32; 3])> {
+    let at = SURFACE_HEADER_LEN + k * SURFACE_ENTRY_LEN;
+    Ok((
+        u32_at(b, at)?,
+        [f32_at(b, at + 4)?, f32_at(b, at + 8)?, f32_at(b, at + 12)?],
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn payloads_round_trip_and_refuse_bad_lengths() {
+        let mut buf = [0u8; 256];
+        let b = BoxPayload {
+            step: 7,
+            min: [-1.0, 0.5, 2.0],
+            max: [3.0, 4.0, 5.5],
+        };
+        let n = b.emit(&mut buf).unwrap();
+        assert_eq!(BoxPayload::parse(&buf[..n]).unwrap(), b);
+        assert_eq!(BoxPayload::parse(&buf[..n - 1]), Err(Error::Truncated));
+        let h = NodesHeader {
+            step: 9,
+            last: true,
+            count: 2,
+        };
+        let n = h.emit(&mut buf).unwrap();
+        emit_node_entry(&mut buf, 0, 5, [1.0, 2.0, 3.0]).unwrap();
+        emit_node_entry(&mut buf, 1, 6, [4.0, 5.0, 6.0]).unwrap();
+        assert_eq!(NodesHeader::parse(&buf[..n]).unwrap(), h);
+        assert_eq!(node_entry(&buf[..n], 1).unwrap(), (6, [4.0, 5.0, 6.0]));
+        assert_eq!(NodesHeader::parse(&buf[..n + 1]), Err(Error::BadLength));
+        let t = ToolForcePayload {
+            step: 3,
+            tool: 1,
+            force: [0.1, -0.2, 0.3],
+        };
+        let n = t.emit(&mut buf).unwrap();
+        assert_eq!(ToolForcePayload::parse(&buf[..n]).unwrap(), t);
+        let s = SurfaceHeader {
+            frame: 2,
+            step: 800,
+            chunk: 3,
+            chunks: 20,
+            count: 1,
+        };
+        let n = s.emit(&mut buf).unwrap();
+        emit_surface_entry(&mut buf, 0, 42, [1.5, -2.0, 0.25]).unwrap();
+        assert_eq!(SurfaceHeader::parse(&buf[..n]).unwrap(), s);
+        assert_eq!(surface_entry(&buf[..n], 0).unwrap(), (42, [1.5, -2.0, 0.25]));
+        assert_eq!(SurfaceHeader::parse(&buf[..3]), Err(Error::Truncated));
+    }
+}

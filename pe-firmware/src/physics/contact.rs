@@ -1,0 +1,580 @@
+//! Penalty contact, shared by the serial solver and the board runtime.
+//!
+//! Two kinds, both frictionless:
+//!
+//! - **Rigid tools** (a capsule: the points within `radius_m` of a segment `a–b`) against
+//!   the nodes of a declared tissue surface. A node at `x` inside the capsule by depth
+//!   `p = r − |x − c(x)|` (`c(x)` the closest point of the axis) gets `f = k p n`,
+//!   `n = (x − c)/|x − c|`; the tool takes `−f` (what a haptic device renders).
+//! - **Tissue against tissue**, node to surface as in Székely et al.: the nodes of one
+//!   surface (slave) against the faces of the other (master), then the roles flipped, each
+//!   direction with half the penalty ("flipped and averaged"). A slave node below a master
+//!   triangle's plane by `0 < p ≤ depth_max`, with its projection inside the triangle,
+//!   penetrates it; of all the triangles it penetrates, the shallowest wins (ties: the
+//!   lowest face index), so the answer does not depend on search order. The slave takes
+//!   `F = ½ k p n` and the triangle's nodes `−wᵢ F` (barycentric `wᵢ`, `Σ wᵢ = 1`): each
+//!   contact's forces sum to zero to round-off.
+//!
+//! `k` is the slave node's penalty stiffness, `β m / Δt²` (`m` its inertial mass): the
+//! contact spring raises `(ω Δt)²` by at most `β`, so the explicit step stays stable.
+//!
+//! Everything is `f64` (positions `x = X + u`), whatever the element scalar. The search is
+//! split: [`build_candidates`] every check interval (slave nodes within a margin of a
+//! face's bounding box), [`evaluate_pairs`] every step over the candidates. As long as no
+//! node moves farther than the margin allows between checks (checked every step by
+//! [`check_travel`]), the candidates contain every contact, so the result is independent
+//! of the search, of the partition and of the board the sum runs on. Forces are applied
+//! only to nodes the caller accepts (`apply`): a board applies them to the nodes it owns,
+//! in the same order as the serial solver, so both get the same bits.
+//!
+//! Nothing here panics: indices are checked and problems come back as [`PhysicsError`].
+
+use serde::{Deserialize, Serialize};
+
+use super::explicit::PhysicsError;
+
+pub type V3 = [f64; 3];
+
+/// Most declared contact surfaces (bits of [`ContactNode::surfaces`]).
+pub const SURFACES_MAX: usize = 8;
+
+#[inline]
+fn sub(a: V3, b: V3) -> V3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+#[inline]
+fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+#[inline]
+fn cross(a: V3, b: V3) -> V3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+#[inline]
+fn scale(a: V3, s: f64) -> V3 {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+
+/// A rigid capsule: every point within `radius_m` of the segment `a–b` (m).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Capsule {
+    pub a: V3,
+    pub b: V3,
+    pub radius_m: f64,
+}
+
+impl Capsule {
+    /// The capsule moved by `d`.
+    pub fn translated(&self, d: V3) -> Capsule {
+        Capsule {
+            a: [self.a[0] + d[0], self.a[1] + d[1], self.a[2] + d[2]],
+            b: [self.b[0] + d[0], self.b[1] + d[1], self.b[2] + d[2]],
+            radius_m: self.radius_m,
+        }
+    }
+
+    /// The point of the axis segment closest to `x`: `a + t (b − a)`, `t` clamped to [0, 1].
+    pub fn closest_axis_point(&self, x: V3) -> V3 {
+        let ab = sub(self.b, self.a);
+        let l2 = dot(ab, ab);
+        let t = if l2 > 0.0 {
+            (dot(sub(x, self.a), ab) / l2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        [
+            self.a[0] + t * ab[0],
+            self.a[1] + t * ab[1],
+            self.a[2] + t * ab[2],
+        ]
+    }
+
+    /// Depth `p = r − |x − c| > 0` of a point inside the capsule and the outward unit
+    /// normal; `None` outside (or on the surface). A point exactly on the axis is pushed
+    /// out perpendicular to the axis, along the coordinate direction the axis leans on least.
+    pub fn penetration(&self, x: V3) -> Option<(f64, V3)> {
+        let c = self.closest_axis_point(x);
+        let d = sub(x, c);
+        let dist = libm::sqrt(dot(d, d));
+        let depth = self.radius_m - dist;
+        if !(depth > 0.0) {
+            return None;
+        }
+        let n = if dist > 1e-300 {
+            scale(d, 1.0 / dist)
+        } else {
+            let ab = sub(self.b, self.a);
+            let k = (0..3)
+                .min_by(|&i, &j| libm::fabs(ab[i]).total_cmp(&libm::fabs(ab[j])))
+                .unwrap_or(0);
+            let mut e = [0.0; 3];
+            e[k] = 1.0;
+            let p = cross(ab, e);
+            let l = libm::sqrt(dot(p, p));
+            if l > 0.0 {
+                scale(p, 1.0 / l)
+            } else {
+                [0.0, 0.0, 1.0]
+            }
+        };
+        Some((depth, n))
+    }
+
+    /// Axis-aligned bounding box.
+    pub fn bounds(&self) -> [V3; 2] {
+        let r = self.radius_m;
+        [
+            core::array::from_fn(|i| self.a[i].min(self.b[i]) - r),
+            core::array::from_fn(|i| self.a[i].max(self.b[i]) + r),
+        ]
+    }
+}
+
+/// A slave node's penetration into a master face.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FacePenetration {
+    /// Depth below the face (m), `> 0`.
+    pub depth_m: f64,
+    /// Outward unit normal of the master triangle.
+    pub normal: V3,
+    /// Barycentric weights on the quad's four nodes (one is zero), summing to 1.
+    pub weights: [f64; 4],
+}
+
+/// Penetration of point `x` into the triangle `t` (outward normal `(t1 − t0) × (t2 − t0)`)
+/// if `0 < depth ≤ depth_max` and its projection lies inside (edges included).
+fn triangle_penetration(x: V3, t: [V3; 3], depth_max: f64) -> Option<(f64, V3, [f64; 3])> {
+    let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
+    let n2 = dot(n, n);
+    if !(n2 > 0.0) {
+        return None;
+    }
+    let inv = 1.0 / libm::sqrt(n2);
+    let nh = scale(n, inv);
+    let g = dot(sub(x, t[0]), nh);
+    if !(g < 0.0) || -g > depth_max {
+        return None;
+    }
+    // Signed sub-areas: the projection's offset along n drops out of (tⱼ − x)×(tₖ − x)·n.
+    let (a, b, c) = (sub(t[0], x), sub(t[1], x), sub(t[2], x));
+    let w0 = dot(cross(b, c), n) / n2;
+    let w1 = dot(cross(c, a), n) / n2;
+    let w2 = 1.0 - w0 - w1;
+    if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
+        return None;
+    }
+    Some((-g, nh, [w0, w1, w2]))
+}
+
+/// Penetration of `x` into the quad `q` (split along the diagonal 0–2 into triangles
+/// (0,1,2) and (0,2,3), nodes ordered counter-clockwise seen from outside): the shallower
+/// of the two triangles it penetrates.
+pub fn quad_penetration(x: V3, q: &[V3; 4], depth_max: f64) -> Option<FacePenetration> {
+    let t1 = triangle_penetration(x, [q[0], q[1], q[2]], depth_max).map(|(d, n, w)| {
+        FacePenetration {
+            depth_m: d,
+            normal: n,
+            weights: [w[0], w[1], w[2], 0.0],
+        }
+    });
+    let t2 = triangle_penetration(x, [q[0], q[2], q[3]], depth_max).map(|(d, n, w)| {
+        FacePenetration {
+            depth_m: d,
+            normal: n,
+            weights: [w[0], 0.0, w[1], w[2]],
+        }
+    });
+    match (t1, t2) {
+        (Some(a), Some(b)) => Some(if b.depth_m < a.depth_m { b } else { a }),
+        (a, b) => a.or(b),
+    }
+}
+
+/// A node of a contact surface (the table is the same on every board).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ContactNode {
+    /// Index of the node in the scene's mesh.
+    pub global: u32,
+    /// Initial position (m).
+    pub reference: V3,
+    /// Penalty stiffness `β m_inertial / Δt²` when this node is the slave (N/m).
+    pub penalty_n_per_m: f64,
+    /// Bit `s` set: the node belongs to surface `s`.
+    pub surfaces: u8,
+}
+
+/// A face of a contact surface: four contact-node indices, counter-clockwise seen from
+/// outside the body it bounds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ContactFace {
+    pub nodes: [u32; 4],
+    pub surface: u8,
+}
+
+/// Two surfaces that may touch; each is slave against the other's faces.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ContactPair {
+    pub a: u8,
+    pub b: u8,
+    /// Deepest penetration still taken as contact (m): below it a node is taken to be on
+    /// the far side of a thin master, not in it. Less than half the master's thickness.
+    pub depth_max_m: f64,
+}
+
+/// A rigid tool: a capsule (at time 0) moved by a displacement path, touching the nodes of
+/// one surface.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Tool {
+    pub capsule: Capsule,
+    /// Index of the displacement path (in the path table) the tool follows.
+    pub path: u16,
+    pub surface: u8,
+}
+
+/// A candidate of the search: slave node against master face, in direction
+/// `2 · pair + (0: a's nodes on b's faces, 1: b's nodes on a's faces)`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Candidate {
+    pub direction: u16,
+    pub slave: u32,
+    pub face: u32,
+}
+
+/// What a step of contact found (for reports and checkers).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ContactStats {
+    /// Active node-face and node-tool contacts applied.
+    pub active: u32,
+    /// Deepest penetration among the applied contacts (m).
+    pub max_depth_m: f64,
+    /// Per pair: the sum of all forces of its contacts (zero to round-off), and the sum
+    /// of their magnitudes (the scale).
+    pub pair_sum_n: [V3; SURFACES_MAX],
+    pub pair_magnitude_n: [f64; SURFACES_MAX],
+}
+
+/// The contact problem: tables shared by every board.
+#[derive(Clone, Copy, Debug)]
+pub struct ContactModel<'a> {
+    pub nodes: &'a [ContactNode],
+    pub faces: &'a [ContactFace],
+    pub pairs: &'a [ContactPair],
+    pub tools: &'a [Tool],
+}
+
+fn bad(index: usize) -> PhysicsError {
+    PhysicsError::BadContactIndex {
+        index: index as u32,
+    }
+}
+
+impl ContactModel<'_> {
+    /// Master and slave surfaces of a direction.
+    fn roles(&self, direction: usize) -> Option<(u8, u8, f64)> {
+        let p = self.pairs.get(direction / 2)?;
+        Some(if direction % 2 == 0 {
+            (p.a, p.b, p.depth_max_m)
+        } else {
+            (p.b, p.a, p.depth_max_m)
+        })
+    }
+
+    fn face_points(
+        &self,
+        f: usize,
+        pos: &impl Fn(usize) -> Option<V3>,
+    ) -> Result<Option<[V3; 4]>, PhysicsError> {
+        let face = self.faces.get(f).ok_or(bad(f))?;
+        let mut q = [[0.0; 3]; 4];
+        for (k, &c) in face.nodes.iter().enumerate() {
+            if c as usize >= self.nodes.len() {
+                return Err(bad(c as usize));
+            }
+            match pos(c as usize) {
+                Some(x) => q[k] = x,
+                None => return Ok(None),
+            }
+        }
+        Ok(Some(q))
+    }
+}
+
+/// Finds the candidates: for every pair, both directions, every slave node whose position
+/// is known (ascending), every master face whose nodes are all known (ascending) and whose
+/// bounding box, grown by `margin_m`, holds the node. A face that shares a node with the
+/// slave is skipped. Writes them to `out` in that order; returns how many, or
+/// `Err(needed)` if `out` is too small.
+pub fn build_candidates(
+    m: &ContactModel<'_>,
+    pos: impl Fn(usize) -> Option<V3>,
+    margin_m: f64,
+    out: &mut [Candidate],
+) -> Result<usize, usize> {
+    let mut n = 0usize;
+    let mut needed = 0usize;
+    for direction in 0..2 * m.pairs.len() {
+        let Some((slave, master, _)) = m.roles(direction) else {
+            continue;
+        };
+        for (s, node) in m.nodes.iter().enumerate() {
+            if node.surfaces & (1 << slave) == 0 {
+                continue;
+            }
+            let Some(x) = pos(s) else { continue };
+            for (f, face) in m.faces.iter().enumerate() {
+                if face.surface != master || face.nodes.contains(&(s as u32)) {
+                    continue;
+                }
+                let Ok(Some(q)) = m.face_points(f, &pos) else {
+                    continue;
+                };
+                let inside = (0..3).all(|i| {
+                    let lo = q.iter().map(|p| p[i]).fold(f64::INFINITY, f64::min);
+                    let hi = q.iter().map(|p| p[i]).fold(f64::NEG_INFINITY, f64::max);
+                    x[i] >= lo - margin_m && x[i] <= hi + margin_m
+                });
+                if inside {
+                    needed += 1;
+                    if let Some(c) = out.get_mut(n) {
+                        *c = Candidate {
+                            direction: direction as u16,
+                            slave: s as u32,
+                            face: f as u32,
+                        };
+                        n += 1;
+                    }
+                }
+            }
+        }
+    }
+    if needed > n {
+        Err(needed)
+    } else {
+        Ok(n)
+    }
+}
+
+/// Node-to-surface forces over `candidates` (in [`build_candidates`] order): for each
+/// slave, the winning face; `F = ½ k p n` on the slave and `−wᵢ F` on the face's nodes,
+/// added to `force[c]` for the contact nodes with `apply(c)`. A slave or face whose
+/// positions are unknown is skipped (the caller's search guarantees that those never
+/// matter for the nodes it applies). `tolerance_m`: a penetration deeper than this on an
+/// applied slave node is an error (the penalty is too soft for the load).
+pub fn evaluate_pairs(
+    m: &ContactModel<'_>,
+    candidates: &[Candidate],
+    pos: impl Fn(usize) -> Option<V3>,
+    apply: impl Fn(usize) -> bool,
+    tolerance_m: f64,
+    force: &mut [V3],
+    stats: &mut ContactStats,
+) -> Result<(), PhysicsError> {
+    let mut i = 0;
+    while i < candidates.len() {
+        let (direction, slave) = (candidates[i].direction, candidates[i].slave);
+        let mut j = i;
+        while j < candidates.len()
+            && candidates[j].direction == direction
+            && candidates[j].slave == slave
+        {
+            j += 1;
+        }
+        let group = &candidates[i..j];
+        i = j;
+        let s = slave as usize;
+        let (_, _, depth_max) = m.roles(direction as usize).ok_or(bad(direction as usize))?;
+        let node = m.nodes.get(s).ok_or(bad(s))?;
+        let Some(x) = pos(s) else { continue };
+        let mut best: Option<(usize, FacePenetration)> = None;
+        for c in group {
+            let Some(q) = m.face_points(c.face as usize, &pos)? else {
+                continue;
+            };
+            if let Some(p) = quad_penetration(x, &q, depth_max) {
+                if best.is_none_or(|(_, b)| p.depth_m < b.depth_m) {
+                    best = Some((c.face as usize, p));
+                }
+            }
+        }
+        let Some((f, p)) = best else { continue };
+        let face_nodes = m.faces[f].nodes;
+        let applied_here = apply(s) || face_nodes.iter().any(|&c| apply(c as usize));
+        if !applied_here {
+            continue;
+        }
+        let mag = 0.5 * node.penalty_n_per_m * p.depth_m;
+        let fs = scale(p.normal, mag);
+        if apply(s) {
+            if p.depth_m > tolerance_m {
+                return Err(PhysicsError::Penetration {
+                    node: node.global,
+                    depth_m: p.depth_m,
+                    tolerance_m,
+                });
+            }
+            let t = force.get_mut(s).ok_or(bad(s))?;
+            for k in 0..3 {
+                t[k] += fs[k];
+            }
+        }
+        let pair = (direction / 2) as usize;
+        let mut sum = fs;
+        for (w, &c) in p.weights.iter().zip(&face_nodes) {
+            let fm = scale(fs, -w);
+            for k in 0..3 {
+                sum[k] += fm[k];
+            }
+            if apply(c as usize) {
+                let t = force.get_mut(c as usize).ok_or(bad(c as usize))?;
+                for k in 0..3 {
+                    t[k] += fm[k];
+                }
+            }
+        }
+        stats.active += 1;
+        stats.max_depth_m = stats.max_depth_m.max(p.depth_m);
+        if pair < SURFACES_MAX {
+            for k in 0..3 {
+                stats.pair_sum_n[pair][k] += sum[k];
+            }
+            stats.pair_magnitude_n[pair] += 2.0 * mag;
+        }
+    }
+    Ok(())
+}
+
+/// Tool forces: every node of tool `t`'s surface with `apply(c)` (ascending) inside the
+/// tool's capsule at its current place `capsules[t]` gets `k p n`; `tool_force[t]` takes
+/// the sum of `−k p n` (the force of the tissue on the tool).
+pub fn evaluate_tools(
+    m: &ContactModel<'_>,
+    capsules: &[Capsule],
+    pos: impl Fn(usize) -> Option<V3>,
+    apply: impl Fn(usize) -> bool,
+    tolerance_m: f64,
+    force: &mut [V3],
+    tool_force: &mut [V3],
+    stats: &mut ContactStats,
+) -> Result<(), PhysicsError> {
+    for (t, tool) in m.tools.iter().enumerate() {
+        let cap = capsules.get(t).ok_or(bad(t))?;
+        let b = cap.bounds();
+        for (c, node) in m.nodes.iter().enumerate() {
+            if node.surfaces & (1 << tool.surface) == 0 || !apply(c) {
+                continue;
+            }
+            let Some(x) = pos(c) else { continue };
+            if (0..3).any(|i| x[i] < b[0][i] || x[i] > b[1][i]) {
+                continue;
+            }
+            if let Some((depth, n)) = cap.penetration(x) {
+                if depth > tolerance_m {
+                    return Err(PhysicsError::Penetration {
+                        node: node.global,
+                        depth_m: depth,
+                        tolerance_m,
+                    });
+                }
+                let f = scale(n, node.penalty_n_per_m * depth);
+                let dst = force.get_mut(c).ok_or(bad(c))?;
+                let tf = tool_force.get_mut(t).ok_or(bad(t))?;
+                for k in 0..3 {
+                    dst[k] += f[k];
+                    tf[k] -= f[k];
+                }
+                stats.active += 1;
+                stats.max_depth_m = stats.max_depth_m.max(depth);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The speed bound behind the search interval: no node of a pair surface with `apply(c)`
+/// may have moved farther than `travel_max_m` from where it was at the last check
+/// (`at_check`). A faster node could reach a face the search did not list, so a violation
+/// is an error naming the node.
+pub fn check_travel(
+    m: &ContactModel<'_>,
+    pos: impl Fn(usize) -> Option<V3>,
+    at_check: &[V3],
+    apply: impl Fn(usize) -> bool,
+    pair_surfaces: u8,
+    travel_max_m: f64,
+) -> Result<(), PhysicsError> {
+    let lim2 = travel_max_m * travel_max_m;
+    for (c, node) in m.nodes.iter().enumerate() {
+        if node.surfaces & pair_surfaces == 0 || !apply(c) {
+            continue;
+        }
+        let (Some(x), Some(x0)) = (pos(c), at_check.get(c)) else {
+            continue;
+        };
+        let d = sub(x, *x0);
+        let d2 = dot(d, d);
+        if !(d2 <= lim2) {
+            return Err(PhysicsError::ContactSpeedBound {
+                node: node.global,
+                moved_m: libm::sqrt(d2),
+                allowed_m: travel_max_m,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Bit mask of the surfaces that take part in some pair.
+pub fn pair_surface_mask(pairs: &[ContactPair]) -> u8 {
+    pairs.iter().fold(0u8, |m, p| {
+        m | 1u8.checked_shl(p.a as u32).unwrap_or(0) | 1u8.checked_shl(p.b as u32).unwrap_or(0)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn capsule_depth_and_normal_match_the_geometry() {
+        let c = Capsule {
+            a: [0.0, 0.0, 0.0],
+            b: [0.0, 0.0, 1.0],
+            radius_m: 0.1,
+        };
+        // 0.04 from the axis beside the segment: depth 0.06, normal +x.
+        let (d, n) = c.penetration([0.04, 0.0, 0.5]).expect("inside");
+        assert!((d - 0.06).abs() < 1e-15 && (n[0] - 1.0).abs() < 1e-15);
+        // Beyond the end cap: distance to the end point.
+        let (d, n) = c.penetration([0.0, 0.0, 1.05]).expect("inside the cap");
+        assert!((d - 0.05).abs() < 1e-15 && (n[2] - 1.0).abs() < 1e-15);
+        assert!(c.penetration([0.2, 0.0, 0.5]).is_none());
+        // On the axis: pushed out perpendicular to it.
+        let (_, n) = c.penetration([0.0, 0.0, 0.5]).expect("on the axis");
+        assert!(n[2].abs() < 1e-15 && (dot(n, n) - 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn quad_penetration_weights_reproduce_the_projection() {
+        // Unit square in z = 0, outward +z; a point 0.01 below at (0.3, 0.6).
+        let q = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ];
+        let p = quad_penetration([0.3, 0.6, -0.01], &q, 0.1).expect("penetrates");
+        assert!((p.depth_m - 0.01).abs() < 1e-15);
+        assert!((p.normal[2] - 1.0).abs() < 1e-15);
+        let proj: V3 = core::array::from_fn(|i| (0..4).map(|k| p.weights[k] * q[k][i]).sum());
+        assert!((proj[0] - 0.3).abs() < 1e-15 && (proj[1] - 0.6).abs() < 1e-15);
+        assert!((p.weights.iter().sum::<f64>() - 1.0).abs() < 1e-15);
+        // Above the face, too deep, or outside the face: no contact.
+        assert!(quad_penetration([0.3, 0.6, 0.01], &q, 0.1).is_none());
+        assert!(quad_penetration([0.3, 0.6, -0.2], &q, 0.1).is_none());
+        assert!(quad_penetration([1.3, 0.6, -0.01], &q, 0.1).is_none());
+    }
+}
