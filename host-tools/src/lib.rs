@@ -13,6 +13,7 @@ pub mod mesh_io;
 pub mod output;
 pub mod partition;
 pub mod problem;
+pub mod render;
 pub mod scene;
 pub mod scene_mesh;
 pub mod solver;

@@ -854,7 +854,7 @@ pub fn plot(rows: &[Row], path: &Path, title: &str) -> Result<()> {
 }
 
 /// DejaVu Sans (from the `dejavu` crate) as plotters' "sans-serif": no system fonts needed.
-fn register_font() {
+pub(crate) fn register_font() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
         let _ = plotters::style::register_font(

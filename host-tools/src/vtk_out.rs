@@ -277,3 +277,320 @@ fn write_vectors(s: &mut String, name: &str, v: &[[f64; 3]]) {
     }
     s.push_str("        </DataArray>\n");
 }
+
+/// ParaView series of a surface (quads): `DIR/surface_NNNNN.vtu` + `DIR/series.pvd`.
+///
+/// Each frame holds the deformed points (reference + displacement), the quads
+/// (`VTK_QUAD` = 9), the point vector "displacement", the cell data "group" and the time as
+/// field data "TimeValue". Existing files of those names in `DIR` are overwritten.
+#[derive(Debug)]
+pub struct SurfaceSeriesWriter {
+    dir: PathBuf,
+    reference: Vec<[f64; 3]>,
+    /// Connectivity, offsets, types and group sections, the same in every frame.
+    cells_xml: String,
+    n_cells: usize,
+    frames: Vec<(f64, String)>,
+}
+
+impl SurfaceSeriesWriter {
+    /// `reference`: initial positions of the surface's nodes (surface-local numbering), `quads` in that numbering.
+    ///
+    /// Creates `dir` (and parents) if needed. The reference positions must be finite, every
+    /// quad index must be below `reference.len()` and there must be one group per quad.
+    pub fn new(
+        dir: &Path,
+        reference: Vec<[f64; 3]>,
+        quads: Vec<[u32; 4]>,
+        quad_groups: Vec<u8>,
+    ) -> Result<Self, MeshError> {
+        if quad_groups.len() != quads.len() {
+            return Err(MeshError::LengthMismatch {
+                path: dir.to_path_buf(),
+                what: "quad_groups".into(),
+                expected: quads.len(),
+                got: quad_groups.len(),
+            });
+        }
+        for (i, p) in reference.iter().enumerate() {
+            if !p.iter().all(|x| x.is_finite()) {
+                return Err(MeshError::NonFiniteCoordinate {
+                    path: dir.to_path_buf(),
+                    node: i as u64,
+                    coords: *p,
+                });
+            }
+        }
+        for (c, q) in quads.iter().enumerate() {
+            if let Some(&index) = q.iter().find(|&&i| i as usize >= reference.len()) {
+                return Err(MeshError::NodeIndexOutOfRange {
+                    path: dir.to_path_buf(),
+                    cell: c,
+                    index,
+                    nodes: reference.len(),
+                });
+            }
+        }
+        fs::create_dir_all(dir).map_err(io_err(dir))?;
+        let mut c = String::new();
+        let _ = writeln!(c, "      <Cells>");
+        let _ = writeln!(
+            c,
+            "        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">"
+        );
+        for q in &quads {
+            let _ = writeln!(c, "          {} {} {} {}", q[0], q[1], q[2], q[3]);
+        }
+        let _ = writeln!(c, "        </DataArray>");
+        let _ = writeln!(
+            c,
+            "        <DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">"
+        );
+        for chunk in (1..=quads.len()).collect::<Vec<_>>().chunks(16) {
+            let line: Vec<String> = chunk.iter().map(|i| (4 * i).to_string()).collect();
+            let _ = writeln!(c, "          {}", line.join(" "));
+        }
+        let _ = writeln!(c, "        </DataArray>");
+        let _ = writeln!(
+            c,
+            "        <DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">"
+        );
+        for chunk in quads.chunks(32) {
+            let line = vec!["9"; chunk.len()];
+            let _ = writeln!(c, "          {}", line.join(" "));
+        }
+        let _ = writeln!(c, "        </DataArray>");
+        let _ = writeln!(c, "      </Cells>");
+        let _ = writeln!(c, "      <CellData Scalars=\"group\">");
+        let _ = writeln!(
+            c,
+            "        <DataArray type=\"Int32\" Name=\"group\" format=\"ascii\">"
+        );
+        for chunk in quad_groups.chunks(32) {
+            let line: Vec<String> = chunk.iter().map(|g| g.to_string()).collect();
+            let _ = writeln!(c, "          {}", line.join(" "));
+        }
+        let _ = writeln!(c, "        </DataArray>");
+        let _ = writeln!(c, "      </CellData>");
+        Ok(SurfaceSeriesWriter {
+            dir: dir.to_path_buf(),
+            reference,
+            cells_xml: c,
+            n_cells: quads.len(),
+            frames: Vec::new(),
+        })
+    }
+
+    /// Number of frames written so far.
+    pub fn frame_count(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// One frame: displacement per surface node (same numbering), time in s.
+    pub fn write_frame(&mut self, time_s: f64, displacement: &[[f64; 3]]) -> Result<(), MeshError> {
+        let name = format!("surface_{:05}.vtu", self.frames.len());
+        let path = self.dir.join(&name);
+        let n = self.reference.len();
+        if displacement.len() != n {
+            return Err(MeshError::LengthMismatch {
+                path,
+                what: "displacement".into(),
+                expected: n,
+                got: displacement.len(),
+            });
+        }
+        if !time_s.is_finite() {
+            return Err(MeshError::InvalidInput {
+                path,
+                msg: format!("frame time {time_s} is not finite"),
+            });
+        }
+        let mut s = String::with_capacity(128 * n + self.cells_xml.len() + 1024);
+        s.push_str("<?xml version=\"1.0\"?>\n");
+        s.push_str(
+            "<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n",
+        );
+        s.push_str("  <UnstructuredGrid>\n");
+        s.push_str("    <FieldData>\n");
+        s.push_str(
+            "      <DataArray type=\"Float64\" Name=\"TimeValue\" NumberOfTuples=\"1\" \
+             format=\"ascii\">\n        ",
+        );
+        num(&mut s, time_s);
+        s.push_str("\n      </DataArray>\n    </FieldData>\n");
+        let _ = writeln!(
+            s,
+            "    <Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{}\">",
+            self.n_cells
+        );
+        s.push_str("      <Points>\n");
+        s.push_str(
+            "        <DataArray type=\"Float64\" Name=\"Points\" NumberOfComponents=\"3\" \
+             format=\"ascii\">\n",
+        );
+        for (p, u) in self.reference.iter().zip(displacement) {
+            vec3_line(&mut s, [p[0] + u[0], p[1] + u[1], p[2] + u[2]]);
+        }
+        s.push_str("        </DataArray>\n      </Points>\n");
+        s.push_str(&self.cells_xml);
+        s.push_str("      <PointData Vectors=\"displacement\">\n");
+        write_vectors(&mut s, "displacement", displacement);
+        s.push_str("      </PointData>\n");
+        s.push_str("    </Piece>\n  </UnstructuredGrid>\n</VTKFile>\n");
+        fs::write(&path, s).map_err(io_err(&path))?;
+        self.frames.push((time_s, name));
+        Ok(())
+    }
+
+    /// Write (or rewrite) `DIR/series.pvd` listing the frames written so far; returns its
+    /// path.
+    pub fn write_pvd(&self) -> Result<PathBuf, MeshError> {
+        let path = self.dir.join("series.pvd");
+        let mut s = String::new();
+        s.push_str("<?xml version=\"1.0\"?>\n");
+        s.push_str("<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n");
+        s.push_str("  <Collection>\n");
+        for (t, file) in &self.frames {
+            s.push_str("    <DataSet timestep=\"");
+            num(&mut s, *t);
+            let _ = writeln!(s, "\" group=\"\" part=\"0\" file=\"{}\"/>", xml_attr(file));
+        }
+        s.push_str("  </Collection>\n</VTKFile>\n");
+        fs::write(&path, s).map_err(io_err(&path))?;
+        Ok(path)
+    }
+
+    /// Writes series.pvd, returns its path.
+    pub fn finish(self) -> Result<PathBuf, MeshError> {
+        self.write_pvd()
+    }
+}
+
+#[cfg(test)]
+mod surface_series_tests {
+    use super::*;
+    use crate::mesh::HEX_FACES;
+
+    fn temp_dir(tag: &str) -> PathBuf {
+        static N: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let k = N.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        std::env::temp_dir().join(format!("pe-vtk-{tag}-{}-{k}", std::process::id()))
+    }
+
+    fn cube() -> (Vec<[f64; 3]>, Vec<[u32; 4]>) {
+        let nodes = vec![
+            [0.0, 0.0, 0.0],
+            [0.01, 0.0, 0.0],
+            [0.01, 0.01, 0.0],
+            [0.0, 0.01, 0.0],
+            [0.0, 0.0, 0.01],
+            [0.01, 0.0, 0.01],
+            [0.01, 0.01, 0.01],
+            [0.0, 0.01, 0.01],
+        ];
+        let quads = HEX_FACES
+            .iter()
+            .map(|f| [f[0] as u32, f[1] as u32, f[2] as u32, f[3] as u32])
+            .collect();
+        (nodes, quads)
+    }
+
+    /// Two frames of a cube's surface read back with vtkio: 8 points, 6 quads, the groups,
+    /// and the second frame's points are reference + displacement.
+    #[test]
+    fn surface_series_round_trip() {
+        use vtkio::model::{Attribute, CellType, DataSet, Piece};
+
+        let (nodes, quads) = cube();
+        let groups = vec![0u8, 0, 1, 1, 2, 7];
+        let dir = temp_dir("surface");
+        let mut w =
+            SurfaceSeriesWriter::new(&dir, nodes.clone(), quads.clone(), groups.clone()).unwrap();
+        let zero = vec![[0.0; 3]; 8];
+        let u: Vec<[f64; 3]> = nodes
+            .iter()
+            .enumerate()
+            .map(|(i, p)| [0.1 * p[2], -1e-4 * i as f64, 3e-5])
+            .collect();
+        w.write_frame(0.0, &zero).unwrap();
+        w.write_frame(0.002, &u).unwrap();
+        assert_eq!(w.frame_count(), 2);
+
+        let vtk = vtkio::Vtk::import(dir.join("surface_00001.vtu")).unwrap();
+        let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
+            panic!("not an unstructured grid")
+        };
+        let Some(Piece::Inline(p)) = pieces.into_iter().next() else {
+            panic!("no inline piece")
+        };
+        let pts = p.points.cast_into::<f64>().unwrap();
+        assert_eq!(pts.len(), 3 * 8, "8 points");
+        for (i, (x, d)) in nodes.iter().zip(&u).enumerate() {
+            for k in 0..3 {
+                assert!((pts[3 * i + k] - (x[k] + d[k])).abs() <= 1e-12, "point {i}");
+            }
+        }
+        assert_eq!(p.cells.types.len(), 6, "6 cells");
+        assert!(p.cells.types.iter().all(|&t| t == CellType::Quad));
+        let (conn, offsets) = p.cells.cell_verts.into_xml();
+        let expect: Vec<u64> = quads.iter().flatten().map(|&i| i as u64).collect();
+        assert_eq!(conn, expect);
+        assert_eq!(offsets, [4, 8, 12, 16, 20, 24]);
+        let group = p
+            .data
+            .cell
+            .iter()
+            .find_map(|a| match a {
+                Attribute::DataArray(d) if d.name == "group" => Some(d.data.clone()),
+                _ => None,
+            })
+            .expect("cell data group");
+        let want: Vec<i32> = groups.iter().map(|&g| g as i32).collect();
+        assert_eq!(group.cast_into::<i32>().unwrap(), want);
+        let disp = match &p.data.point[0] {
+            Attribute::DataArray(d) if d.name == "displacement" => {
+                d.data.clone().cast_into::<f64>().unwrap()
+            }
+            _ => panic!("displacement is not the first point data array"),
+        };
+        assert_eq!(disp, u.iter().flatten().copied().collect::<Vec<f64>>());
+
+        let pvd = w.finish().unwrap();
+        assert_eq!(pvd, dir.join("series.pvd"));
+        let text = fs::read_to_string(&pvd).unwrap();
+        assert!(text.contains("file=\"surface_00000.vtu\""), "{text}");
+        assert!(
+            text.contains("timestep=\"2e-3\" group=\"\" part=\"0\" file=\"surface_00001.vtu\""),
+            "{text}"
+        );
+        let _ = fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn surface_series_rejects_bad_input() {
+        let (nodes, quads) = cube();
+        let dir = temp_dir("surface-bad");
+        let e = SurfaceSeriesWriter::new(&dir, nodes.clone(), quads.clone(), vec![0; 5]);
+        assert!(matches!(e, Err(MeshError::LengthMismatch { .. })), "{e:?}");
+        let mut q = quads.clone();
+        q[3][2] = 8;
+        let e = SurfaceSeriesWriter::new(&dir, nodes.clone(), q, vec![0; 6]);
+        assert!(
+            matches!(
+                e,
+                Err(MeshError::NodeIndexOutOfRange {
+                    cell: 3,
+                    index: 8,
+                    ..
+                })
+            ),
+            "{e:?}"
+        );
+        let mut w = SurfaceSeriesWriter::new(&dir, nodes, quads, vec![0; 6]).unwrap();
+        let e = w.write_frame(0.0, &[[0.0; 3]; 7]).unwrap_err();
+        assert!(e.to_string().contains("surface_00000.vtu"), "{e}");
+        assert!(w.write_frame(f64::NAN, &[[0.0; 3]; 8]).is_err());
+        assert_eq!(w.frame_count(), 0);
+        let _ = fs::remove_dir_all(&dir);
+    }
+}
