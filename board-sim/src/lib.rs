@@ -14,9 +14,13 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, bail, Context, Result};
 use host_tools::compile::{image_file_name, read_manifest, Manifest};
 use link_proto::Links;
+use pe_firmware::image::{ContactFace, ContactNode, ContactNodePlace};
 use pe_firmware::image::{ImageReader, Integration, Precision, RecvEntry};
+use pe_firmware::physics::contact::Candidate;
 use pe_firmware::physics::{HexElement, HexFull, HexReduced, MaterialLaw};
-use pe_firmware::runtime::{Fault, LinkStats, Runtime, RuntimeConfig, Storage, WireReal};
+use pe_firmware::runtime::{
+    ContactStorage, Fault, GlobalStats, LinkStats, Runtime, RuntimeConfig, Storage, WireReal,
+};
 use serde::de::DeserializeOwned;
 
 use links::{build_links, FaultSpec, FaultyLinks, Injected, ThreadEnv};
@@ -55,6 +59,15 @@ pub struct BoardResult {
     pub frames_sent: [u64; 6],
     pub bytes_sent: [u64; 6],
     pub wait_s: f64,
+    /// Global-network traffic (contact exchange, graphics, tool forces).
+    #[serde(skip)]
+    pub global: GlobalStats,
+    pub global_packets: u64,
+    pub global_bytes: u64,
+    pub contact_vectors: u64,
+    pub graphics_bytes: u64,
+    pub contact_checks: u64,
+    pub candidates_max: u32,
 }
 
 /// What a run produced.
@@ -71,6 +84,78 @@ pub struct SimOutput {
     pub reaction_fixed: [f64; 3],
     pub kinetic_energy: f64,
     pub injected: Vec<Injected>,
+    /// What the graphics engine received: one frame per graphics interval.
+    pub graphics: Vec<GraphicsFrame>,
+    /// Per step, the force on each tool as the host summed it from the boards' shares (N).
+    pub tool_force: Vec<[f64; 3]>,
+    pub tools: usize,
+    pub dt_s: f64,
+}
+
+/// A surface frame as the graphics engine assembled it from the boards' chunks.
+#[derive(Clone, Debug)]
+pub struct GraphicsFrame {
+    pub frame: u32,
+    /// First and last step of the chunks.
+    pub steps: (u32, u32),
+    /// (mesh node, displacement) of every surface node received, ascending node.
+    pub nodes: Vec<(u32, [f32; 3])>,
+    /// Chunks received.
+    pub packets: u32,
+}
+
+/// The sinks' packets turned into frames and per-step tool forces (summed in board order).
+fn collect_sinks(
+    net: &links::GlobalNet,
+    steps: u64,
+    tools: usize,
+) -> Result<(Vec<GraphicsFrame>, Vec<[f64; 3]>)> {
+    use link_proto::payload::{surface_entry, SurfaceHeader, ToolForcePayload};
+    let mut frames: std::collections::BTreeMap<u32, GraphicsFrame> = Default::default();
+    let graphics = net.graphics.lock().map(|v| v.clone()).unwrap_or_default();
+    for p in &graphics {
+        let r = link_proto::PacketRepr::parse_bytes(p)
+            .map_err(|e| anyhow!("graphics engine: bad packet: {e}"))?;
+        let h = SurfaceHeader::parse(r.payload)
+            .map_err(|e| anyhow!("graphics engine: bad surface payload from {}: {e}", r.src))?;
+        let f = frames.entry(h.frame).or_insert_with(|| GraphicsFrame {
+            frame: h.frame,
+            steps: (h.step, h.step),
+            nodes: Vec::new(),
+            packets: 0,
+        });
+        f.steps = (f.steps.0.min(h.step), f.steps.1.max(h.step));
+        f.packets += 1;
+        for k in 0..h.count as usize {
+            f.nodes.push(
+                surface_entry(r.payload, k)
+                    .map_err(|e| anyhow!("graphics engine: bad surface entry: {e}"))?,
+            );
+        }
+    }
+    let mut out: Vec<GraphicsFrame> = frames.into_values().collect();
+    for f in &mut out {
+        f.nodes.sort_by_key(|e| e.0);
+    }
+    let mut shares: Vec<(u32, u8, u8, [f64; 3])> = Vec::new();
+    let host = net.host.lock().map(|v| v.clone()).unwrap_or_default();
+    for p in &host {
+        let r =
+            link_proto::PacketRepr::parse_bytes(p).map_err(|e| anyhow!("host: bad packet: {e}"))?;
+        let t = ToolForcePayload::parse(r.payload)
+            .map_err(|e| anyhow!("host: bad tool-force payload from {}: {e}", r.src))?;
+        shares.push((t.step, t.tool, r.src, t.force));
+    }
+    shares.sort_by_key(|a| (a.0, a.1, a.2));
+    let mut tool_force = vec![[0.0; 3]; steps as usize * tools];
+    for (step, tool, _, f) in shares {
+        if let Some(d) = tool_force.get_mut(step as usize * tools + tool as usize) {
+            for i in 0..3 {
+                d[i] += f[i];
+            }
+        }
+    }
+    Ok((out, tool_force))
 }
 
 /// A run that stopped on a fault: the faults reported (root cause first) and what was
@@ -118,6 +203,82 @@ struct OwnedStorage<T, E> {
     recvs: Vec<RecvEntry>,
     path_points: Vec<pe_firmware::image::PathPoint>,
     loads: Vec<pe_firmware::image::LoadRecord>,
+    contact: OwnedContact,
+}
+
+/// Contact storage for one board on the host: exact sizes from the image, generous
+/// candidate and send-list room (they depend on the motion).
+struct OwnedContact {
+    nodes: Vec<ContactNode>,
+    places: Vec<ContactNodePlace>,
+    faces: Vec<ContactFace>,
+    at_check: Vec<[f64; 3]>,
+    force: Vec<[f64; 3]>,
+    remote_u: Vec<[f64; 3]>,
+    remote_stamp: Vec<u32>,
+    candidates: Vec<Candidate>,
+    send_list: Vec<u32>,
+    contact_of: Vec<u32>,
+    graphics: Vec<u16>,
+}
+
+impl OwnedContact {
+    fn new(c: &pe_firmware::image::Counts) -> Self {
+        let nc = c.contact_nodes as usize;
+        let zero = ContactNode {
+            global: 0,
+            reference: [0.0; 3],
+            penalty_n_per_m: 0.0,
+            surfaces: 0,
+        };
+        OwnedContact {
+            nodes: vec![zero; nc],
+            places: vec![
+                ContactNodePlace {
+                    local: None,
+                    owned: false
+                };
+                nc
+            ],
+            faces: vec![
+                ContactFace {
+                    nodes: [0; 4],
+                    surface: 0
+                };
+                c.contact_faces as usize
+            ],
+            at_check: vec![[0.0; 3]; nc],
+            force: vec![[0.0; 3]; nc],
+            remote_u: vec![[0.0; 3]; 2 * nc],
+            remote_stamp: vec![0; 2 * nc],
+            candidates: vec![Candidate::default(); if c.pairs > 0 { 64 * nc.max(16) } else { 0 }],
+            send_list: vec![
+                0;
+                if c.pairs > 0 {
+                    nc * c.contact_boards as usize
+                } else {
+                    0
+                }
+            ],
+            contact_of: vec![u32::MAX; if nc > 0 { c.nodes as usize } else { 0 }],
+            graphics: vec![0; c.graphics_nodes as usize],
+        }
+    }
+    fn storage(&mut self) -> ContactStorage<'_> {
+        ContactStorage {
+            nodes: &mut self.nodes,
+            places: &mut self.places,
+            faces: &mut self.faces,
+            at_check: &mut self.at_check,
+            force: &mut self.force,
+            remote_u: &mut self.remote_u,
+            remote_stamp: &mut self.remote_stamp,
+            candidates: &mut self.candidates,
+            send_list: &mut self.send_list,
+            contact_of: &mut self.contact_of,
+            graphics: &mut self.graphics,
+        }
+    }
 }
 
 impl<T: WireReal, E: Copy> OwnedStorage<T, E> {
@@ -170,10 +331,11 @@ impl<T: WireReal, E: Copy> OwnedStorage<T, E> {
                 };
                 c.loads as usize
             ],
+            contact: OwnedContact::new(&c),
         })
     }
-    fn storage(&mut self) -> Storage<'_, T, E> {
-        Storage {
+    fn storage(&mut self) -> (Storage<'_, T, E>, ContactStorage<'_>) {
+        let st = Storage {
             laws: &mut self.laws,
             elements: &mut self.elements,
             nodes: &mut self.nodes,
@@ -185,7 +347,8 @@ impl<T: WireReal, E: Copy> OwnedStorage<T, E> {
             recvs: &mut self.recvs,
             path_points: &mut self.path_points,
             loads: &mut self.loads,
-        }
+        };
+        (st, self.contact.storage())
     }
 }
 
@@ -193,6 +356,7 @@ impl<T: WireReal, E: Copy> OwnedStorage<T, E> {
 type BoxedLinks = Box<dyn Links + Send>;
 
 /// Messages from board threads to the collector.
+#[allow(clippy::large_enum_variant)]
 enum Report {
     /// Owned nodes' displacements at a step: (global, u).
     Frame {
@@ -243,14 +407,10 @@ fn run_worker<T: WireReal, E: HexElement<T> + DeserializeOwned + Copy>(
     }
     let mut rts: Vec<Runtime<'_, T, E>> = Vec::with_capacity(boards.len());
     for (st, ctx) in storages.iter_mut().zip(&boards) {
+        let (st, cs) = st.storage();
         rts.push(
-            Runtime::load(
-                &ctx.image,
-                ctx.coords.map(|c| c as u8),
-                st.storage(),
-                ctx.config,
-            )
-            .map_err(load_fault(ctx.coords))?,
+            Runtime::load(&ctx.image, ctx.coords.map(|c| c as u8), st, cs, ctx.config)
+                .map_err(load_fault(ctx.coords))?,
         );
     }
     let send_frame = |rt: &Runtime<'_, T, E>, step: u64| {
@@ -286,6 +446,13 @@ fn run_worker<T: WireReal, E: HexElement<T> + DeserializeOwned + Copy>(
                             frames_sent: st.frames_sent,
                             bytes_sent: st.bytes_sent,
                             wait_s: st.wait_ns as f64 * 1e-9,
+                            global: rt.global,
+                            global_packets: rt.global.packets_sent,
+                            global_bytes: rt.global.bytes_sent,
+                            contact_vectors: rt.global.node_vectors,
+                            graphics_bytes: rt.global.graphics_bytes,
+                            contact_checks: rt.global.checks,
+                            candidates_max: rt.global.candidates_max,
                         },
                         reaction_prescribed: rt.reaction_prescribed,
                         reaction_fixed: rt.reaction_fixed,
@@ -383,7 +550,7 @@ pub fn run(
         .collect();
     let board_bells: Vec<Arc<links::Doorbell>> =
         (0..count).map(|b| bells[b % workers].clone()).collect();
-    let links = build_links(dims, &board_bells);
+    let (links, net) = build_links(dims, &board_bells);
     let (tx, rx) = mpsc::channel::<Report>();
     let progress = Arc::new(AtomicU64::new(0));
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
@@ -519,7 +686,13 @@ pub fn run(
         .collect::<Option<Vec<_>>>()
         .ok_or_else(|| anyhow!("a board ended without a report"))?;
     frames.sort_by_key(|f| f.0);
+    let tools = header.counts.tools as usize;
+    let (graphics, tool_force) = collect_sinks(&net, steps, tools)?;
     Ok(SimOutput {
+        graphics,
+        tool_force,
+        tools,
+        dt_s: header.params.dt_s,
         manifest,
         steps,
         wall_s,

@@ -51,11 +51,66 @@ pub struct Channel {
     bell: Arc<Doorbell>,
 }
 
+/// The emulated global network: one inbox per board address, and the two sinks (the
+/// graphics engine and the host) that keep what they receive for the run's outputs.
+pub struct GlobalNet {
+    /// Inbox per global address (`x + 4y + 16z`), with the board's doorbell.
+    inboxes: Vec<Option<Arc<Channel>>>,
+    pub graphics: Mutex<Vec<Vec<u8>>>,
+    pub host: Mutex<Vec<Vec<u8>>>,
+}
+
+/// Packets a board's inbox holds before senders see `WouldBlock`.
+pub const GLOBAL_QUEUE_PACKETS: usize = 4096;
+
+impl GlobalNet {
+    fn deliver(&self, dst: u8, src: u8, packet: &[u8]) -> Result<(), SendError> {
+        use link_proto::packet::{ADDR_BROADCAST, ADDR_GRAPHICS, ADDR_HOST};
+        let sink = |m: &Mutex<Vec<Vec<u8>>>| {
+            m.lock()
+                .map(|mut v| v.push(packet.to_vec()))
+                .map_err(|_| SendError::NoLink)
+        };
+        match dst {
+            ADDR_GRAPHICS => sink(&self.graphics),
+            ADDR_HOST => sink(&self.host),
+            ADDR_BROADCAST => {
+                for (a, ch) in self.inboxes.iter().enumerate() {
+                    if a != src as usize {
+                        if let Some(ch) = ch {
+                            push(ch, packet, GLOBAL_QUEUE_PACKETS)?;
+                        }
+                    }
+                }
+                Ok(())
+            }
+            d => match self.inboxes.get(d as usize) {
+                Some(Some(ch)) => push(ch, packet, GLOBAL_QUEUE_PACKETS),
+                _ => Err(SendError::NoLink),
+            },
+        }
+    }
+}
+
+fn push(ch: &Channel, packet: &[u8], max: usize) -> Result<(), SendError> {
+    let mut q = ch.queue.lock().map_err(|_| SendError::NoLink)?;
+    if q.len() >= max {
+        return Err(SendError::WouldBlock);
+    }
+    q.push_back(packet.to_vec());
+    drop(q);
+    ch.bell.ring();
+    Ok(())
+}
+
 /// A board's view of its links.
 pub struct EmuLinks {
     /// Outgoing channel per face (None at the machine's edge).
     pub tx: [Option<Arc<Channel>>; 6],
     pub rx: [Option<Arc<Channel>>; 6],
+    /// The global network, this board's address and inbox.
+    pub net: Option<Arc<GlobalNet>>,
+    pub address: u8,
 }
 
 impl Links for EmuLinks {
@@ -86,24 +141,69 @@ impl Links for EmuLinks {
         }
     }
 
-    fn try_send_global(&mut self, _packet: &[u8]) -> Result<(), SendError> {
-        Err(SendError::NoLink)
+    fn try_send_global(&mut self, packet: &[u8]) -> Result<(), SendError> {
+        let net = self.net.as_ref().ok_or(SendError::NoLink)?;
+        // The network routes on the header's destination, as a switch would.
+        let dst = *packet.first().ok_or(SendError::TooLong)?;
+        net.deliver(dst, self.address, packet)
     }
 
-    fn try_recv_global(&mut self, _buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
-        Ok(None)
+    fn try_recv_global(&mut self, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        let Some(net) = self.net.as_ref() else {
+            return Ok(None);
+        };
+        let Some(Some(ch)) = net.inboxes.get(self.address as usize) else {
+            return Ok(None);
+        };
+        let mut q = ch.queue.lock().map_err(|_| RecvError::NoLink)?;
+        match q.pop_front() {
+            None => Ok(None),
+            Some(f) => {
+                let dst = buf
+                    .get_mut(..f.len())
+                    .ok_or(RecvError::BufferTooSmall { needed: f.len() })?;
+                dst.copy_from_slice(&f);
+                Ok(Some(f.len()))
+            }
+        }
     }
 }
 
 /// Builds the links of a machine: `links[b]` for board `b` (x fastest); a frame for board
 /// `b` rings `bells[b]` (boards sharing a worker thread share its doorbell).
-pub fn build_links(dims: [usize; 3], bells: &[Arc<Doorbell>]) -> Vec<EmuLinks> {
+pub fn build_links(dims: [usize; 3], bells: &[Arc<Doorbell>]) -> (Vec<EmuLinks>, Arc<GlobalNet>) {
     let count = dims.iter().product::<usize>();
     let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
+    let coords = |b: usize| {
+        [
+            b % dims[0],
+            (b / dims[0]) % dims[1],
+            b / (dims[0] * dims[1]),
+        ]
+    };
+    let mut inboxes: Vec<Option<Arc<Channel>>> = vec![None; link_proto::BOARD_COUNT];
+    let mut addresses = vec![u8::MAX; count];
+    for b in 0..count {
+        let c = coords(b);
+        if let Some(a) = link_proto::link::board_at(c[0], c[1], c[2]) {
+            inboxes[a as usize] = Some(Arc::new(Channel {
+                queue: Mutex::new(VecDeque::new()),
+                bell: bells[b].clone(),
+            }));
+            addresses[b] = a;
+        }
+    }
+    let net = Arc::new(GlobalNet {
+        inboxes,
+        graphics: Mutex::new(Vec::new()),
+        host: Mutex::new(Vec::new()),
+    });
     let mut links: Vec<EmuLinks> = (0..count)
-        .map(|_| EmuLinks {
+        .map(|b| EmuLinks {
             tx: Default::default(),
             rx: Default::default(),
+            net: Some(net.clone()),
+            address: addresses[b],
         })
         .collect();
     for b in 0..count {
@@ -136,7 +236,7 @@ pub fn build_links(dims: [usize; 3], bells: &[Arc<Doorbell>]) -> Vec<EmuLinks> {
             links[nb].rx[face.opposite().index()] = Some(ch);
         }
     }
-    links
+    (links, net)
 }
 
 /// Time and waiting for a board thread.

@@ -71,9 +71,17 @@ struct RunArgs {
     /// Run report (JSON): as `pe solve`, plus per-link traffic, waiting and the link model.
     #[arg(long)]
     report: Option<PathBuf>,
-    /// ParaView time series into this directory.
+    /// ParaView time series into this directory: the surface frames the graphics engine
+    /// received over the global network (every graphics interval).
     #[arg(long)]
     vtk: Option<PathBuf>,
+    /// PNG of the last surface frame the graphics engine received.
+    #[arg(long)]
+    png: Option<PathBuf>,
+    /// step,time_s,tool,fx,fy,fz: the force of the tissue on each tool every step, as the
+    /// host summed it from the boards' packets (what a haptic device renders).
+    #[arg(long)]
+    tool_force: Option<PathBuf>,
     /// Stop after N steps.
     #[arg(long)]
     steps: Option<u64>,
@@ -188,6 +196,8 @@ fn builtin(
         output_nodes: Some(out.join("nodes.csv")),
         report: Some(out.join("report.json")),
         vtk: Some(out.join("frames")),
+        png: Some(out.join("final.png")),
+        tool_force: Some(out.join("tool_force.csv")),
         steps,
         link_timeout_s: 10.0,
         quiet,
@@ -208,10 +218,10 @@ fn builtin(
         })
         .fold(0.0, f64::max);
     let sim_s = sim.steps as f64 * sim.manifest.dt_s;
-    let f = sim.reaction_prescribed;
+    let f = sim.tool_force.last().copied().unwrap_or([0.0; 3]);
     println!("summary:");
     println!(
-        "  probe push on the right tube: [{:.4e}, {:.4e}, {:.4e}] N (|F| = {:.4e} N)",
+        "  force of the right tube on the probe at the end (capsule contact, summed by the host from the boards' packets): [{:.4e}, {:.4e}, {:.4e}] N (|F| = {:.4e} N)",
         f[0],
         f[1],
         f[2],
@@ -226,8 +236,10 @@ fn builtin(
         sim.steps, sim_s, sim.wall_s, sim.boards.len(), sim_s / sim.wall_s
     );
     println!(
-        "  ParaView: {}; report: {}",
+        "  ParaView (what the graphics engine received): {}; picture of the last frame: {}; tool force per step: {}; report: {}",
         out.join("frames/series.pvd").display(),
+        out.join("final.png").display(),
+        out.join("tool_force.csv").display(),
         out.join("report.json").display()
     );
     Ok(())
@@ -239,6 +251,8 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
         output_nodes,
         report,
         vtk,
+        png,
+        tool_force,
         steps,
         duration,
         faults,
@@ -283,7 +297,8 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
                 .with_context(|| format!("loading scene {} for outputs", manifest.scene_source))?,
         )
     };
-    if vtk.is_some() {
+    let graphics_stream = manifest_graphics(dir)?;
+    if vtk.is_some() && !graphics_stream {
         opts.frame_every = ((0.04 / manifest.dt_s).round() as u64).max(1);
     }
     eprintln!(
@@ -351,15 +366,51 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
     if let (Some(p), Some(pr)) = (&output_nodes, &problem) {
         write_nodes_csv(p, &pr.mesh, &out.displacements)?;
     }
+    let frames = problem
+        .as_ref()
+        .map(|pr| surface_frames(pr, &out))
+        .unwrap_or_default();
     if let (Some(d), Some(pr)) = (&vtk, &problem) {
-        std::fs::create_dir_all(d)?;
-        let mut w = VtkSeriesWriter::new(d, &pr.mesh)?;
-        w.write_frame(0.0, &vec![[0.0; 3]; pr.mesh.nodes.len()])?;
-        for (s, u) in &out.frames {
-            w.write_frame(*s as f64 * manifest.dt_s, u)?;
+        if graphics_stream {
+            write_surface_series(d, pr, &frames)?;
         }
-        w.write_frame(sim_s, &out.displacements)?;
-        w.finish()?;
+    }
+    if let (Some(p), Some(pr)) = (&png, &problem) {
+        if let Some(last) = frames.last() {
+            render_frame(p, pr, last, &out)?;
+        }
+    }
+    if let Some(p) = &tool_force {
+        let mut text = String::from("step,time_s,tool,fx,fy,fz\n");
+        for (k, f) in out.tool_force.iter().enumerate() {
+            let (step, t) = (k / out.tools.max(1), k % out.tools.max(1));
+            text.push_str(&format!(
+                "{step},{:e},{t},{:e},{:e},{:e}\n",
+                step as f64 * out.dt_s,
+                f[0],
+                f[1],
+                f[2]
+            ));
+        }
+        std::fs::write(p, text).with_context(|| format!("writing {}", p.display()))?;
+    }
+    if let (Some(d), Some(pr)) = (&vtk, &problem) {
+        if graphics_stream {
+            // Written above from the graphics engine's frames.
+        } else {
+            std::fs::create_dir_all(d)?;
+            let mut w = VtkSeriesWriter::new(d, &pr.mesh)?;
+            w.write_frame(0.0, &vec![[0.0; 3]; pr.mesh.nodes.len()])?;
+            for (s, u) in &out.frames {
+                w.write_frame(*s as f64 * manifest.dt_s, u)?;
+            }
+            w.write_frame(sim_s, &out.displacements)?;
+            w.finish()?;
+        }
+    }
+    let global = global_summary(&out, sim_s);
+    if let Some(g) = &global {
+        println!("{}", g.text);
     }
     if let Some(p) = report {
         let links: Vec<serde_json::Value> = out
@@ -389,12 +440,212 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
             "boards": links,
             "link_model": modelled,
             "faults_injected": out.injected,
+            "global_network": global.as_ref().map(|g| &g.json),
         });
         std::fs::write(&p, serde_json::to_string_pretty(&rep)?)
             .with_context(|| format!("writing {}", p.display()))?;
     }
     let problem = problem.ok_or_else(|| anyhow::anyhow!("no scene"))?;
     Ok((out, problem))
+}
+
+/// Whether the images send surface frames to the graphics engine.
+fn manifest_graphics(dir: &std::path::Path) -> Result<bool> {
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json"))?)?;
+    Ok(r["graphics"]["interval_steps"].as_u64().unwrap_or(0) > 0)
+}
+
+/// A frame the graphics engine assembled: time and displacement of every mesh node it
+/// received (others zero), or None if some surface node is missing.
+struct SurfaceFrame {
+    time_s: f64,
+    u: Vec<[f64; 3]>,
+}
+
+fn surface_frames(pr: &Problem, out: &board_sim::SimOutput) -> Vec<SurfaceFrame> {
+    let surface = host_tools::compile::surface_node_mask(pr);
+    let needed = surface.iter().filter(|s| **s).count();
+    out.graphics
+        .iter()
+        .filter(|f| f.nodes.len() == needed)
+        .map(|f| {
+            let mut u = vec![[0.0; 3]; pr.mesh.nodes.len()];
+            for (n, d) in &f.nodes {
+                if let Some(x) = u.get_mut(*n as usize) {
+                    *x = d.map(|v| v as f64);
+                }
+            }
+            SurfaceFrame {
+                time_s: f.steps.0 as f64 * out.dt_s,
+                u,
+            }
+        })
+        .collect()
+}
+
+fn write_surface_series(d: &std::path::Path, pr: &Problem, frames: &[SurfaceFrame]) -> Result<()> {
+    std::fs::create_dir_all(d)?;
+    let (local, quads) = surface_numbering(pr);
+    let reference: Vec<[f64; 3]> = local.iter().map(|&g| pr.mesh.nodes[g as usize]).collect();
+    let groups = surface_groups(pr);
+    let mut w = host_tools::vtk_out::SurfaceSeriesWriter::new(d, reference, quads, groups)?;
+    for f in frames {
+        let u: Vec<[f64; 3]> = local.iter().map(|&g| f.u[g as usize]).collect();
+        w.write_frame(f.time_s, &u)?;
+    }
+    w.finish()?;
+    Ok(())
+}
+
+/// Surface nodes (mesh indices, ascending) and the boundary quads in that numbering.
+fn surface_numbering(pr: &Problem) -> (Vec<u32>, Vec<[u32; 4]>) {
+    let mask = host_tools::compile::surface_node_mask(pr);
+    let local: Vec<u32> = (0..mask.len() as u32)
+        .filter(|&n| mask[n as usize])
+        .collect();
+    let index: std::collections::HashMap<u32, u32> = local
+        .iter()
+        .enumerate()
+        .map(|(i, &g)| (g, i as u32))
+        .collect();
+    let quads = pr
+        .surface_faces
+        .iter()
+        .map(|q| q.map(|n| index[&n]))
+        .collect();
+    (local, quads)
+}
+
+/// Region group of each boundary quad (its cell's region, as a small index).
+fn surface_groups(pr: &Problem) -> Vec<u8> {
+    host_tools::contact::boundary_faces_with_cells(&pr.mesh)
+        .iter()
+        .map(|(_, c)| pr.mesh.cell_regions[*c as usize].clamp(0, 255) as u8)
+        .collect()
+}
+
+fn render_frame(
+    p: &std::path::Path,
+    pr: &Problem,
+    f: &SurfaceFrame,
+    out: &board_sim::SimOutput,
+) -> Result<()> {
+    use host_tools::render::{render_surface_png, CapsuleOverlay, SurfaceImage, View};
+    let positions: Vec<[f64; 3]> = pr
+        .mesh
+        .nodes
+        .iter()
+        .zip(&f.u)
+        .map(|(x, u)| core::array::from_fn(|i| x[i] + u[i]))
+        .collect();
+    let values: Vec<f64> =
+        f.u.iter()
+            .map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt())
+            .collect();
+    let tools: Vec<CapsuleOverlay> = pr
+        .contact
+        .as_ref()
+        .map(|c| {
+            c.tools
+                .iter()
+                .map(|t| {
+                    let cap = t.capsule.translated(pr.paths[t.path as usize].at(f.time_s));
+                    CapsuleOverlay {
+                        a: cap.a,
+                        b: cap.b,
+                        radius_m: cap.radius_m,
+                    }
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let title = format!(
+        "t = {:.3} s: the graphics stream from {} boards",
+        f.time_s,
+        out.boards.len()
+    );
+    render_surface_png(
+        p,
+        &SurfaceImage {
+            positions: &positions,
+            quads: &pr.surface_faces,
+            quad_groups: &surface_groups(pr),
+            node_values: &values,
+            value_label: "displacement (mm)",
+            value_scale: 1e3,
+            tools: &tools,
+            title: &title,
+            view: View {
+                azimuth_deg: -60.0,
+                elevation_deg: 30.0,
+            },
+            size_px: (1200, 900),
+        },
+    )
+}
+
+struct GlobalSummary {
+    text: String,
+    json: serde_json::Value,
+}
+
+/// Global-network figures of a run beside the seed's (about 300 collision vectors per
+/// step, 72 MB/s, and 18 MB/s of graphics for its 2000-element model).
+fn global_summary(out: &board_sim::SimOutput, sim_s: f64) -> Option<GlobalSummary> {
+    let g: Vec<&pe_firmware::runtime::GlobalStats> = out.boards.iter().map(|b| &b.global).collect();
+    let packets: u64 = g.iter().map(|s| s.packets_sent).sum();
+    if packets == 0 {
+        return None;
+    }
+    let steps = out.steps.max(1) as f64;
+    let vectors = g.iter().map(|s| s.node_vectors).sum::<u64>() as f64 / steps;
+    let bytes = g.iter().map(|s| s.bytes_sent).sum::<u64>() as f64;
+    let gbytes = g.iter().map(|s| s.graphics_bytes).sum::<u64>() as f64;
+    let boxes = g.iter().map(|s| s.box_packets).sum::<u64>();
+    let checks = g.iter().map(|s| s.checks).max().unwrap_or(0);
+    let cand = g.iter().map(|s| s.candidates_max).max().unwrap_or(0);
+    let peak: Vec<f64> = (0..out.tools)
+        .map(|t| {
+            out.tool_force
+                .iter()
+                .skip(t)
+                .step_by(out.tools.max(1))
+                .map(|f| (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt())
+                .fold(0.0, f64::max)
+        })
+        .collect();
+    let last: Vec<[f64; 3]> = if out.tools > 0 {
+        out.tool_force[out.tool_force.len().saturating_sub(out.tools)..].to_vec()
+    } else {
+        vec![]
+    };
+    let text = format!(
+        "global network: {packets} packets, {:.1} MB/s in all; contact: {vectors:.1} node vectors per step ({:.1} MB/s at this step rate; the seed: ~300 vectors, 72 MB/s), {boxes} bounding-box packets over {checks} checks, at most {cand} candidates on a board; graphics: {} frames, {:.2} MB/s (the seed: 18 MB/s); tool force at the end {:?} N, peak {:?} N",
+        bytes / sim_s / 1e6,
+        vectors * 28.0 / (sim_s / steps) / 1e6,
+        out.graphics.len(),
+        gbytes / sim_s / 1e6,
+        last,
+        peak
+    );
+    let json = serde_json::json!({
+        "packets": packets,
+        "bytes_per_s": bytes / sim_s,
+        "contact_vectors_per_step": vectors,
+        "contact_bytes_per_s": vectors * 28.0 / (sim_s / steps),
+        "seed_contact_vectors_per_step": 300,
+        "seed_contact_bytes_per_s": 72e6,
+        "box_packets": boxes,
+        "checks": checks,
+        "candidates_max": cand,
+        "graphics_frames": out.graphics.len(),
+        "graphics_bytes_per_s": gbytes / sim_s,
+        "seed_graphics_bytes_per_s": 18e6,
+        "tool_force_final_n": last,
+        "tool_force_peak_n": peak,
+    });
+    Some(GlobalSummary { text, json })
 }
 
 fn manifest_elements(dir: &std::path::Path) -> Result<usize> {

@@ -278,7 +278,14 @@ pub fn runtime_ram_bytes(h: &ImageHeader) -> u64 {
     let node = 8 + w * 4 + 8 /* record */ + w * 9 /* u, u_prev, f */;
     let exchange: u64 = (c.sends as u64) * 2 + (c.recvs as u64) * 4;
     let link_buffers = 6 * 2 * (12 + 3 * w * link_proto::BORDER_NODES_PER_FACE_MAX as u64);
-    c.elements as u64 * element
+    let contact = c.contact_nodes as u64
+        * (4 + 24 + 8 + 1 + 4 + 1 + 3 * 24 /* x, x at check, force */ + 8)
+        + c.contact_faces as u64 * 17
+        + c.pairs as u64 * 16
+        + c.tools as u64 * 64
+        + c.graphics_nodes as u64 * 2;
+    contact
+        + c.elements as u64 * element
         + c.nodes as u64 * node
         + exchange
         + c.path_points as u64 * 40
@@ -377,6 +384,31 @@ fn write_image<T: Real + Serialize>(
     } else {
         Integration::Reduced
     };
+    let contact = contact_tables(problem, plan, dt)?;
+    let places: Vec<ContactNodePlace> = contact
+        .as_ref()
+        .map(|(run, _)| {
+            run.nodes
+                .iter()
+                .map(|n| {
+                    let l = local.get(&n.global).copied();
+                    ContactNodePlace {
+                        local: l,
+                        owned: plan.node_owner[n.global as usize] as usize == b,
+                    }
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let on_surface = surface_node_mask(problem);
+    let graphics_nodes: Vec<u16> = bp
+        .nodes
+        .iter()
+        .enumerate()
+        .filter(|(k, &n)| bp.owner[*k] && on_surface[n as usize])
+        .map(|(k, _)| k as u16)
+        .collect();
+    let graphics = graphics_params(problem, dt);
     let header = ImageHeader {
         version: FORMAT_VERSION,
         board: bp.coords.map(|c| c as u8),
@@ -408,6 +440,12 @@ fn write_image<T: Real + Serialize>(
                 .sum::<usize>() as u32,
             path_points: points.len() as u16,
             loads: loads.len() as u16,
+            contact_nodes: places.len() as u32,
+            contact_faces: contact.as_ref().map_or(0, |(r, _)| r.faces.len() as u32),
+            pairs: contact.as_ref().map_or(0, |(r, _)| r.pairs.len() as u8),
+            tools: contact.as_ref().map_or(0, |(r, _)| r.tools.len() as u8),
+            contact_boards: contact.as_ref().map_or(0, |(_, b)| b.len() as u8),
+            graphics_nodes: graphics_nodes.len() as u16,
         },
         params: SceneParams {
             dt_s: dt,
@@ -419,6 +457,8 @@ fn write_image<T: Real + Serialize>(
         },
         scene_elements: problem.mesh.cells.len() as u32,
         scene_nodes: problem.mesh.nodes.len() as u32,
+        contact: contact.as_ref().map(|(r, _)| r.params).unwrap_or_default(),
+        graphics,
     };
     let mut buf = vec![
         0u8;
@@ -426,6 +466,12 @@ fn write_image<T: Real + Serialize>(
             + bp.nodes.len() * 128
             + points.len() * 64
             + loads.len() * 64
+            + places.len() * 64
+            + contact.as_ref().map_or(0, |(r, _)| r.faces.len() * 32
+                + r.tools.len() * 128
+                + r.pairs.len() * 32)
+            + graphics_nodes.len() * 4
+            + 256
     ];
     let mut w = ImageWriter::new(&mut buf, &header).map_err(|e| anyhow!("{e}"))?;
     let err = |e: ImageError| anyhow!("board {:?}: {e}", bp.coords);
@@ -491,6 +537,27 @@ fn write_image<T: Real + Serialize>(
     for l in &loads {
         w.push(l).map_err(err)?;
     }
+    if let Some((run, boards)) = &contact {
+        for (n, p) in run.nodes.iter().zip(&places) {
+            w.push(n).map_err(err)?;
+            w.push(p).map_err(err)?;
+        }
+        for f in &run.faces {
+            w.push(f).map_err(err)?;
+        }
+        for p in &run.pairs {
+            w.push(p).map_err(err)?;
+        }
+        for t in &run.tools {
+            w.push(t).map_err(err)?;
+        }
+        for b in boards {
+            w.push(b).map_err(err)?;
+        }
+    }
+    for g in &graphics_nodes {
+        w.push(g).map_err(err)?;
+    }
     let len = w.finish().map_err(err)?;
     buf.truncate(len);
     let ram_bytes = runtime_ram_bytes(&header);
@@ -500,6 +567,64 @@ fn write_image<T: Real + Serialize>(
         bytes: buf,
         ram_bytes,
     })
+}
+
+/// The contact tables for step `dt` and the global-network addresses of the boards that
+/// own a node of a pair surface (they exchange bounding boxes).
+pub fn contact_tables(
+    problem: &Problem,
+    plan: &Plan,
+    dt: f64,
+) -> Result<Option<(crate::contact::ContactRun, Vec<u8>)>> {
+    let Some(setup) = problem.contact.as_ref() else {
+        return Ok(None);
+    };
+    let ms = problem.solver.mass_scaling;
+    let inertial: Vec<f64> = problem.mass.iter().map(|m| m * ms).collect();
+    let run = setup.for_step(&problem.mesh, &inertial, dt);
+    let mut owners = std::collections::BTreeSet::new();
+    for n in &run.nodes {
+        if n.surfaces & run.params.pair_surfaces != 0 {
+            owners.insert(plan.node_owner[n.global as usize] as usize);
+        }
+    }
+    let mut boards = Vec::new();
+    for b in owners {
+        let c = plan.machine.coords(b);
+        let id = link_proto::link::board_at(c[0], c[1], c[2]).ok_or_else(|| {
+            anyhow!(
+                "board {c:?} owns contact nodes but has no global-network address: contact needs a machine of at most {g}x{g}x{g} boards",
+                g = link_proto::GRID_DIM
+            )
+        })?;
+        boards.push(id);
+    }
+    Ok(Some((run, boards)))
+}
+
+/// Mesh nodes on the boundary (what the graphics engine draws).
+pub fn surface_node_mask(problem: &Problem) -> Vec<bool> {
+    let mut m = vec![false; problem.mesh.nodes.len()];
+    for q in &problem.surface_faces {
+        for &n in q {
+            m[n as usize] = true;
+        }
+    }
+    m
+}
+
+/// The graphics stream's timing for step `dt`.
+pub fn graphics_params(problem: &Problem, dt: f64) -> GraphicsParams {
+    let interval =
+        ((problem.solver.graphics_interval / dt).round() as u64).clamp(1, u32::MAX as u64) as u32;
+    GraphicsParams {
+        interval_steps: interval,
+        spread_steps: problem
+            .solver
+            .graphics_spread_steps
+            .min(interval)
+            .clamp(1, u16::MAX as u32) as u16,
+    }
 }
 
 /// Compiles every board's image.
@@ -622,6 +747,120 @@ pub struct CompileReport {
     /// (`pe_firmware::profile::MEASURED_COST`), one instruction per cycle.
     pub capacity: Capacity,
     pub boards: Vec<BoardSummary>,
+    pub graphics: GraphicsReport,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub contact: Option<ContactCompileReport>,
+}
+
+/// The graphics stream's cost.
+#[derive(Clone, Debug, Serialize)]
+pub struct GraphicsReport {
+    pub interval_steps: u32,
+    pub spread_steps: u16,
+    pub surface_nodes: usize,
+    /// Packets and bytes per frame (all boards), and the mean rate (bytes/s).
+    pub packets_per_frame: usize,
+    pub bytes_per_frame: usize,
+    pub bytes_per_s: f64,
+    pub seed_bytes_per_s: f64,
+}
+
+/// Contact figures: the tables and the collision traffic with the tissue at rest.
+#[derive(Clone, Debug, Serialize)]
+pub struct ContactCompileReport {
+    pub contact_nodes: usize,
+    pub contact_faces: usize,
+    pub pairs: usize,
+    pub tools: usize,
+    pub contact_boards: usize,
+    pub check_interval_steps: u32,
+    pub travel_max_m: f64,
+    pub box_margin_m: f64,
+    /// With the tissue at rest: board pairs that open a channel, contact-node vectors sent
+    /// per step, and bytes per second at the scene's step rate.
+    pub channels_at_rest: usize,
+    pub vectors_per_step_at_rest: usize,
+    pub bytes_per_s_at_rest: f64,
+    pub seed_vectors_per_step: usize,
+    pub seed_bytes_per_s: f64,
+}
+
+/// The contact traffic at rest: the runtime's box test on the reference positions.
+fn contact_report(
+    problem: &Problem,
+    plan: &Plan,
+    dt: f64,
+    rate: f64,
+) -> Result<Option<ContactCompileReport>> {
+    let Some((run, boards)) = contact_tables(problem, plan, dt)? else {
+        return Ok(None);
+    };
+    let p = run.params;
+    let owner_of = |c: &pe_firmware::physics::contact::ContactNode| {
+        plan.node_owner[c.global as usize] as usize
+    };
+    let board_index: Vec<usize> = boards
+        .iter()
+        .map(|&a| {
+            let (x, y, z) = link_proto::link::board_coords(a).unwrap_or((0, 0, 0));
+            plan.machine.index([x, y, z])
+        })
+        .collect();
+    let pair_nodes = |b: usize| {
+        run.nodes
+            .iter()
+            .filter(move |n| n.surfaces & p.pair_surfaces != 0 && owner_of(n) == b)
+    };
+    let bbox = |b: usize| {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for n in pair_nodes(b) {
+            for i in 0..3 {
+                lo[i] = lo[i].min(n.reference[i]);
+                hi[i] = hi[i].max(n.reference[i]);
+            }
+        }
+        (lo, hi)
+    };
+    let boxes: Vec<_> = board_index.iter().map(|&b| bbox(b)).collect();
+    let grow = |b: &([f64; 3], [f64; 3])| -> ([f64; 3], [f64; 3]) {
+        (
+            core::array::from_fn(|i| b.0[i] - p.box_margin_m),
+            core::array::from_fn(|i| b.1[i] + p.box_margin_m),
+        )
+    };
+    let (mut channels, mut vectors) = (0, 0);
+    for (i, &bi) in board_index.iter().enumerate() {
+        for (j, other) in boxes.iter().enumerate() {
+            if i == j {
+                continue;
+            }
+            let g = grow(&boxes[i]);
+            if !(0..3).all(|k| other.0[k] <= g.1[k] && g.0[k] <= other.1[k]) {
+                continue;
+            }
+            channels += 1;
+            let r = grow(other);
+            vectors += pair_nodes(bi)
+                .filter(|n| (0..3).all(|k| r.0[k] <= n.reference[k] && n.reference[k] <= r.1[k]))
+                .count();
+        }
+    }
+    Ok(Some(ContactCompileReport {
+        contact_nodes: run.nodes.len(),
+        contact_faces: run.faces.len(),
+        pairs: run.pairs.len(),
+        tools: run.tools.len(),
+        contact_boards: boards.len(),
+        check_interval_steps: p.check_interval_steps,
+        travel_max_m: p.travel_max_m,
+        box_margin_m: p.box_margin_m,
+        channels_at_rest: channels / 2,
+        vectors_per_step_at_rest: vectors,
+        bytes_per_s_at_rest: (vectors * link_proto::payload::NODE_ENTRY_LEN) as f64 * rate,
+        seed_vectors_per_step: 300,
+        seed_bytes_per_s: 72e6,
+    }))
 }
 
 /// What the scene asks of the busiest board's processor, from measured instruction counts.
@@ -764,7 +1003,48 @@ pub fn report(
             ram_bytes: im.ram_bytes,
         })
         .collect();
+    let gp = graphics_params(problem, dt);
+    let mask = surface_node_mask(problem);
+    let surface_nodes = mask.iter().filter(|m| **m).count();
+    let packets_per_frame: usize = plan
+        .boards
+        .iter()
+        .map(|b| {
+            let n = b
+                .nodes
+                .iter()
+                .zip(&b.owner)
+                .filter(|(n, o)| **o && mask[**n as usize])
+                .count();
+            // One packet per spread step (more if a slice overflows a packet).
+            (0..gp.spread_steps as usize)
+                .map(|j| {
+                    let len =
+                        (j + 1) * n / gp.spread_steps as usize - j * n / gp.spread_steps as usize;
+                    len.div_ceil(link_proto::payload::SURFACE_NODES_PER_PACKET_MAX)
+                        .max(1)
+                })
+                .sum::<usize>()
+        })
+        .sum();
+    let overhead = link_proto::PACKET_HEADER_LEN
+        + link_proto::CRC_LEN
+        + link_proto::payload::SURFACE_HEADER_LEN;
+    let bytes_per_frame =
+        packets_per_frame * overhead + surface_nodes * link_proto::payload::SURFACE_ENTRY_LEN;
+    let graphics = GraphicsReport {
+        interval_steps: gp.interval_steps,
+        spread_steps: gp.spread_steps,
+        surface_nodes,
+        packets_per_frame,
+        bytes_per_frame,
+        bytes_per_s: bytes_per_frame as f64 / (gp.interval_steps as f64 * dt),
+        seed_bytes_per_s: 18e6,
+    };
+    let contact = contact_report(problem, plan, dt, rate)?;
     Ok(CompileReport {
+        graphics,
+        contact,
         scene: scene.to_string(),
         machine: plan.machine.to_string(),
         rounds: plan.rounds,
@@ -850,6 +1130,18 @@ pub fn summary(r: &CompileReport) -> String {
         if c.compute_keeps_real_time { "keeps real time" } else { "does NOT keep real time" },
         c.elements_per_board_at_scene_rate, c.elements_per_board_at_10_khz, c.boards_needed_at_10_khz
     );
+    let g = &r.graphics;
+    s += &format!(
+        "  graphics: {} surface nodes every {} steps ({:.1} ms) spread over {} steps: {} packets, {} bytes per frame, {:.3} MB/s (the seed: 18 MB/s)\n",
+        g.surface_nodes, g.interval_steps, g.interval_steps as f64 * r.dt_s * 1e3, g.spread_steps, g.packets_per_frame, g.bytes_per_frame, g.bytes_per_s / 1e6
+    );
+    if let Some(c) = &r.contact {
+        s += &format!(
+            "  contact: {} nodes, {} faces, {} pairs, {} tools on {} boards; bounding boxes every {} steps (travel {:.2} mm, box margin {:.2} mm); at rest {} channels, {} node vectors per step, {:.2} MB/s (the seed: ~300 vectors, 72 MB/s)\n",
+            c.contact_nodes, c.contact_faces, c.pairs, c.tools, c.contact_boards, c.check_interval_steps, c.travel_max_m * 1e3, c.box_margin_m * 1e3,
+            c.channels_at_rest, c.vectors_per_step_at_rest, c.bytes_per_s_at_rest / 1e6
+        );
+    }
     s += "  seed's reference case: 2000 elements on 4x4x4 boards at dt = 100 us: 5600 force vectors per step, 1.35 GB/s in all\n";
     s += &format!(
         "  this scene at dt = 100 us: {} force vectors per step, {:.3} GB/s in all\n",
@@ -879,6 +1171,12 @@ pub struct DecodedImage {
     pub rounds: [Vec<DecodedRound>; 3],
     pub path_points: Vec<PathPoint>,
     pub loads: Vec<LoadRecord>,
+    pub contact_nodes: Vec<(ContactNode, ContactNodePlace)>,
+    pub contact_faces: Vec<ContactFace>,
+    pub pairs: Vec<ContactPair>,
+    pub tools: Vec<Tool>,
+    pub contact_boards: Vec<u8>,
+    pub graphics_nodes: Vec<u16>,
 }
 
 fn decode_typed<T: Real + serde::de::DeserializeOwned>(
@@ -896,6 +1194,12 @@ fn decode_typed<T: Real + serde::de::DeserializeOwned>(
         rounds: Default::default(),
         path_points: Vec::new(),
         loads: Vec::new(),
+        contact_nodes: Vec::new(),
+        contact_faces: Vec::new(),
+        pairs: Vec::new(),
+        tools: Vec::new(),
+        contact_boards: Vec::new(),
+        graphics_nodes: Vec::new(),
     };
     for _ in 0..c.materials {
         d.materials.push(r.next("material")?);
@@ -939,6 +1243,25 @@ fn decode_typed<T: Real + serde::de::DeserializeOwned>(
     }
     for _ in 0..c.loads {
         d.loads.push(r.next("load")?);
+    }
+    for _ in 0..c.contact_nodes {
+        d.contact_nodes
+            .push((r.next("contact node")?, r.next("contact node place")?));
+    }
+    for _ in 0..c.contact_faces {
+        d.contact_faces.push(r.next("contact face")?);
+    }
+    for _ in 0..c.pairs {
+        d.pairs.push(r.next("contact pair")?);
+    }
+    for _ in 0..c.tools {
+        d.tools.push(r.next("tool")?);
+    }
+    for _ in 0..c.contact_boards {
+        d.contact_boards.push(r.next("contact board")?);
+    }
+    for _ in 0..c.graphics_nodes {
+        d.graphics_nodes.push(r.next("graphics node")?);
     }
     if !r.is_done() {
         return Err(ImageError::Malformed {

@@ -7,6 +7,7 @@
 pub mod bench;
 pub mod builtin;
 pub mod compile;
+pub mod contact;
 pub mod firmware;
 pub mod mesh;
 pub mod mesh_io;

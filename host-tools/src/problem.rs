@@ -64,6 +64,10 @@ pub struct Problem {
     pub solver: SolverSpec,
     /// True (gravitational) lumped mass per node, kg.
     pub mass: Vec<f64>,
+    /// Tools and contact pairs (None: the scene has no contact).
+    pub contact: Option<crate::contact::ContactSetup>,
+    /// Mesh boundary faces (outward), the surface the graphics engine draws.
+    pub surface_faces: Vec<[u32; 4]>,
     critical: std::sync::OnceLock<CriticalStep>,
 }
 
@@ -317,7 +321,39 @@ impl Problem {
                 });
             }
         }
+        let select_surface = |sp: &crate::scene::SurfaceSpec| -> Result<Option<Vec<bool>>> {
+            let sel = sp.selector();
+            if sel.box_.is_none() && sel.sphere.is_none() && sel.set.is_none() {
+                return Ok(None);
+            }
+            let mut m = vec![false; n_nodes];
+            for n in select(sel, &format!("[[surface]] {:?}", sp.name))? {
+                m[n as usize] = true;
+            }
+            Ok(Some(m))
+        };
+        let mut add_path = |points: Vec<(f64, [f64; 3])>| {
+            paths.push(Path1 { points });
+            (paths.len() - 1) as u32
+        };
+        let contact = crate::contact::resolve(
+            scene,
+            &mesh,
+            &select_surface,
+            &|r| region_tag(&mesh, r),
+            &mut add_path,
+            &|c| reference[c as usize].characteristic_length,
+        )?;
+        let surface_faces = crate::contact::boundary_faces_with_cells(&mesh)
+            .into_iter()
+            .map(|(q, _)| q)
+            .collect();
         let s = &scene.solver;
+        if !(s.graphics_interval > 0.0) || s.graphics_spread_steps == 0 {
+            bail!(
+                "[solver] graphics_interval must be positive and graphics_spread_steps at least 1"
+            );
+        }
         if !matches!(s.precision.as_str(), "f32" | "f64") {
             bail!(
                 "[solver] precision = \"{}\": expected \"f32\" or \"f64\"",
@@ -335,6 +371,9 @@ impl Problem {
         }
         if !(s.dt_safety > 0.0) || !(s.hourglass >= 0.0) || !(s.damping >= 0.0) {
             bail!("[solver] dt_safety must be > 0, hourglass and damping >= 0");
+        }
+        if contact.is_some() && s.adapt_dt {
+            bail!("[solver] adapt_dt with contact is not supported: the contact penalty and search interval follow from the step (lower dt_safety instead)");
         }
         if s.dt_recheck_interval == Some(0) {
             bail!("[solver] dt_recheck_interval must be at least 1 (or left out)");
@@ -365,6 +404,8 @@ impl Problem {
                 .unwrap_or([0.0; 3]),
             solver: scene.solver.clone(),
             mass,
+            contact,
+            surface_faces,
             critical: std::sync::OnceLock::new(),
         })
     }

@@ -22,6 +22,83 @@ pub struct Scene {
     pub gravity: Option<GravitySpec>,
     #[serde(default)]
     pub solver: SolverSpec,
+    /// `[contact]`: settings shared by every tool and contact pair.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact: Option<ContactSpec>,
+    /// `[[surface]]`: named contact surfaces (boundary faces of the mesh).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub surface: Vec<SurfaceSpec>,
+    /// `[[tool]]`: rigid instruments moving along a path.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tool: Vec<ToolSpec>,
+    /// `[[contact_pair]]`: two surfaces that may touch (tissue against tissue).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub contact_pair: Vec<ContactPairSpec>,
+}
+
+/// `[contact]`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ContactSpec {
+    /// Penalty stiffness as a fraction β of each node's `m / Δt²` (the contact spring adds
+    /// β to `(ω Δt)²`; at dt_safety 0.9 the stiffest mode leaves room for about 0.7).
+    pub penalty: f64,
+    /// Deepest penetration tolerated (m); deeper is an error naming the node and step.
+    pub tolerance: f64,
+    /// Fastest any contact-surface node moves (m/s); faster is an error.
+    pub speed_bound: f64,
+    /// Margin (m) the bounding-box checks cover: boxes are compared every
+    /// `gap / (2 · speed_bound · Δt)` steps (the seed: 2 cm and 10 cm/s give 1000 steps).
+    pub gap: f64,
+}
+
+impl Default for ContactSpec {
+    fn default() -> Self {
+        ContactSpec {
+            penalty: 0.5,
+            tolerance: 1e-3,
+            speed_bound: 0.1,
+            gap: 0.02,
+        }
+    }
+}
+
+/// `[[surface]]`: the boundary faces of the mesh's cells in `region` (default: all cells)
+/// whose four nodes are all selected by `box`/`sphere`/`set` (default: no restriction).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SurfaceSpec {
+    pub name: String,
+    pub region: Option<RegionRef>,
+    #[serde(rename = "box")]
+    pub box_: Option<[[f64; 3]; 2]>,
+    pub sphere: Option<SphereSpec>,
+    pub set: Option<String>,
+}
+
+/// `[[tool]]`: a rigid capsule (`shape = "capsule"`: every point within `radius` of the
+/// segment `a`–`b`, m) moved by the displacement `path = [[t, dx, dy, dz], ...]`
+/// (piecewise linear, held after the last point), touching the nodes of `surface`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ToolSpec {
+    pub name: String,
+    pub shape: String,
+    pub a: [f64; 3],
+    pub b: [f64; 3],
+    pub radius: f64,
+    pub path: Vec<[f64; 4]>,
+    pub surface: String,
+}
+
+/// `[[contact_pair]]`: the nodes of each surface against the faces of the other.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactPairSpec {
+    pub surfaces: [String; 2],
+    /// Deepest penetration still taken as contact (m); default: a third of the thinnest
+    /// cell of either surface (a node deeper than that is on the far side of a thin body).
+    pub depth: Option<f64>,
 }
 
 /// `[mesh]`: one of `file`, `generate` or `builtin`.
@@ -35,6 +112,20 @@ pub struct MeshSpec {
     pub builtin: Option<String>,
     /// Level of the built-in anatomy: "coarse" (~300), "medium" (~2000), "fine" (~20000).
     pub level: Option<String>,
+    /// `[[mesh.blocks]]`: separate boxes of hexahedra (one body and one region each,
+    /// region tag k + 1 named `name`): test bodies for contact.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub blocks: Vec<BlockSpec>,
+}
+
+/// One box of `[[mesh.blocks]]`: from `origin` to `origin + size`, `cells` per axis.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BlockSpec {
+    pub name: String,
+    pub origin: [f64; 3],
+    pub size: [f64; 3],
+    pub cells: [usize; 3],
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -106,6 +197,7 @@ macro_rules! selector {
 selector!(FixedSpec);
 selector!(PrescribedSpec);
 selector!(LoadSpec);
+selector!(SurfaceSpec);
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -182,6 +274,11 @@ pub struct SolverSpec {
     pub speed_limit: f64,
     /// Seconds of simulated time between ParaView frames (with --vtk).
     pub output_interval: f64,
+    /// Seconds of simulated time between the boards' surface updates to the graphics
+    /// engine (the seed: 40 ms).
+    pub graphics_interval: f64,
+    /// Each update is spread over at most this many steps (the seed: 20).
+    pub graphics_spread_steps: u32,
     /// Every this many steps, re-estimate the critical step about the current (deformed)
     /// state by a warm-started power iteration; `None`: never (the step found at rest is
     /// kept). Large deformation can shrink the stable step (compressed elements).
@@ -209,6 +306,8 @@ impl Default for SolverSpec {
             steps: None,
             speed_limit: 100.0,
             output_interval: 0.04,
+            graphics_interval: 0.04,
+            graphics_spread_steps: 20,
             dt_recheck_interval: None,
             dt_recheck_iterations: 20,
             adapt_dt: false,

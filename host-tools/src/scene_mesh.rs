@@ -16,9 +16,39 @@ pub fn load(spec: &MeshSpec, scene_dir: &Path) -> Result<(Mesh, BTreeMap<String,
         spec.file.is_some(),
         spec.generate.is_some(),
         spec.builtin.is_some(),
+        !spec.blocks.is_empty(),
     ];
     if given.iter().filter(|g| **g).count() != 1 {
-        bail!("[mesh] needs exactly one of `file`, `generate`, `builtin`");
+        bail!("[mesh] needs exactly one of `file`, `generate`, `builtin`, `blocks`");
+    }
+    if !spec.blocks.is_empty() {
+        let mut mesh = Mesh {
+            source: "[[mesh.blocks]]".into(),
+            ..Mesh::default()
+        };
+        for (k, b) in spec.blocks.iter().enumerate() {
+            if b.cells.contains(&0) || b.size.iter().any(|&s| !(s > 0.0)) {
+                bail!(
+                    "[[mesh.blocks]] {k} ({:?}): size and cells must be positive",
+                    b.name
+                );
+            }
+            let part = crate::mesh_io::generate_box(b.size, b.cells);
+            let base = mesh.nodes.len() as u32;
+            let region = k as i32 + 1;
+            mesh.nodes.extend(
+                part.nodes
+                    .iter()
+                    .map(|p| core::array::from_fn(|i| p[i] + b.origin[i])),
+            );
+            mesh.cells
+                .extend(part.cells.iter().map(|c| c.map(|n| n + base)));
+            mesh.cell_regions
+                .extend(std::iter::repeat_n(region, part.cells.len()));
+            mesh.region_names.insert(region, b.name.clone());
+        }
+        mesh.node_tags = (1..=mesh.nodes.len() as u64).collect();
+        return Ok((mesh, BTreeMap::new()));
     }
     if let Some(f) = &spec.file {
         let path = scene_dir.join(f);
@@ -86,6 +116,8 @@ pub const PROBE_TIP_RADIUS_M: f64 = 0.0025;
 /// How far the probe pushes the tube (m) and over what time (s).
 pub const PROBE_PUSH_M: f64 = 0.005;
 pub const PROBE_PUSH_S: f64 = 0.5;
+/// The probe starts this far above the tube (m).
+pub const PROBE_START_GAP_M: f64 = 0.001;
 
 /// The tube's nodes under the probe tip: every node of the tube's cross-section within the
 /// tip radius of the tube axis point below the contact point (until contact exists, the
@@ -113,7 +145,16 @@ fn probe_nodes(a: &builtin::Anatomy) -> Vec<u32> {
 pub fn builtin_scene(level: &str) -> Result<Scene> {
     let lv: Level = level.parse().map_err(|e| anyhow!("--level: {e}"))?;
     let probe = builtin::generate(lv).probe;
-    let d = probe.push_direction.map(|v| v * PROBE_PUSH_M);
+    let up = probe.push_direction.map(|v| -v);
+    // The blunt probe: a capsule of the tip's radius, its end just above the tube, its
+    // shaft leaning back 30 degrees from the vertical, 40 mm of it modelled.
+    let r = PROBE_TIP_RADIUS_M;
+    let tip: [f64; 3] =
+        core::array::from_fn(|i| probe.contact_point[i] + (r + PROBE_START_GAP_M) * up[i]);
+    let lean = [0.5, 0.0, 0.866];
+    let tail: [f64; 3] = core::array::from_fn(|i| tip[i] + 0.04 * lean[i]);
+    let travel = PROBE_PUSH_M + PROBE_START_GAP_M;
+    let d = probe.push_direction.map(|v| v * travel);
     let mat = |region: Option<&str>, e: f64| MaterialSpec {
         region: region.map(|r| RegionRef::Name(r.into())),
         law: "neo-hookean".into(),
@@ -131,6 +172,7 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
             generate: None,
             builtin: Some("uterus".into()),
             level: Some(level.into()),
+            blocks: vec![],
         },
         // Uterine wall ~ 10 kPa; the oviducts are softer (3 kPa).
         materials: vec![
@@ -146,12 +188,7 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
                 set: Some(s.into()),
             })
             .to_vec(),
-        prescribed: vec![PrescribedSpec {
-            box_: None,
-            sphere: None,
-            set: Some("probe".into()),
-            path: vec![[0.0, 0.0, 0.0, 0.0], [PROBE_PUSH_S, d[0], d[1], d[2]]],
-        }],
+        prescribed: vec![],
         load: vec![],
         // The organs rest on their neighbours in the pelvis, which carry their weight; a
         // 3 kPa tube 3.5 mm across could not carry its own over 10 cm, so gravity is off.
@@ -161,5 +198,26 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
             duration: Some(0.6),
             ..SolverSpec::default()
         },
+        contact: Some(ContactSpec {
+            penalty: 0.3,
+            ..ContactSpec::default()
+        }),
+        surface: vec![SurfaceSpec {
+            name: "right_tube".into(),
+            region: Some(RegionRef::Name("right_oviduct".into())),
+            box_: None,
+            sphere: None,
+            set: None,
+        }],
+        tool: vec![ToolSpec {
+            name: "probe".into(),
+            shape: "capsule".into(),
+            a: tip,
+            b: tail,
+            radius: r,
+            path: vec![[0.0, 0.0, 0.0, 0.0], [PROBE_PUSH_S, d[0], d[1], d[2]]],
+            surface: "right_tube".into(),
+        }],
+        contact_pair: vec![],
     })
 }

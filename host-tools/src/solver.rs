@@ -4,6 +4,10 @@
 use std::time::Instant;
 
 use anyhow::{anyhow, Result};
+use pe_firmware::physics::contact::{
+    build_candidates, check_travel, evaluate_pairs, evaluate_tools, Candidate, ContactModel,
+    ContactStats,
+};
 use pe_firmware::physics::explicit::{accumulate_internal_forces, stored_energy};
 use pe_firmware::physics::{
     CentralDifference, HexElement, HexFull, HexReduced, MaterialLaw, PhysicsError, Real,
@@ -105,6 +109,124 @@ pub struct Model<'p, T> {
     /// exert on the tissue at the last step, N (for the built-in scene: the probe push).
     pub reaction_prescribed: [f64; 3],
     pub reaction_fixed: [f64; 3],
+    /// Contact state (None: the scene has no contact).
+    pub contact: Option<ContactState>,
+}
+
+/// The serial solver's contact state: the tables, the search and the forces of the last step.
+pub struct ContactState {
+    pub run: crate::contact::ContactRun,
+    pub candidates: Vec<Candidate>,
+    /// Contact-node positions at the last check.
+    pub at_check: Vec<[f64; 3]>,
+    /// Contact force per contact node at the last step (N).
+    pub force: Vec<[f64; 3]>,
+    /// Force of the tissue on each tool at the last step (N).
+    pub tool_force: Vec<[f64; 3]>,
+    pub stats: ContactStats,
+    /// Checks done and the most candidates any check found.
+    pub checks: u64,
+    pub candidates_max: usize,
+    /// Deepest penetration over the run (m).
+    pub max_depth_m: f64,
+}
+
+impl ContactState {
+    fn new(problem: &Problem, dt_s: f64) -> Option<ContactState> {
+        let setup = problem.contact.as_ref()?;
+        let ms = problem.solver.mass_scaling;
+        let inertial: Vec<f64> = problem.mass.iter().map(|m| m * ms).collect();
+        let run = setup.for_step(&problem.mesh, &inertial, dt_s);
+        let n = run.nodes.len();
+        let tools = run.tools.len();
+        Some(ContactState {
+            run,
+            candidates: Vec::new(),
+            at_check: vec![[0.0; 3]; n],
+            force: vec![[0.0; 3]; n],
+            tool_force: vec![[0.0; 3]; tools],
+            stats: ContactStats::default(),
+            checks: 0,
+            candidates_max: 0,
+            max_depth_m: 0.0,
+        })
+    }
+
+    /// Contact forces at the state `u` (step `step`, time `t`), the same sequence of
+    /// operations the board runtime performs for the nodes it owns.
+    fn evaluate<T: Real>(
+        &mut self,
+        problem: &Problem,
+        u: &[[T; 3]],
+        step: u64,
+        t: f64,
+    ) -> Result<(), PhysicsError> {
+        let run = &self.run;
+        let m = ContactModel {
+            nodes: &run.nodes,
+            faces: &run.faces,
+            pairs: &run.pairs,
+            tools: &run.tools,
+        };
+        let pos = |c: usize| {
+            let n = &run.nodes[c];
+            let d = u[n.global as usize];
+            Some(core::array::from_fn(|i| n.reference[i] + d[i].to_f64()))
+        };
+        let p = run.params;
+        if step.is_multiple_of(p.check_interval_steps.max(1) as u64) {
+            for (c, x) in self.at_check.iter_mut().enumerate() {
+                *x = pos(c).unwrap_or([0.0; 3]);
+            }
+            if !run.pairs.is_empty() {
+                self.candidates.clear();
+                let needed = match build_candidates(&m, pos, p.candidate_margin_m, &mut []) {
+                    Ok(n) | Err(n) => n,
+                };
+                self.candidates.resize(needed, Candidate::default());
+                let _ = build_candidates(&m, pos, p.candidate_margin_m, &mut self.candidates);
+                self.candidates_max = self.candidates_max.max(needed);
+            }
+            self.checks += 1;
+        }
+        check_travel(
+            &m,
+            pos,
+            &self.at_check,
+            |_| true,
+            p.pair_surfaces,
+            p.travel_max_m,
+        )?;
+        self.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+        self.tool_force.iter_mut().for_each(|f| *f = [0.0; 3]);
+        self.stats = ContactStats::default();
+        let capsules: Vec<_> = run
+            .tools
+            .iter()
+            .map(|tl| tl.capsule.translated(problem.paths[tl.path as usize].at(t)))
+            .collect();
+        evaluate_tools(
+            &m,
+            &capsules,
+            pos,
+            |_| true,
+            p.tolerance_m,
+            &mut self.force,
+            &mut self.tool_force,
+            &mut self.stats,
+        )?;
+        evaluate_pairs(
+            &m,
+            &self.candidates,
+            pos,
+            |_| true,
+            p.tolerance_m,
+            &mut self.force,
+            &mut self.stats,
+        )?;
+        self.max_depth_m = self.max_depth_m.max(self.stats.max_depth_m);
+        Ok(())
+    }
 }
 
 /// A step failure with the step number.
@@ -153,6 +275,7 @@ impl<'p, T: Real> Model<'p, T> {
             kinetic_energy: 0.0,
             reaction_prescribed: [0.0; 3],
             reaction_fixed: [0.0; 3],
+            contact: ContactState::new(problem, dt_s),
         }
     }
 
@@ -181,8 +304,9 @@ impl<'p, T: Real> Model<'p, T> {
         self.gain = self.problem.mass.iter().map(|m| cd.gain(m * ms)).collect();
     }
 
-    /// External forces at time `t`: gravity plus ramped loads.
-    fn external_forces(&mut self, t: f64) {
+    /// External forces at time `t`: gravity plus ramped loads plus contact (in that order,
+    /// as the board runtime adds them).
+    fn external_forces(&mut self, t: f64) -> Result<(), PhysicsError> {
         self.f_ext.copy_from_slice(&self.gravity_force);
         for l in &self.problem.loads {
             let s = l.ramp.as_ref().map(|r| r.at(t)[0]).unwrap_or(1.0);
@@ -190,6 +314,16 @@ impl<'p, T: Real> Model<'p, T> {
                 self.f_ext[l.node as usize][i] += T::from_f64(l.force[i] * s);
             }
         }
+        if let Some(c) = self.contact.as_mut() {
+            c.evaluate(self.problem, &self.u, self.step, t)?;
+            for (node, f) in c.run.nodes.iter().zip(&c.force) {
+                let e = &mut self.f_ext[node.global as usize];
+                for i in 0..3 {
+                    e[i] += T::from_f64(f[i]);
+                }
+            }
+        }
+        Ok(())
     }
 
     /// One central-difference step from `t_n` to `t_{n+1}`.
@@ -201,7 +335,8 @@ impl<'p, T: Real> Model<'p, T> {
         self.elements
             .internal_forces(&self.laws, &self.u, &mut self.f_int)
             .map_err(|error| StepError { step, error })?;
-        self.external_forces(t);
+        self.external_forces(t)
+            .map_err(|error| StepError { step, error })?;
         let inv2dt = 1.0 / (2.0 * self.dt_s);
         let limit = self.problem.solver.speed_limit;
         let ms = self.problem.solver.mass_scaling;
@@ -302,12 +437,35 @@ pub struct RunReport {
     /// Re-checks done and how many of them lowered `dt`.
     pub dt_rechecks: u64,
     pub dt_reductions: u64,
+    /// Contact figures (absent without contact).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub contact: Option<ContactReport>,
+}
+
+/// What contact did over a run.
+#[derive(Clone, Debug, Serialize)]
+pub struct ContactReport {
+    pub tools: Vec<String>,
+    /// Force of the tissue on each tool at the end and the largest magnitude over the run (N).
+    pub tool_force_final_n: Vec<[f64; 3]>,
+    pub tool_force_peak_n: Vec<f64>,
+    /// Deepest penetration over the run (m) and the scene's tolerance.
+    pub max_penetration_m: f64,
+    pub tolerance_m: f64,
+    /// Largest |Σ forces of a pair| / Σ|forces| over the run (zero to round-off).
+    pub pair_force_sum_rel_max: f64,
+    pub check_interval_steps: u32,
+    pub checks: u64,
+    pub candidates_max: usize,
+    pub active_contacts_final: u32,
 }
 
 /// Result of a run: final displacements (f64) and the report.
 pub struct RunOutput {
     pub displacements: Vec<[f64; 3]>,
     pub report: RunReport,
+    /// Per step, the force of the tissue on each tool (N): `tool_force[step · tools + t]`.
+    pub tool_force: Vec<[f64; 3]>,
 }
 
 /// Called every step with the model's state after the step (for progress and frames).
@@ -343,10 +501,25 @@ pub fn run_typed<T: Real>(
     let mut model = Model::<T>::new(problem, dt);
     let mut monitor = DtMonitor::new(problem, dt_crit);
     let start = Instant::now();
+    let mut tool_force = Vec::new();
+    let mut peak: Vec<f64> = Vec::new();
+    let mut pair_rel: f64 = 0.0;
     while model.step < steps {
         model
             .advance()
             .map_err(|e| anyhow!("{name}: {}", describe_step_error(problem, &e)))?;
+        if let Some(c) = &model.contact {
+            tool_force.extend_from_slice(&c.tool_force);
+            peak.resize(c.tool_force.len(), 0.0);
+            for (p, f) in peak.iter_mut().zip(&c.tool_force) {
+                *p = p.max((f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt());
+            }
+            for (s, m) in c.stats.pair_sum_n.iter().zip(&c.stats.pair_magnitude_n) {
+                if *m > 0.0 {
+                    pair_rel = pair_rel.max((s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt() / m);
+                }
+            }
+        }
         if monitor.due(model.step) && model.step < steps {
             if let Some(dt_new) = monitor.check(&model).map_err(|e| anyhow!("{name}: {e}"))? {
                 model.set_dt(dt_new);
@@ -390,10 +563,27 @@ pub fn run_typed<T: Real>(
         dt_critical_min_s: monitor.dt_critical_min_s,
         dt_rechecks: monitor.rechecks,
         dt_reductions: monitor.reductions,
+        contact: model.contact.as_ref().map(|c| ContactReport {
+            tools: problem
+                .contact
+                .as_ref()
+                .map(|s| s.tool_names.clone())
+                .unwrap_or_default(),
+            tool_force_final_n: c.tool_force.clone(),
+            tool_force_peak_n: peak.clone(),
+            max_penetration_m: c.max_depth_m,
+            tolerance_m: c.run.params.tolerance_m,
+            pair_force_sum_rel_max: pair_rel,
+            check_interval_steps: c.run.params.check_interval_steps,
+            checks: c.checks,
+            candidates_max: c.candidates_max,
+            active_contacts_final: c.stats.active,
+        }),
     };
     Ok(RunOutput {
         displacements,
         report,
+        tool_force,
     })
 }
 
@@ -417,7 +607,10 @@ pub fn describe_step_error(problem: &Problem, e: &StepError) -> String {
             .unwrap_or_default()
     };
     let detail = match e.error {
-        PhysicsError::NonFinite { node } | PhysicsError::SpeedLimit { node, .. } => {
+        PhysicsError::NonFinite { node }
+        | PhysicsError::SpeedLimit { node, .. }
+        | PhysicsError::Penetration { node, .. }
+        | PhysicsError::ContactSpeedBound { node, .. } => {
             format!(
                 " (node index {node} = mesh node tag {}{})",
                 tag(node),
@@ -434,6 +627,7 @@ pub fn describe_step_error(problem: &Problem, e: &StepError) -> String {
                 None => String::new(),
             }
         }
+        PhysicsError::BadContactIndex { .. } => String::new(),
     };
     format!("{e}{detail}")
 }

@@ -364,6 +364,14 @@ fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
 
 /// The quantity of interest of a finished run: its name and vector value.
 fn qoi(p: &Problem, out: &solver::RunOutput) -> (String, [f64; 3]) {
+    if let Some(f) = out
+        .report
+        .contact
+        .as_ref()
+        .and_then(|c| c.tool_force_final_n.first())
+    {
+        return ("tool_force_n".into(), *f);
+    }
     if p.node_kind
         .iter()
         .any(|k| matches!(k, NodeKind::Prescribed(_)))
@@ -729,7 +737,7 @@ pub fn to_markdown(rows: &[Row], name: &str) -> String {
     }
     s.push_str("\n## How the errors are measured\n\n");
     s.push_str("- Nodal displacement: at every node of the configuration's mesh, against the reference's field at the same point: node by node on the reference's own mesh, otherwise interpolated with the trilinear shape functions of the reference cell that holds the point (found by inverting the cell map); nodes more than a quarter cell outside the reference mesh are left out (`compared_nodes` in the CSV).\n");
-    s.push_str("- Quantity of interest: the force the prescribed nodes exert on the tissue (the probe's push) when the scene prescribes motion, otherwise the mean displacement of the tip face (largest x); the norm of the vector difference over the reference's norm.\n");
+    s.push_str("- Quantity of interest: the force of the tissue on the first tool (the probe) when the scene has tools, else the force the prescribed nodes exert on the tissue when the scene prescribes motion, otherwise the mean displacement of the tip face (largest x); the norm of the vector difference over the reference's norm.\n");
     s.push_str("- Energy: stored + kinetic energy at the end, relative to the reference's.\n");
     s.push_str("- Wall time is measured on a shared 2-core machine: expect ±20% between runs.\n");
     s

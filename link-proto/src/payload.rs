@@ -15,6 +15,9 @@
 //!
 //! Never: parsing checks every length first, emitting checks the buffer.
 
+// Index loops mirror the byte offsets of the layout.
+#![allow(clippy::needless_range_loop)]
+
 use crate::error::{Error, Result};
 use crate::limits::PACKET_PAYLOAD_LEN_MAX;
 
@@ -103,7 +106,8 @@ pub const NODES_HEADER_LEN: usize = 7;
 /// Length of one node entry.
 pub const NODE_ENTRY_LEN: usize = 28;
 /// Most node entries in one packet.
-pub const NODES_PER_PACKET_MAX: usize = (PACKET_PAYLOAD_LEN_MAX - NODES_HEADER_LEN) / NODE_ENTRY_LEN;
+pub const NODES_PER_PACKET_MAX: usize =
+    (PACKET_PAYLOAD_LEN_MAX - NODES_HEADER_LEN) / NODE_ENTRY_LEN;
 
 impl NodesHeader {
     /// Writes the header; the entries go after it with [`emit_node_entry`].
@@ -151,11 +155,7 @@ pub fn node_entry(b: &[u8], k: usize) -> Result<(u32, [f64; 3])> {
     let at = NODES_HEADER_LEN + k * NODE_ENTRY_LEN;
     Ok((
         u32_at(b, at)?,
-        [
-            f64_at(b, at + 4)?,
-            f64_at(b, at + 12)?,
-            f64_at(b, at + 20)?,
-        ],
+        [f64_at(b, at + 4)?, f64_at(b, at + 12)?, f64_at(b, at + 20)?],
     ))
 }
 
@@ -317,7 +317,10 @@ mod tests {
         let n = s.emit(&mut buf).unwrap();
         emit_surface_entry(&mut buf, 0, 42, [1.5, -2.0, 0.25]).unwrap();
         assert_eq!(SurfaceHeader::parse(&buf[..n]).unwrap(), s);
-        assert_eq!(surface_entry(&buf[..n], 0).unwrap(), (42, [1.5, -2.0, 0.25]));
+        assert_eq!(
+            surface_entry(&buf[..n], 0).unwrap(),
+            (42, [1.5, -2.0, 0.25])
+        );
         assert_eq!(SurfaceHeader::parse(&buf[..3]), Err(Error::Truncated));
     }
 }

@@ -10,16 +10,23 @@
 //! exchange rounds: for each axis x, y, z, `rounds[axis]` rounds, each with, for the faces
 //! (+axis, −axis) in turn, a `u16` count and that many `u16` local node indices to send,
 //! then a `u16` count and that many [`RecvEntry`]; then `path_points` × [`PathPoint`],
-//! `loads` × [`LoadRecord`]; last, a CRC-32 (little-endian) of everything before it.
+//! `loads` × [`LoadRecord`]; then the contact tables (the same on every board):
+//! `contact_nodes` × ([`ContactNode`], [`ContactNodePlace`]), `contact_faces` ×
+//! [`ContactFace`], `pairs` × [`ContactPair`], `tools` × [`Tool`], `contact_boards` × `u8`
+//! (global-network addresses of every board that owns a node of a contact pair's
+//! surface), `graphics_nodes` × `u16` (this board's owned surface nodes, local indices,
+//! sent to the graphics engine); last, a CRC-32 (little-endian) of everything before it.
 //!
 //! Reading never panics: a short, corrupted or foreign image is an [`ImageError`].
 
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
+pub use crate::physics::contact::{ContactFace, ContactNode, ContactPair, Tool};
+
 /// First four bytes of every schedule image.
 pub const MAGIC: [u8; 4] = *b"PESI";
 /// Format version; bumped whenever a record type changes.
-pub const FORMAT_VERSION: u16 = 1;
+pub const FORMAT_VERSION: u16 = 2;
 
 /// Scalar type of the image's element and node records.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -52,6 +59,48 @@ pub struct Counts {
     pub recvs: u32,
     pub path_points: u16,
     pub loads: u16,
+    pub contact_nodes: u32,
+    pub contact_faces: u32,
+    pub pairs: u8,
+    pub tools: u8,
+    pub contact_boards: u8,
+    pub graphics_nodes: u16,
+}
+
+/// Contact search parameters (all zero without contact).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ContactParams {
+    /// Bounding boxes are exchanged (and the candidates rebuilt) every this many steps.
+    pub check_interval_steps: u32,
+    /// Farthest a pair-surface node may move between two checks (m): `speed_bound ·
+    /// check_interval · Δt`, at most half the scene's gap.
+    pub travel_max_m: f64,
+    /// A slave node is a candidate of a face whose bounding box, grown by this, holds it.
+    pub candidate_margin_m: f64,
+    /// Boards whose boxes, grown by this, overlap exchange nodes until the next check:
+    /// twice (face diameter + contact depth) plus twice the travel.
+    pub box_margin_m: f64,
+    /// Deepest penetration tolerated (m).
+    pub tolerance_m: f64,
+    /// Bit mask of the surfaces that take part in a pair.
+    pub pair_surfaces: u8,
+}
+
+/// The graphics stream: every `interval_steps` steps the owned surface nodes go to the
+/// graphics engine, spread over `spread_steps` steps (0: no stream).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct GraphicsParams {
+    pub interval_steps: u32,
+    pub spread_steps: u16,
+}
+
+/// Where a contact node lives on this board.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ContactNodePlace {
+    /// Local node index, if the board holds the node (owner or replica).
+    pub local: Option<u16>,
+    /// The board owns it (applies its contact force).
+    pub owned: bool,
 }
 
 /// Scene parameters the board needs.
@@ -82,6 +131,8 @@ pub struct ImageHeader {
     /// Scene totals, for reports.
     pub scene_elements: u32,
     pub scene_nodes: u32,
+    pub contact: ContactParams,
+    pub graphics: GraphicsParams,
 }
 
 /// How a node moves.

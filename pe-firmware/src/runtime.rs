@@ -7,10 +7,21 @@
 //! bad images, bad frames, stalled links and numerical failure become a [`Fault`] naming
 //! the board, the link or the element, and the step.
 
-use link_proto::{emit_values, Face, FrameKind, FrameRepr, Links, Values, FRAME_LEN_MAX};
+use link_proto::payload::{
+    emit_node_entry, emit_surface_entry, node_entry, BoxPayload, NodesHeader, SurfaceHeader,
+    ToolForcePayload, NODES_PER_PACKET_MAX, SURFACE_NODES_PER_PACKET_MAX,
+};
+use link_proto::{
+    emit_values, Face, FrameKind, FrameRepr, Links, Packet, PacketKind, PacketRepr, Values,
+    FRAME_LEN_MAX, PACKET_HEADER_LEN,
+};
 use serde::de::DeserializeOwned;
 
 use crate::image::*;
+use crate::physics::contact::{
+    build_candidates, check_travel, evaluate_pairs, evaluate_tools, Candidate, Capsule,
+    ContactModel, ContactStats,
+};
 use crate::physics::explicit::accumulate_internal_forces;
 use crate::physics::{
     CentralDifference, HexElement, HexFull, HexReduced, MaterialLaw, PhysicsError, Real,
@@ -80,6 +91,35 @@ pub enum FaultKind {
     Physics(PhysicsError),
     /// The schedule image was refused.
     Image(ImageError),
+    /// The global port refused a packet to `dst`.
+    GlobalSendFailed {
+        dst: u8,
+        error: link_proto::SendError,
+    },
+    /// The global port reported an error.
+    GlobalError {
+        error: link_proto::RecvError,
+    },
+    /// A global packet failed to parse (CRC, length, payload layout).
+    BadPacket {
+        error: link_proto::Error,
+    },
+    /// A global packet arrived intact but is not one the schedule expects now.
+    UnexpectedPacket {
+        src: u8,
+        kind: u8,
+        step: u32,
+    },
+    /// No packet from board `src` (global address) within the link timeout.
+    GlobalTimeout {
+        src: u8,
+    },
+    /// The contact search needs more room than this firmware has.
+    ContactCapacity {
+        what: &'static str,
+        needed: u32,
+        max: u32,
+    },
 }
 
 /// A fault with its board and step.
@@ -105,6 +145,22 @@ impl core::fmt::Display for Fault {
             FaultKind::BadFrame { face, error } => write!(f, "link {face:?}: bad frame: {error}"),
             FaultKind::Physics(e) => write!(f, "{e}"),
             FaultKind::Image(e) => write!(f, "schedule image: {e}"),
+            FaultKind::GlobalSendFailed { dst, error } => {
+                write!(f, "global network: send to {dst} failed: {error:?}")
+            }
+            FaultKind::GlobalError { error } => write!(f, "global network: {error:?}"),
+            FaultKind::BadPacket { error } => write!(f, "global network: bad packet: {error}"),
+            FaultKind::UnexpectedPacket { src, kind, step } => write!(
+                f,
+                "global network: unexpected packet of kind {kind:#04x} for step {step} from {src}"
+            ),
+            FaultKind::GlobalTimeout { src } => {
+                write!(f, "global network: nothing from board {src} within the timeout")
+            }
+            FaultKind::ContactCapacity { what, needed, max } => write!(
+                f,
+                "contact: {needed} {what} needed, this firmware holds {max}"
+            ),
         }
     }
 }
@@ -122,6 +178,154 @@ pub struct Storage<'a, T, E> {
     pub recvs: &'a mut [RecvEntry],
     pub path_points: &'a mut [PathPoint],
     pub loads: &'a mut [LoadRecord],
+}
+
+/// Caller-provided storage for contact and the graphics stream (lengths are the
+/// capacities; all may be empty when the scene has neither).
+pub struct ContactStorage<'a> {
+    pub nodes: &'a mut [ContactNode],
+    pub places: &'a mut [ContactNodePlace],
+    pub faces: &'a mut [ContactFace],
+    /// Per contact node: position at the last check, and contact force this step (f64).
+    pub at_check: &'a mut [[f64; 3]],
+    pub force: &'a mut [[f64; 3]],
+    /// Received displacements by step parity (index `2 c + step % 2`) and the step + 1
+    /// each belongs to (twice the contact nodes).
+    pub remote_u: &'a mut [[f64; 3]],
+    pub remote_stamp: &'a mut [u32],
+    pub candidates: &'a mut [Candidate],
+    /// Contact-node indices sent to the partners until the next check (flat).
+    pub send_list: &'a mut [u32],
+    /// Per local node: its contact-node index, or `u32::MAX` (as many as nodes).
+    pub contact_of: &'a mut [u32],
+    /// Local indices of the owned surface nodes sent to the graphics engine.
+    pub graphics: &'a mut [u16],
+}
+
+/// Fixed-capacity contact storage: `NC` contact nodes, `NF` faces, `NK` candidates, `NS`
+/// send entries, `NN` nodes (as [`StaticStorage`]), `NG` graphics nodes.
+pub struct StaticContactStorage<
+    const NC: usize,
+    const NC2: usize,
+    const NF: usize,
+    const NK: usize,
+    const NS: usize,
+    const NN: usize,
+    const NG: usize,
+> {
+    pub nodes: [ContactNode; NC],
+    pub places: [ContactNodePlace; NC],
+    pub faces: [ContactFace; NF],
+    pub at_check: [[f64; 3]; NC],
+    pub force: [[f64; 3]; NC],
+    pub remote_u: [[f64; 3]; NC2],
+    pub remote_stamp: [u32; NC2],
+    pub candidates: [Candidate; NK],
+    pub send_list: [u32; NS],
+    pub contact_of: [u32; NN],
+    pub graphics: [u16; NG],
+}
+
+impl<
+        const NC: usize,
+        const NC2: usize,
+        const NF: usize,
+        const NK: usize,
+        const NS: usize,
+        const NN: usize,
+        const NG: usize,
+    > StaticContactStorage<NC, NC2, NF, NK, NS, NN, NG>
+{
+    /// Empty storage (a `const` so it can initialise a `static`).
+    pub const EMPTY: Self = StaticContactStorage {
+        nodes: [ContactNode {
+            global: 0,
+            reference: [0.0; 3],
+            penalty_n_per_m: 0.0,
+            surfaces: 0,
+        }; NC],
+        places: [ContactNodePlace {
+            local: None,
+            owned: false,
+        }; NC],
+        faces: [ContactFace {
+            nodes: [0; 4],
+            surface: 0,
+        }; NF],
+        at_check: [[0.0; 3]; NC],
+        force: [[0.0; 3]; NC],
+        remote_u: [[0.0; 3]; NC2],
+        remote_stamp: [0; NC2],
+        candidates: [Candidate {
+            direction: 0,
+            slave: 0,
+            face: 0,
+        }; NK],
+        send_list: [0; NS],
+        contact_of: [0; NN],
+        graphics: [0; NG],
+    };
+
+    pub fn storage(&mut self) -> ContactStorage<'_> {
+        ContactStorage {
+            nodes: &mut self.nodes,
+            places: &mut self.places,
+            faces: &mut self.faces,
+            at_check: &mut self.at_check,
+            force: &mut self.force,
+            remote_u: &mut self.remote_u,
+            remote_stamp: &mut self.remote_stamp,
+            candidates: &mut self.candidates,
+            send_list: &mut self.send_list,
+            contact_of: &mut self.contact_of,
+            graphics: &mut self.graphics,
+        }
+    }
+}
+
+/// Most contact pairs and tools a runtime handles.
+pub const PAIRS_MAX: usize = 4;
+pub const TOOLS_MAX: usize = 4;
+/// Most boards on the global network.
+pub const BOARDS_MAX: usize = link_proto::BOARD_COUNT;
+
+/// A received bounding box: (step + 1, min, max).
+type BoxEntry = (u32, [f64; 3], [f64; 3]);
+/// What evaluating contact yields: tool forces, statistics, new candidate count.
+type ContactOutcome = ([[f64; 3]; TOOLS_MAX], ContactStats, Option<usize>);
+
+/// Where the contact operation of a step stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Phase {
+    Start,
+    /// Sending the box to the contact board with this slot next.
+    SendBoxes(usize),
+    AwaitBoxes,
+    /// Sending nodes: partner slot and offset in its list.
+    SendNodes(usize, usize),
+    AwaitNodes,
+    Evaluate,
+    /// Sending tool forces from this tool on.
+    SendTools(usize),
+}
+
+/// Global-network statistics of one board (for reports).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GlobalStats {
+    pub packets_sent: u64,
+    pub bytes_sent: u64,
+    pub box_packets: u64,
+    pub node_packets: u64,
+    /// Contact-node displacement vectors sent.
+    pub node_vectors: u64,
+    pub graphics_packets: u64,
+    pub graphics_bytes: u64,
+    pub tool_packets: u64,
+    /// Bounding-box checks done and the most candidates one found.
+    pub checks: u64,
+    pub candidates_max: u32,
+    /// Partners at the last check.
+    pub partners: u32,
 }
 
 /// Fixed-capacity storage for the firmware: `NE` elements, `NN` nodes, `NX` exchange
@@ -181,6 +385,11 @@ impl<
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Op {
     Begin,
+    /// Surface nodes to the graphics engine (on the steps of a graphics update).
+    Graphics,
+    /// Contact: bounding boxes (every check interval), node exchange with the partners,
+    /// contact forces of owned nodes, tool forces to the host.
+    Contact,
     Batch(u8),
     External(u8),
     /// (axis, round, face 0 = +axis / 1 = −axis)
@@ -191,7 +400,7 @@ enum Op {
 
 /// Most operations in a step: begin, 4 batches, 4 external stages, 3 axes × rounds × 2
 /// faces × (send + receive), update.
-const OPS_MAX: usize = 10 + 3 * ROUNDS_PER_AXIS_MAX * 4;
+const OPS_MAX: usize = 12 + 3 * ROUNDS_PER_AXIS_MAX * 4;
 
 /// Ranges of one round's lists in the flat `sends` / `recvs` arrays, per face (+, −).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -248,6 +457,29 @@ pub struct Runtime<'a, T, E> {
     pub reaction_fixed: [f64; 3],
     /// Kinetic energy of owned nodes at the last step (J).
     pub kinetic_energy: f64,
+    cs: ContactStorage<'a>,
+    pairs: [ContactPair; PAIRS_MAX],
+    tools: [Tool; TOOLS_MAX],
+    contact_boards: [u8; BOARDS_MAX],
+    /// This board's global address and its slot in `contact_boards`.
+    address: u8,
+    slot: Option<usize>,
+    phase: Phase,
+    /// Boxes by step parity and slot: (step + 1, min, max).
+    boxes: [[BoxEntry; BOARDS_MAX]; 2],
+    my_box: ([f64; 3], [f64; 3]),
+    /// Partner slots (bit mask) until the next check and their send-list ranges.
+    partners: u64,
+    send_ranges: [(u32, u32); BOARDS_MAX],
+    /// Per step parity: (step + 1, slots whose last node packet arrived).
+    done: [(u32, u64); 2],
+    candidates_len: usize,
+    graphics_cursor: usize,
+    msg_id: u16,
+    /// Force of the tissue on each tool from this board's nodes at the last step (N).
+    pub tool_force: [[f64; 3]; TOOLS_MAX],
+    pub contact_stats: ContactStats,
+    pub global: GlobalStats,
 }
 
 fn capacity(what: &'static str, count: usize, max: usize) -> Result<(), ImageError> {
@@ -268,6 +500,7 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
         image: &[u8],
         board: [u8; 3],
         st: Storage<'a, T, E>,
+        cs: ContactStorage<'a>,
         config: RuntimeConfig,
     ) -> Result<Self, ImageError> {
         let mut r = ImageReader::new(image, Some(board))?;
@@ -396,12 +629,121 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
             }
             st.loads[k] = l;
         }
+        let nc = c.contact_nodes as usize;
+        capacity("contact nodes", nc, cs.nodes.len().min(cs.places.len()))?;
+        capacity("contact nodes", nc, cs.at_check.len().min(cs.force.len()))?;
+        capacity(
+            "contact nodes (received)",
+            2 * nc,
+            cs.remote_u.len().min(cs.remote_stamp.len()),
+        )?;
+        capacity("contact faces", c.contact_faces as usize, cs.faces.len())?;
+        capacity("contact pairs", c.pairs as usize, PAIRS_MAX)?;
+        capacity("tools", c.tools as usize, TOOLS_MAX)?;
+        capacity("contact boards", c.contact_boards as usize, BOARDS_MAX)?;
+        capacity(
+            "graphics nodes",
+            c.graphics_nodes as usize,
+            cs.graphics.len(),
+        )?;
+        if nc > 0 {
+            capacity("nodes (contact map)", nn, cs.contact_of.len())?;
+        }
+        for v in cs.contact_of.iter_mut().take(nn) {
+            *v = u32::MAX;
+        }
+        for k in 0..nc {
+            let node: ContactNode = r.next("contact node")?;
+            let place: ContactNodePlace = r.next("contact node place")?;
+            if let Some(l) = place.local {
+                if l as usize >= nn {
+                    return Err(ImageError::BadIndex {
+                        what: "local node of contact node",
+                        index: k as u32,
+                    });
+                }
+                cs.contact_of[l as usize] = k as u32;
+            }
+            cs.nodes[k] = node;
+            cs.places[k] = place;
+            cs.force[k] = [0.0; 3];
+            cs.at_check[k] = [0.0; 3];
+            cs.remote_stamp[2 * k] = 0;
+            cs.remote_stamp[2 * k + 1] = 0;
+        }
+        for k in 0..c.contact_faces as usize {
+            let f: ContactFace = r.next("contact face")?;
+            if f.nodes.iter().any(|&n| n as usize >= nc) {
+                return Err(ImageError::BadIndex {
+                    what: "node of contact face",
+                    index: k as u32,
+                });
+            }
+            cs.faces[k] = f;
+        }
+        let mut pairs = [ContactPair {
+            a: 0,
+            b: 0,
+            depth_max_m: 0.0,
+        }; PAIRS_MAX];
+        for (k, p) in pairs.iter_mut().enumerate().take(c.pairs as usize) {
+            *p = r.next("contact pair")?;
+            if p.a as usize >= crate::physics::contact::SURFACES_MAX
+                || p.b as usize >= crate::physics::contact::SURFACES_MAX
+            {
+                return Err(ImageError::BadIndex {
+                    what: "surface of contact pair",
+                    index: k as u32,
+                });
+            }
+        }
+        let mut tools = [Tool {
+            capsule: Capsule {
+                a: [0.0; 3],
+                b: [0.0; 3],
+                radius_m: 0.0,
+            },
+            path: 0,
+            surface: 0,
+        }; TOOLS_MAX];
+        for (k, t) in tools.iter_mut().enumerate().take(c.tools as usize) {
+            *t = r.next("tool")?;
+            if t.surface as usize >= crate::physics::contact::SURFACES_MAX {
+                return Err(ImageError::BadIndex {
+                    what: "surface of tool",
+                    index: k as u32,
+                });
+            }
+        }
+        let address =
+            link_proto::link::board_at(board[0] as usize, board[1] as usize, board[2] as usize)
+                .unwrap_or(u8::MAX);
+        let mut contact_boards = [0u8; BOARDS_MAX];
+        let mut slot = None;
+        for k in 0..c.contact_boards as usize {
+            contact_boards[k] = r.next("contact board")?;
+            if contact_boards[k] == address {
+                slot = Some(k);
+            }
+        }
+        for k in 0..c.graphics_nodes as usize {
+            let g: u16 = r.next("graphics node")?;
+            if g as usize >= nn {
+                return Err(ImageError::BadIndex {
+                    what: "graphics node",
+                    index: k as u32,
+                });
+            }
+            cs.graphics[k] = g;
+        }
         if !r.is_done() {
             return Err(ImageError::Malformed {
                 record: "trailing bytes",
             });
         }
-        let (ops, ops_len) = program(&c.rounds);
+        let has_contact = c.tools > 0 || c.pairs > 0;
+        let has_graphics = c.graphics_nodes > 0 && h.graphics.interval_steps > 0;
+        let (ops, ops_len) = program(&c.rounds, has_contact, has_graphics);
         Ok(Runtime {
             header: h,
             ops,
@@ -420,6 +762,24 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
             reaction_prescribed: [0.0; 3],
             reaction_fixed: [0.0; 3],
             kinetic_energy: 0.0,
+            cs,
+            pairs,
+            tools,
+            contact_boards,
+            address,
+            slot,
+            phase: Phase::Start,
+            boxes: [[(0, [0.0; 3], [0.0; 3]); BOARDS_MAX]; 2],
+            my_box: ([0.0; 3], [0.0; 3]),
+            partners: 0,
+            send_ranges: [(0, 0); BOARDS_MAX],
+            done: [(0, 0); 2],
+            candidates_len: 0,
+            graphics_cursor: 0,
+            msg_id: 0,
+            tool_force: [[0.0; 3]; TOOLS_MAX],
+            contact_stats: ContactStats::default(),
+            global: GlobalStats::default(),
         })
     }
 
@@ -494,6 +854,12 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
                     };
                     for i in 0..3 {
                         fe[i] += T::from_f64(l.force[i] * s);
+                    }
+                }
+                let c = self.cs.contact_of.get(k).copied().unwrap_or(u32::MAX);
+                if let Some(f) = self.cs.force.get(c as usize) {
+                    for i in 0..3 {
+                        fe[i] += T::from_f64(f[i]);
                     }
                 }
                 for i in 0..3 {
@@ -613,6 +979,8 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
                     }
                     true
                 }
+                Op::Graphics => self.graphics_poll(links)?,
+                Op::Contact => self.contact_poll(links)?,
                 Op::Batch(k) => {
                     self.batch(k as usize)?;
                     true
@@ -632,6 +1000,11 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
                 let now = env.now_ns();
                 let since = *self.waiting_since.get_or_insert(now);
                 if now.saturating_sub(since) > self.config.link_timeout_ns {
+                    if self.ops[self.pc] == Op::Contact {
+                        return Err(self.fault(FaultKind::GlobalTimeout {
+                            src: self.missing_partner(),
+                        }));
+                    }
                     let face = match self.ops[self.pc] {
                         Op::Send(a, _, f) | Op::Recv(a, _, f) => face_of(a as usize, f as usize),
                         _ => Face::PosX,
@@ -728,10 +1101,559 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
     }
 }
 
+fn grow(b: &([f64; 3], [f64; 3]), r: f64) -> ([f64; 3], [f64; 3]) {
+    (
+        core::array::from_fn(|i| b.0[i] - r),
+        core::array::from_fn(|i| b.1[i] + r),
+    )
+}
+
+fn overlaps(a: &([f64; 3], [f64; 3]), b: &([f64; 3], [f64; 3])) -> bool {
+    (0..3).all(|i| b.0[i] <= a.1[i] && a.0[i] <= b.1[i])
+}
+
+/// Contact and the graphics stream: the runtime's use of the global network.
+impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
+    fn contact_model(&self) -> ContactModel<'_> {
+        let c = &self.header.counts;
+        ContactModel {
+            nodes: &self.cs.nodes[..c.contact_nodes as usize],
+            faces: &self.cs.faces[..c.contact_faces as usize],
+            pairs: &self.pairs[..c.pairs as usize],
+            tools: &self.tools[..c.tools as usize],
+        }
+    }
+
+    /// Position of contact node `c` at this step, if this board knows it: held nodes from
+    /// their displacement, others from what the partners sent for this step.
+    fn contact_position(&self, c: usize) -> Option<[f64; 3]> {
+        let node = self.cs.nodes.get(c)?;
+        let u = match self.cs.places.get(c)?.local {
+            Some(l) => self.st.u.get(l as usize)?.map(|v| v.to_f64()),
+            None => {
+                let k = 2 * c + (self.step % 2) as usize;
+                if *self.cs.remote_stamp.get(k)? != self.step as u32 + 1 {
+                    return None;
+                }
+                *self.cs.remote_u.get(k)?
+            }
+        };
+        Some(core::array::from_fn(|i| node.reference[i] + u[i]))
+    }
+
+    /// Contact nodes, where they live on this board, and their contact force at the last
+    /// step (non-zero only for owned nodes).
+    pub fn contact_forces(&self) -> (&[ContactNode], &[ContactNodePlace], &[[f64; 3]]) {
+        let n = self.header.counts.contact_nodes as usize;
+        (
+            &self.cs.nodes[..n],
+            &self.cs.places[..n],
+            &self.cs.force[..n],
+        )
+    }
+
+    fn owns_contact(&self, c: usize) -> bool {
+        self.cs.places.get(c).is_some_and(|p| p.owned)
+    }
+
+    fn is_check_step(&self) -> bool {
+        self.step
+            .is_multiple_of(self.header.contact.check_interval_steps.max(1) as u64)
+    }
+
+    /// The first partner (or contact board) this board still waits for.
+    fn missing_partner(&self) -> u8 {
+        let n = self.header.counts.contact_boards as usize;
+        let par = (self.step % 2) as usize;
+        let want = self.step as u32 + 1;
+        for k in 0..n {
+            if Some(k) == self.slot {
+                continue;
+            }
+            let waiting = match self.phase {
+                Phase::AwaitBoxes => self.boxes[par][k].0 != want,
+                _ => {
+                    self.partners & (1 << k) != 0
+                        && !(self.done[par].0 == want && self.done[par].1 & (1 << k) != 0)
+                }
+            };
+            if waiting {
+                return self.contact_boards[k];
+            }
+        }
+        u8::MAX
+    }
+
+    /// Sends the packet whose payload (`len` bytes) is already in `tx[8..]`.
+    fn send_global(
+        &mut self,
+        links: &mut impl Links,
+        dst: u8,
+        kind: PacketKind,
+        len: usize,
+    ) -> Result<bool, Fault> {
+        let total = PACKET_HEADER_LEN + len + link_proto::CRC_LEN;
+        let Some(buf) = self.tx.get_mut(..total) else {
+            return Err(self.fault(FaultKind::GlobalSendFailed {
+                dst,
+                error: link_proto::SendError::TooLong,
+            }));
+        };
+        let mut p = Packet::new_unchecked(buf);
+        p.set_dst(dst);
+        p.set_src(self.address);
+        p.set_msg_id(self.msg_id);
+        p.set_kind(kind);
+        p.set_version(link_proto::packet::PACKET_VERSION);
+        p.set_payload_len(len as u16);
+        p.fill_crc();
+        match links.try_send_global(&self.tx[..total]) {
+            Ok(()) => {
+                self.msg_id = self.msg_id.wrapping_add(1);
+                self.global.packets_sent += 1;
+                self.global.bytes_sent += total as u64;
+                Ok(true)
+            }
+            Err(link_proto::SendError::WouldBlock) => Ok(false),
+            Err(error) => Err(self.fault(FaultKind::GlobalSendFailed { dst, error })),
+        }
+    }
+
+    /// Files every packet that has arrived: boxes and contact nodes of this step or the
+    /// next (a partner runs at most one step ahead: it waits for this board's nodes).
+    fn drain_global(&mut self, links: &mut impl Links) -> Result<(), Fault> {
+        loop {
+            let len = match links.try_recv_global(&mut self.rx) {
+                Ok(Some(len)) => len,
+                Ok(None) => return Ok(()),
+                Err(error) => return Err(self.fault(FaultKind::GlobalError { error })),
+            };
+            let repr = PacketRepr::parse_bytes(&self.rx[..len.min(self.rx.len())])
+                .map_err(|error| self.fault(FaultKind::BadPacket { error }))?;
+            let (src, kind, payload) = (repr.src, repr.kind, repr.payload);
+            let n_boards = self.header.counts.contact_boards as usize;
+            let slot = self.contact_boards[..n_boards]
+                .iter()
+                .position(|&b| b == src);
+            let now = self.step as u32;
+            let unexpected = |step: u32| FaultKind::UnexpectedPacket {
+                src,
+                kind: kind.code(),
+                step,
+            };
+            match (kind, slot) {
+                (PacketKind::BoundingBox, Some(k)) => {
+                    let b = BoxPayload::parse(payload)
+                        .map_err(|error| self.fault(FaultKind::BadPacket { error }))?;
+                    if b.step != now && b.step != now.wrapping_add(1) {
+                        return Err(self.fault(unexpected(b.step)));
+                    }
+                    self.boxes[(b.step % 2) as usize][k] = (b.step.wrapping_add(1), b.min, b.max);
+                }
+                (PacketKind::CollisionExchange, Some(k)) => {
+                    let h = NodesHeader::parse(payload)
+                        .map_err(|error| self.fault(FaultKind::BadPacket { error }))?;
+                    if h.step != now && h.step != now.wrapping_add(1) {
+                        return Err(self.fault(unexpected(h.step)));
+                    }
+                    let par = (h.step % 2) as usize;
+                    let nc = self.header.counts.contact_nodes as usize;
+                    for e in 0..h.count as usize {
+                        let (c, u) = node_entry(payload, e)
+                            .map_err(|error| self.fault(FaultKind::BadPacket { error }))?;
+                        if c as usize >= nc {
+                            return Err(self.fault(unexpected(h.step)));
+                        }
+                        self.cs.remote_u[2 * c as usize + par] = u;
+                        self.cs.remote_stamp[2 * c as usize + par] = h.step.wrapping_add(1);
+                    }
+                    if h.last {
+                        let d = &mut self.done[par];
+                        if d.0 != h.step.wrapping_add(1) {
+                            *d = (h.step.wrapping_add(1), 0);
+                        }
+                        d.1 |= 1 << k;
+                    }
+                }
+                _ => return Err(self.fault(unexpected(now))),
+            }
+        }
+    }
+
+    /// The graphics operation: on the first `spread` steps of every graphics interval,
+    /// one slice of the owned surface nodes (displacements as f32) to the graphics engine.
+    fn graphics_poll(&mut self, links: &mut impl Links) -> Result<bool, Fault> {
+        let g = self.header.graphics;
+        let len = self.header.counts.graphics_nodes as usize;
+        let interval = g.interval_steps.max(1) as u64;
+        let spread = (g.spread_steps.max(1) as u64).min(interval) as usize;
+        let j = (self.step % interval) as usize;
+        if j >= spread {
+            return Ok(true);
+        }
+        let (start, end) = (j * len / spread, (j + 1) * len / spread);
+        while start + self.graphics_cursor < end || (start == end && self.graphics_cursor == 0) {
+            let from = start + self.graphics_cursor;
+            let count = (end - from).min(SURFACE_NODES_PER_PACKET_MAX);
+            let h = SurfaceHeader {
+                frame: (self.step / interval) as u32,
+                step: self.step as u32,
+                chunk: j as u8,
+                chunks: spread as u8,
+                count: count as u16,
+            };
+            let mut plen = 0;
+            let mut ok = h.emit(&mut self.tx[PACKET_HEADER_LEN..]).map(|l| plen = l);
+            for e in 0..count {
+                let l = self.cs.graphics[from + e] as usize;
+                let u = self.st.u[l].map(|v| v.to_f64() as f32);
+                let global = self.st.nodes[l].global;
+                ok = ok.and(emit_surface_entry(
+                    &mut self.tx[PACKET_HEADER_LEN..],
+                    e,
+                    global,
+                    u,
+                ));
+            }
+            ok.map_err(|error| self.fault(FaultKind::BadPacket { error }))?;
+            if !self.send_global(
+                links,
+                link_proto::packet::ADDR_GRAPHICS,
+                PacketKind::GraphicsSurface,
+                plen,
+            )? {
+                return Ok(false);
+            }
+            self.global.graphics_packets += 1;
+            self.global.graphics_bytes += (PACKET_HEADER_LEN + plen + link_proto::CRC_LEN) as u64;
+            self.graphics_cursor += count.max(1);
+            if start == end {
+                break;
+            }
+        }
+        self.graphics_cursor = 0;
+        Ok(true)
+    }
+
+    /// The contact operation (see [`Phase`]); `Ok(false)` while it waits for the network.
+    fn contact_poll(&mut self, links: &mut impl Links) -> Result<bool, Fault> {
+        let n_boards = self.header.counts.contact_boards as usize;
+        let has_pairs = self.header.counts.pairs > 0 && self.slot.is_some();
+        let p = self.header.contact;
+        loop {
+            self.drain_global(links)?;
+            match self.phase {
+                Phase::Start => {
+                    if !has_pairs {
+                        self.phase = Phase::Evaluate;
+                    } else if self.is_check_step() {
+                        let mut lo = [f64::INFINITY; 3];
+                        let mut hi = [f64::NEG_INFINITY; 3];
+                        for c in 0..self.header.counts.contact_nodes as usize {
+                            if !self.owns_contact(c)
+                                || self.cs.nodes[c].surfaces & p.pair_surfaces == 0
+                            {
+                                continue;
+                            }
+                            if let Some(x) = self.contact_position(c) {
+                                for i in 0..3 {
+                                    lo[i] = lo[i].min(x[i]);
+                                    hi[i] = hi[i].max(x[i]);
+                                }
+                            }
+                        }
+                        self.my_box = (lo, hi);
+                        self.phase = Phase::SendBoxes(0);
+                    } else {
+                        self.phase = Phase::SendNodes(0, 0);
+                    }
+                }
+                Phase::SendBoxes(k) => {
+                    if k >= n_boards {
+                        self.phase = Phase::AwaitBoxes;
+                        continue;
+                    }
+                    if Some(k) == self.slot {
+                        self.phase = Phase::SendBoxes(k + 1);
+                        continue;
+                    }
+                    let b = BoxPayload {
+                        step: self.step as u32,
+                        min: self.my_box.0,
+                        max: self.my_box.1,
+                    };
+                    let len = b
+                        .emit(&mut self.tx[PACKET_HEADER_LEN..])
+                        .map_err(|error| self.fault(FaultKind::BadPacket { error }))?;
+                    if !self.send_global(
+                        links,
+                        self.contact_boards[k],
+                        PacketKind::BoundingBox,
+                        len,
+                    )? {
+                        return Ok(false);
+                    }
+                    self.global.box_packets += 1;
+                    self.phase = Phase::SendBoxes(k + 1);
+                }
+                Phase::AwaitBoxes => {
+                    let par = (self.step % 2) as usize;
+                    let want = self.step as u32 + 1;
+                    if (0..n_boards).any(|k| Some(k) != self.slot && self.boxes[par][k].0 != want) {
+                        return Ok(false);
+                    }
+                    // Partners: boxes within the margin (the same test on both sides).
+                    let mine = grow(&self.my_box, p.box_margin_m);
+                    let mut partners = 0u64;
+                    let mut used = 0usize;
+                    for k in 0..n_boards {
+                        self.send_ranges[k] = (used as u32, used as u32);
+                        if Some(k) == self.slot {
+                            continue;
+                        }
+                        let other = (self.boxes[par][k].1, self.boxes[par][k].2);
+                        if !overlaps(&mine, &other) {
+                            continue;
+                        }
+                        partners |= 1 << k;
+                        // Own pair-surface nodes the partner may need until the next check.
+                        let reach = grow(&other, p.box_margin_m);
+                        for c in 0..self.header.counts.contact_nodes as usize {
+                            if !self.owns_contact(c)
+                                || self.cs.nodes[c].surfaces & p.pair_surfaces == 0
+                            {
+                                continue;
+                            }
+                            let Some(x) = self.contact_position(c) else {
+                                continue;
+                            };
+                            if (0..3).all(|i| reach.0[i] <= x[i] && x[i] <= reach.1[i]) {
+                                let cap = self.cs.send_list.len() as u32;
+                                let slot = self.cs.send_list.get_mut(used).ok_or(Fault {
+                                    board: self.header.board,
+                                    step: self.step,
+                                    kind: FaultKind::ContactCapacity {
+                                        what: "contact-node send entries",
+                                        needed: used as u32 + 1,
+                                        max: cap,
+                                    },
+                                })?;
+                                *slot = c as u32;
+                                used += 1;
+                            }
+                        }
+                        self.send_ranges[k].1 = used as u32;
+                    }
+                    self.partners = partners;
+                    self.global.partners = partners.count_ones();
+                    self.phase = Phase::SendNodes(0, 0);
+                }
+                Phase::SendNodes(k, off) => {
+                    if k >= n_boards {
+                        self.phase = Phase::AwaitNodes;
+                        continue;
+                    }
+                    if self.partners & (1 << k) == 0 {
+                        self.phase = Phase::SendNodes(k + 1, 0);
+                        continue;
+                    }
+                    let (s, e) = self.send_ranges[k];
+                    let total = (e - s) as usize;
+                    let count = (total - off.min(total)).min(NODES_PER_PACKET_MAX);
+                    let last = off + count >= total;
+                    let h = NodesHeader {
+                        step: self.step as u32,
+                        last,
+                        count: count as u16,
+                    };
+                    let mut len = 0;
+                    let mut ok = h.emit(&mut self.tx[PACKET_HEADER_LEN..]).map(|l| len = l);
+                    for j in 0..count {
+                        let c = self.cs.send_list[s as usize + off + j] as usize;
+                        let u = match self.cs.places[c].local {
+                            Some(l) => self.st.u[l as usize].map(|v| v.to_f64()),
+                            None => [f64::NAN; 3],
+                        };
+                        ok = ok.and(emit_node_entry(
+                            &mut self.tx[PACKET_HEADER_LEN..],
+                            j,
+                            c as u32,
+                            u,
+                        ));
+                    }
+                    ok.map_err(|error| self.fault(FaultKind::BadPacket { error }))?;
+                    if !self.send_global(
+                        links,
+                        self.contact_boards[k],
+                        PacketKind::CollisionExchange,
+                        len,
+                    )? {
+                        return Ok(false);
+                    }
+                    self.global.node_packets += 1;
+                    self.global.node_vectors += count as u64;
+                    self.phase = if last {
+                        Phase::SendNodes(k + 1, 0)
+                    } else {
+                        Phase::SendNodes(k, off + count)
+                    };
+                }
+                Phase::AwaitNodes => {
+                    let par = (self.step % 2) as usize;
+                    let want = self.step as u32 + 1;
+                    let arrived = if self.done[par].0 == want {
+                        self.done[par].1
+                    } else {
+                        0
+                    };
+                    if arrived & self.partners != self.partners {
+                        return Ok(false);
+                    }
+                    self.phase = Phase::Evaluate;
+                }
+                Phase::Evaluate => {
+                    self.evaluate_contact()?;
+                    self.phase = Phase::SendTools(0);
+                }
+                Phase::SendTools(t) => {
+                    if t >= self.header.counts.tools as usize {
+                        self.phase = Phase::Start;
+                        return Ok(true);
+                    }
+                    let f = self.tool_force[t];
+                    if f == [0.0; 3] {
+                        self.phase = Phase::SendTools(t + 1);
+                        continue;
+                    }
+                    let pl = ToolForcePayload {
+                        step: self.step as u32,
+                        tool: t as u8,
+                        force: f,
+                    };
+                    let len = pl
+                        .emit(&mut self.tx[PACKET_HEADER_LEN..])
+                        .map_err(|error| self.fault(FaultKind::BadPacket { error }))?;
+                    if !self.send_global(
+                        links,
+                        link_proto::packet::ADDR_HOST,
+                        PacketKind::ToolForce,
+                        len,
+                    )? {
+                        return Ok(false);
+                    }
+                    self.global.tool_packets += 1;
+                    self.phase = Phase::SendTools(t + 1);
+                }
+            }
+        }
+    }
+
+    /// Contact forces of the owned nodes at this step (the serial solver's arithmetic, in
+    /// its order, restricted to the owned nodes) and this board's share of the tool forces.
+    fn evaluate_contact(&mut self) -> Result<(), Fault> {
+        let c = self.header.counts;
+        let nc = c.contact_nodes as usize;
+        let p = self.header.contact;
+        let t = self.step as f64 * self.header.params.dt_s;
+        let np = c.path_points as usize;
+        let mut capsules = [Capsule {
+            a: [0.0; 3],
+            b: [0.0; 3],
+            radius_m: 0.0,
+        }; TOOLS_MAX];
+        for k in 0..c.tools as usize {
+            let d = path_value(&self.st.path_points[..np], self.tools[k].path, t);
+            capsules[k] = self.tools[k].capsule.translated(d);
+        }
+        let force = core::mem::take(&mut self.cs.force);
+        let at_check = core::mem::take(&mut self.cs.at_check);
+        let candidates = core::mem::take(&mut self.cs.candidates);
+        let result = (|| -> Result<ContactOutcome, Fault> {
+            let mut new_len = None;
+            let fault = |kind| Fault {
+                board: self.header.board,
+                step: self.step,
+                kind,
+            };
+            let m = self.contact_model();
+            let pos = |k: usize| self.contact_position(k);
+            let own = |k: usize| self.owns_contact(k);
+            if c.pairs > 0 && self.slot.is_some() && self.is_check_step() {
+                for (k, x) in at_check.iter_mut().enumerate().take(nc) {
+                    *x = pos(k).unwrap_or([0.0; 3]);
+                }
+                let n = build_candidates(&m, pos, p.candidate_margin_m, candidates).map_err(
+                    |needed| {
+                        fault(FaultKind::ContactCapacity {
+                            what: "contact candidates",
+                            needed: needed as u32,
+                            max: candidates.len() as u32,
+                        })
+                    },
+                )?;
+                new_len = Some(n);
+            }
+            check_travel(
+                &m,
+                pos,
+                &at_check[..nc],
+                own,
+                p.pair_surfaces,
+                p.travel_max_m,
+            )
+            .map_err(|e| fault(FaultKind::Physics(e)))?;
+            for f in force.iter_mut().take(nc) {
+                *f = [0.0; 3];
+            }
+            let mut tool_force = [[0.0; 3]; TOOLS_MAX];
+            let mut stats = ContactStats::default();
+            evaluate_tools(
+                &m,
+                &capsules[..c.tools as usize],
+                pos,
+                own,
+                p.tolerance_m,
+                &mut force[..nc],
+                &mut tool_force,
+                &mut stats,
+            )
+            .map_err(|e| fault(FaultKind::Physics(e)))?;
+            let cand = if c.pairs > 0 && self.slot.is_some() {
+                &candidates[..new_len.unwrap_or(self.candidates_len).min(candidates.len())]
+            } else {
+                &[]
+            };
+            evaluate_pairs(
+                &m,
+                cand,
+                pos,
+                own,
+                p.tolerance_m,
+                &mut force[..nc],
+                &mut stats,
+            )
+            .map_err(|e| fault(FaultKind::Physics(e)))?;
+            Ok((tool_force, stats, new_len))
+        })();
+        self.cs.force = force;
+        self.cs.at_check = at_check;
+        self.cs.candidates = candidates;
+        let (tool_force, stats, new_len) = result?;
+        if let Some(n) = new_len {
+            self.candidates_len = n;
+            self.global.checks += 1;
+            self.global.candidates_max = self.global.candidates_max.max(n as u32);
+        }
+        self.tool_force = tool_force;
+        self.contact_stats = stats;
+        Ok(())
+    }
+}
+
 /// The step's operations: batch x; send ±x; batch y; receive ±x (and further x rounds);
 /// send ±y; batch z; receive ±y...; send ±z; inner batch; receive ±z...; update. External
 /// forces of owned nodes go in just before their first exchange.
-fn program(rounds: &[u8; 3]) -> ([Op; OPS_MAX], usize) {
+fn program(rounds: &[u8; 3], contact: bool, graphics: bool) -> ([Op; OPS_MAX], usize) {
     let mut ops = [Op::Update; OPS_MAX];
     let mut n = 0;
     let mut push = |op| {
@@ -741,6 +1663,12 @@ fn program(rounds: &[u8; 3]) -> ([Op; OPS_MAX], usize) {
         }
     };
     push(Op::Begin);
+    if graphics {
+        push(Op::Graphics);
+    }
+    if contact {
+        push(Op::Contact);
+    }
     push(Op::Batch(0));
     for axis in 0..3u8 {
         let r = rounds[axis as usize].min(ROUNDS_PER_AXIS_MAX as u8);

@@ -44,6 +44,21 @@ pub const PATH_POINTS: usize = 64;
 pub const LOADS: usize = 256;
 pub const MATERIALS: usize = 8;
 
+/// Contact and graphics capacities.
+pub const CONTACT_NODES: usize = 512;
+pub const CONTACT_FACES: usize = 512;
+pub const CONTACT_CANDIDATES: usize = 2048;
+pub const CONTACT_SENDS: usize = 1024;
+pub type ContactStatic = pe_firmware::runtime::StaticContactStorage<
+    CONTACT_NODES,
+    { 2 * CONTACT_NODES },
+    CONTACT_FACES,
+    CONTACT_CANDIDATES,
+    CONTACT_SENDS,
+    NODES,
+    NODES,
+>;
+
 /// Static RAM that is not elements: node state, exchange lists, paths, loads, links.
 pub const FIXED_BYTES: usize = NODES
     * (size_of::<NodeRecord<Scalar>>() + 1 + 3 * size_of::<[Scalar; 3]>())
@@ -51,7 +66,8 @@ pub const FIXED_BYTES: usize = NODES
     + PATH_POINTS * size_of::<PathPoint>()
     + LOADS * size_of::<LoadRecord>()
     + MATERIALS * size_of::<MaterialLaw<Scalar>>()
-    + size_of::<crate::links::BoardLinks>();
+    + size_of::<crate::links::BoardLinks>()
+    + size_of::<ContactStatic>();
 
 /// Elements: whatever the profile's RAM leaves after the reserve (stack, the runtime's
 /// frame buffers) and the fixed part. The linker checks that it fits (schedule.x).

@@ -40,7 +40,11 @@ fn main() -> ! {
     let Some(store) = storage::take() else {
         report::fault(board, format_args!("storage taken twice"));
     };
-    let rt = Runtime::<Scalar, Element>::load(image, board, store, RuntimeConfig::default());
+    let Some(contact) = storage::take_contact() else {
+        report::fault(board, format_args!("contact storage taken twice"));
+    };
+    let rt =
+        Runtime::<Scalar, Element>::load(image, board, store, contact, RuntimeConfig::default());
     let mut rt = match rt {
         Ok(rt) => rt,
         Err(e) => report::fault(

@@ -94,3 +94,17 @@ pub fn take() -> Option<Storage<'static, Scalar, Element>> {
         loads: &mut b.loads,
     })
 }
+
+static mut CONTACT: ContactStatic = ContactStatic::EMPTY;
+static CONTACT_TAKEN: AtomicBool = AtomicBool::new(false);
+
+/// The contact and graphics storage; `None` if called twice.
+pub fn take_contact() -> Option<pe_firmware::runtime::ContactStorage<'static>> {
+    if CONTACT_TAKEN.swap(true, Ordering::AcqRel) {
+        return None;
+    }
+    // SAFETY: CONTACT_TAKEN makes this the only place that ever creates a reference to
+    // CONTACT, at most once, so the `&'static mut` is unique.
+    let c: &'static mut ContactStatic = unsafe { &mut *core::ptr::addr_of_mut!(CONTACT) };
+    Some(c.storage())
+}

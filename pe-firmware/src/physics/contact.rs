@@ -174,20 +174,18 @@ fn triangle_penetration(x: V3, t: [V3; 3], depth_max: f64) -> Option<(f64, V3, [
 /// (0,1,2) and (0,2,3), nodes ordered counter-clockwise seen from outside): the shallower
 /// of the two triangles it penetrates.
 pub fn quad_penetration(x: V3, q: &[V3; 4], depth_max: f64) -> Option<FacePenetration> {
-    let t1 = triangle_penetration(x, [q[0], q[1], q[2]], depth_max).map(|(d, n, w)| {
-        FacePenetration {
+    let t1 =
+        triangle_penetration(x, [q[0], q[1], q[2]], depth_max).map(|(d, n, w)| FacePenetration {
             depth_m: d,
             normal: n,
             weights: [w[0], w[1], w[2], 0.0],
-        }
-    });
-    let t2 = triangle_penetration(x, [q[0], q[2], q[3]], depth_max).map(|(d, n, w)| {
-        FacePenetration {
+        });
+    let t2 =
+        triangle_penetration(x, [q[0], q[2], q[3]], depth_max).map(|(d, n, w)| FacePenetration {
             depth_m: d,
             normal: n,
             weights: [w[0], 0.0, w[1], w[2]],
-        }
-    });
+        });
     match (t1, t2) {
         (Some(a), Some(b)) => Some(if b.depth_m < a.depth_m { b } else { a }),
         (a, b) => a.or(b),
@@ -276,7 +274,7 @@ impl ContactModel<'_> {
     /// Master and slave surfaces of a direction.
     fn roles(&self, direction: usize) -> Option<(u8, u8, f64)> {
         let p = self.pairs.get(direction / 2)?;
-        Some(if direction % 2 == 0 {
+        Some(if direction.is_multiple_of(2) {
             (p.a, p.b, p.depth_max_m)
         } else {
             (p.b, p.a, p.depth_max_m)
@@ -447,6 +445,7 @@ pub fn evaluate_pairs(
     Ok(())
 }
 
+#[allow(clippy::too_many_arguments)]
 /// Tool forces: every node of tool `t`'s surface with `apply(c)` (ascending) inside the
 /// tool's capsule at its current place `capsules[t]` gets `k p n`; `tool_force[t]` takes
 /// the sum of `−k p n` (the force of the tissue on the tool).
