@@ -57,8 +57,10 @@ fn main() -> ! {
     let board = board_position().unwrap_or_else(|| fail("identity"));
     let image = schedule_image().unwrap_or_else(|_| fail("no schedule image"));
     let store = storage::take().unwrap_or_else(|| fail("storage"));
-    let mut rt = Runtime::<Scalar, Element>::load(image, board, store, RuntimeConfig::default())
-        .unwrap_or_else(|e| report::fault(board, format_args!("bench: image refused: {e}")));
+    let contact = storage::take_contact().unwrap_or_else(|| fail("contact storage"));
+    let mut rt =
+        Runtime::<Scalar, Element>::load(image, board, store, contact, RuntimeConfig::default())
+            .unwrap_or_else(|e| report::fault(board, format_args!("bench: image refused: {e}")));
     let links = links::take().unwrap_or_else(|| fail("links"));
     let mut env = CallClock(0);
     let steps = rt.header.params.steps;
