@@ -12,6 +12,7 @@ pub mod firmware;
 pub mod mesh;
 pub mod mesh_io;
 pub mod output;
+pub mod ovary;
 pub mod partition;
 pub mod problem;
 pub mod render;
