@@ -173,7 +173,7 @@ fn corrupted_or_foreign_images_are_refused() {
             expected: [1, 0, 0]
         }
     );
-    // Version: the first header byte after the magic (postcard varint of 1); fix the CRC.
+    // Version: the first header byte after the magic (a one-byte postcard varint); fix the CRC.
     let mut old = good.clone();
     old[4] = 7;
     let n = old.len();
@@ -183,7 +183,7 @@ fn corrupted_or_foreign_images_are_refused() {
         decode_image(&old, None).unwrap_err(),
         ImageError::WrongVersion {
             found: 7,
-            expected: 1
+            expected: pe_firmware::image::FORMAT_VERSION
         }
     );
     assert!(matches!(
