@@ -60,14 +60,7 @@ pub struct BoardResult {
     pub bytes_sent: [u64; 6],
     pub wait_s: f64,
     /// Global-network traffic (contact exchange, graphics, tool forces).
-    #[serde(skip)]
     pub global: GlobalStats,
-    pub global_packets: u64,
-    pub global_bytes: u64,
-    pub contact_vectors: u64,
-    pub graphics_bytes: u64,
-    pub contact_checks: u64,
-    pub candidates_max: u32,
 }
 
 /// What a run produced.
@@ -447,12 +440,6 @@ fn run_worker<T: WireReal, E: HexElement<T> + DeserializeOwned + Copy>(
                             bytes_sent: st.bytes_sent,
                             wait_s: st.wait_ns as f64 * 1e-9,
                             global: rt.global,
-                            global_packets: rt.global.packets_sent,
-                            global_bytes: rt.global.bytes_sent,
-                            contact_vectors: rt.global.node_vectors,
-                            graphics_bytes: rt.global.graphics_bytes,
-                            contact_checks: rt.global.checks,
-                            candidates_max: rt.global.candidates_max,
                         },
                         reaction_prescribed: rt.reaction_prescribed,
                         reaction_fixed: rt.reaction_fixed,

@@ -297,7 +297,7 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
                 .with_context(|| format!("loading scene {} for outputs", manifest.scene_source))?,
         )
     };
-    let graphics_stream = manifest_graphics(dir)?;
+    let (elements, graphics_stream) = compile_report_facts(dir)?;
     if vtk.is_some() && !graphics_stream {
         opts.frame_every = ((0.04 / manifest.dt_s).round() as u64).max(1);
     }
@@ -330,7 +330,6 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
         b.finish_and_clear();
     }
     let out = out?;
-    let elements = manifest_elements(dir)?;
     let sim_s = out.steps as f64 * manifest.dt_s;
     let max = out
         .displacements
@@ -372,7 +371,17 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
         .unwrap_or_default();
     if let (Some(d), Some(pr)) = (&vtk, &problem) {
         if graphics_stream {
+            // What the graphics engine received.
             write_surface_series(d, pr, &frames)?;
+        } else {
+            std::fs::create_dir_all(d)?;
+            let mut w = VtkSeriesWriter::new(d, &pr.mesh)?;
+            w.write_frame(0.0, &vec![[0.0; 3]; pr.mesh.nodes.len()])?;
+            for (s, u) in &out.frames {
+                w.write_frame(*s as f64 * manifest.dt_s, u)?;
+            }
+            w.write_frame(sim_s, &out.displacements)?;
+            w.finish()?;
         }
     }
     if let (Some(p), Some(pr)) = (&png, &problem) {
@@ -393,20 +402,6 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
             ));
         }
         std::fs::write(p, text).with_context(|| format!("writing {}", p.display()))?;
-    }
-    if let (Some(d), Some(pr)) = (&vtk, &problem) {
-        if graphics_stream {
-            // Written above from the graphics engine's frames.
-        } else {
-            std::fs::create_dir_all(d)?;
-            let mut w = VtkSeriesWriter::new(d, &pr.mesh)?;
-            w.write_frame(0.0, &vec![[0.0; 3]; pr.mesh.nodes.len()])?;
-            for (s, u) in &out.frames {
-                w.write_frame(*s as f64 * manifest.dt_s, u)?;
-            }
-            w.write_frame(sim_s, &out.displacements)?;
-            w.finish()?;
-        }
     }
     let global = global_summary(&out, sim_s);
     if let Some(g) = &global {
@@ -447,13 +442,6 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
     }
     let problem = problem.ok_or_else(|| anyhow::anyhow!("no scene"))?;
     Ok((out, problem))
-}
-
-/// Whether the images send surface frames to the graphics engine.
-fn manifest_graphics(dir: &std::path::Path) -> Result<bool> {
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json"))?)?;
-    Ok(r["graphics"]["interval_steps"].as_u64().unwrap_or(0) > 0)
 }
 
 /// A frame the graphics engine assembled: time and displacement of every mesh node it
@@ -519,9 +507,9 @@ fn surface_numbering(pr: &Problem) -> (Vec<u32>, Vec<[u32; 4]>) {
 
 /// Region group of each boundary quad (its cell's region, as a small index).
 fn surface_groups(pr: &Problem) -> Vec<u8> {
-    host_tools::contact::boundary_faces_with_cells(&pr.mesh)
+    pr.surface_face_cells
         .iter()
-        .map(|(_, c)| pr.mesh.cell_regions[*c as usize].clamp(0, 255) as u8)
+        .map(|c| pr.mesh.cell_regions[*c as usize].clamp(0, 255) as u8)
         .collect()
 }
 
@@ -648,8 +636,13 @@ fn global_summary(out: &board_sim::SimOutput, sim_s: f64) -> Option<GlobalSummar
     Some(GlobalSummary { text, json })
 }
 
-fn manifest_elements(dir: &std::path::Path) -> Result<usize> {
+/// From the compile report: the scene's elements, and whether the images send surface
+/// frames to the graphics engine.
+fn compile_report_facts(dir: &std::path::Path) -> Result<(usize, bool)> {
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("report.json"))?)?;
-    Ok(r["elements"].as_u64().unwrap_or(0) as usize)
+    Ok((
+        r["elements"].as_u64().unwrap_or(0) as usize,
+        r["graphics"]["interval_steps"].as_u64().unwrap_or(0) > 0,
+    ))
 }

@@ -337,9 +337,18 @@ fn path_table(problem: &Problem) -> (Vec<PathPoint>, Vec<Option<u16>>) {
     (points, load_ramp)
 }
 
+/// What every board's image shares: the contact tables, which nodes are on the surface, the
+/// graphics timing (computed once per compilation).
+struct Shared {
+    contact: Option<(crate::contact::ContactRun, Vec<u8>)>,
+    on_surface: Vec<bool>,
+    graphics: GraphicsParams,
+}
+
 fn write_image<T: Real + Serialize>(
     problem: &Problem,
     plan: &Plan,
+    shared: &Shared,
     b: usize,
 ) -> Result<BoardImage> {
     let bp = &plan.boards[b];
@@ -384,7 +393,7 @@ fn write_image<T: Real + Serialize>(
     } else {
         Integration::Reduced
     };
-    let contact = contact_tables(problem, plan, dt)?;
+    let contact = &shared.contact;
     let places: Vec<ContactNodePlace> = contact
         .as_ref()
         .map(|(run, _)| {
@@ -400,7 +409,7 @@ fn write_image<T: Real + Serialize>(
                 .collect()
         })
         .unwrap_or_default();
-    let on_surface = surface_node_mask(problem);
+    let on_surface = &shared.on_surface;
     let graphics_nodes: Vec<u16> = bp
         .nodes
         .iter()
@@ -408,7 +417,7 @@ fn write_image<T: Real + Serialize>(
         .filter(|(k, &n)| bp.owner[*k] && on_surface[n as usize])
         .map(|(k, _)| k as u16)
         .collect();
-    let graphics = graphics_params(problem, dt);
+    let graphics = shared.graphics;
     let header = ImageHeader {
         version: FORMAT_VERSION,
         board: bp.coords.map(|c| c as u8),
@@ -537,7 +546,7 @@ fn write_image<T: Real + Serialize>(
     for l in &loads {
         w.push(l).map_err(err)?;
     }
-    if let Some((run, boards)) = &contact {
+    if let Some((run, boards)) = contact {
         for (n, p) in run.nodes.iter().zip(&places) {
             w.push(n).map_err(err)?;
             w.push(p).map_err(err)?;
@@ -629,10 +638,16 @@ pub fn graphics_params(problem: &Problem, dt: f64) -> GraphicsParams {
 
 /// Compiles every board's image.
 pub fn compile_images(problem: &Problem, plan: &Plan) -> Result<Vec<BoardImage>> {
+    let (dt, _) = problem.time_step()?;
+    let shared = Shared {
+        contact: contact_tables(problem, plan, dt)?,
+        on_surface: surface_node_mask(problem),
+        graphics: graphics_params(problem, dt),
+    };
     (0..plan.boards.len())
         .map(|b| match problem.solver.precision.as_str() {
-            "f32" => write_image::<f32>(problem, plan, b),
-            _ => write_image::<f64>(problem, plan, b),
+            "f32" => write_image::<f32>(problem, plan, &shared, b),
+            _ => write_image::<f64>(problem, plan, &shared, b),
         })
         .collect()
 }

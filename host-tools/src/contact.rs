@@ -237,11 +237,15 @@ impl ContactSetup {
 }
 
 /// Resolves the scene's `[[surface]]`, `[[tool]]` and `[[contact_pair]]` (None if it has
-/// none). `select(surface spec)`: the selected mesh nodes (None: no restriction);
+/// none) on the mesh's boundary faces (`faces`, outward, with their `cells`, from
+/// [`boundary_faces_with_cells`]). `select(surface spec)`: the selected mesh nodes (None: no restriction);
 /// `region(spec)`: the region tag; `add_path`: registers a tool path, returns its index.
+#[allow(clippy::too_many_arguments)]
 pub fn resolve(
     scene: &crate::scene::Scene,
     mesh: &Mesh,
+    faces: &[[u32; 4]],
+    cells: &[u32],
     select: &dyn Fn(&crate::scene::SurfaceSpec) -> Result<Option<Vec<bool>>>,
     region: &dyn Fn(&crate::scene::RegionRef) -> Option<i32>,
     add_path: &mut dyn FnMut(Vec<(f64, [f64; 3])>) -> u32,
@@ -253,7 +257,6 @@ pub fn resolve(
         }
         return Ok(None);
     }
-    let all = boundary_faces_with_cells(mesh);
     let mut surfaces = Vec::new();
     for (k, s) in scene.surface.iter().enumerate() {
         let what = format!("[[surface]] {k} ({:?})", s.name);
@@ -271,17 +274,18 @@ pub fn resolve(
             None => None,
         };
         let sel = select(s)?;
-        let faces: Vec<([u32; 4], u32)> = all
+        let chosen: Vec<([u32; 4], u32)> = faces
             .iter()
+            .zip(cells)
             .filter(|(q, c)| {
-                tag.is_none_or(|t| mesh.cell_regions[*c as usize] == t)
+                tag.is_none_or(|t| mesh.cell_regions[**c as usize] == t)
                     && sel
                         .as_ref()
                         .is_none_or(|m| q.iter().all(|&n| m[n as usize]))
             })
-            .cloned()
+            .map(|(q, c)| (*q, *c))
             .collect();
-        if faces.is_empty() {
+        if chosen.is_empty() {
             bail!(
                 "{what}: no boundary face of mesh {} lies in it",
                 mesh.source
@@ -289,7 +293,7 @@ pub fn resolve(
         }
         surfaces.push(Surface {
             name: s.name.clone(),
-            faces,
+            faces: chosen,
         });
     }
     let find = |name: &str, what: &str| {

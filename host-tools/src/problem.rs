@@ -66,8 +66,10 @@ pub struct Problem {
     pub mass: Vec<f64>,
     /// Tools and contact pairs (None: the scene has no contact).
     pub contact: Option<crate::contact::ContactSetup>,
-    /// Mesh boundary faces (outward), the surface the graphics engine draws.
+    /// Mesh boundary faces (outward), the surface the graphics engine draws, and the cell
+    /// each belongs to.
     pub surface_faces: Vec<[u32; 4]>,
+    pub surface_face_cells: Vec<u32>,
     critical: std::sync::OnceLock<CriticalStep>,
 }
 
@@ -336,18 +338,20 @@ impl Problem {
             paths.push(Path1 { points });
             (paths.len() - 1) as u32
         };
+        let (surface_faces, surface_face_cells): (Vec<[u32; 4]>, Vec<u32>) =
+            crate::contact::boundary_faces_with_cells(&mesh)
+                .into_iter()
+                .unzip();
         let contact = crate::contact::resolve(
             scene,
             &mesh,
+            &surface_faces,
+            &surface_face_cells,
             &select_surface,
             &|r| region_tag(&mesh, r),
             &mut add_path,
             &|c| reference[c as usize].characteristic_length,
         )?;
-        let surface_faces = crate::contact::boundary_faces_with_cells(&mesh)
-            .into_iter()
-            .map(|(q, _)| q)
-            .collect();
         let s = &scene.solver;
         if !(s.graphics_interval > 0.0) || s.graphics_spread_steps == 0 {
             bail!(
@@ -406,6 +410,7 @@ impl Problem {
             mass,
             contact,
             surface_faces,
+            surface_face_cells,
             critical: std::sync::OnceLock::new(),
         })
     }

@@ -179,13 +179,21 @@ impl ContactState {
                 *x = pos(c).unwrap_or([0.0; 3]);
             }
             if !run.pairs.is_empty() {
-                self.candidates.clear();
-                let needed = match build_candidates(&m, pos, p.candidate_margin_m, &mut []) {
-                    Ok(n) | Err(n) => n,
+                // Search into the room the last check needed; grow and search again only
+                // when this one needs more.
+                let cap = self.candidates.capacity().max(self.candidates.len());
+                self.candidates.resize(cap, Candidate::default());
+                let n = match build_candidates(&m, pos, p.candidate_margin_m, &mut self.candidates)
+                {
+                    Ok(n) => n,
+                    Err(needed) => {
+                        self.candidates.resize(needed, Candidate::default());
+                        build_candidates(&m, pos, p.candidate_margin_m, &mut self.candidates)
+                            .unwrap_or(needed)
+                    }
                 };
-                self.candidates.resize(needed, Candidate::default());
-                let _ = build_candidates(&m, pos, p.candidate_margin_m, &mut self.candidates);
-                self.candidates_max = self.candidates_max.max(needed);
+                self.candidates.truncate(n);
+                self.candidates_max = self.candidates_max.max(n);
             }
             self.checks += 1;
         }

@@ -69,47 +69,13 @@ impl VtkSeriesWriter {
     pub fn new(dir: &Path, mesh: &Mesh) -> Result<Self, MeshError> {
         mesh.validate()?;
         fs::create_dir_all(dir).map_err(io_err(dir))?;
-        let mut c = String::new();
-        let _ = writeln!(c, "      <Cells>");
-        let _ = writeln!(
-            c,
-            "        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">"
+        let c = cells_xml(
+            mesh.cells.iter().map(|c| &c[..]),
+            8,
+            12,
+            "region",
+            mesh.cell_regions.iter().map(|r| r.to_string()),
         );
-        for cell in &mesh.cells {
-            let line: Vec<String> = cell.iter().map(|i| i.to_string()).collect();
-            let _ = writeln!(c, "          {}", line.join(" "));
-        }
-        let _ = writeln!(c, "        </DataArray>");
-        let _ = writeln!(
-            c,
-            "        <DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">"
-        );
-        for chunk in (1..=mesh.cells.len()).collect::<Vec<_>>().chunks(16) {
-            let line: Vec<String> = chunk.iter().map(|i| (8 * i).to_string()).collect();
-            let _ = writeln!(c, "          {}", line.join(" "));
-        }
-        let _ = writeln!(c, "        </DataArray>");
-        let _ = writeln!(
-            c,
-            "        <DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">"
-        );
-        for chunk in mesh.cells.chunks(32) {
-            let line = vec!["12"; chunk.len()];
-            let _ = writeln!(c, "          {}", line.join(" "));
-        }
-        let _ = writeln!(c, "        </DataArray>");
-        let _ = writeln!(c, "      </Cells>");
-        let _ = writeln!(c, "      <CellData Scalars=\"region\">");
-        let _ = writeln!(
-            c,
-            "        <DataArray type=\"Int32\" Name=\"region\" format=\"ascii\">"
-        );
-        for chunk in mesh.cell_regions.chunks(32) {
-            let line: Vec<String> = chunk.iter().map(|r| r.to_string()).collect();
-            let _ = writeln!(c, "          {}", line.join(" "));
-        }
-        let _ = writeln!(c, "        </DataArray>");
-        let _ = writeln!(c, "      </CellData>");
         Ok(VtkSeriesWriter {
             dir: dir.to_path_buf(),
             nodes: mesh.nodes.clone(),
@@ -170,61 +136,14 @@ impl VtkSeriesWriter {
             });
         }
 
-        let mut s = String::with_capacity(128 * n + self.cells_xml.len() + 1024);
-        s.push_str("<?xml version=\"1.0\"?>\n");
-        s.push_str(
-            "<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n",
+        let s = frame_xml(
+            time_s,
+            &self.nodes,
+            displacement,
+            &self.cells_xml,
+            self.n_cells,
+            extra,
         );
-        s.push_str("  <UnstructuredGrid>\n");
-        s.push_str("    <FieldData>\n");
-        s.push_str(
-            "      <DataArray type=\"Float64\" Name=\"TimeValue\" NumberOfTuples=\"1\" \
-             format=\"ascii\">\n        ",
-        );
-        num(&mut s, time_s);
-        s.push_str("\n      </DataArray>\n    </FieldData>\n");
-        let _ = writeln!(
-            s,
-            "    <Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{}\">",
-            self.n_cells
-        );
-        s.push_str("      <Points>\n");
-        s.push_str(
-            "        <DataArray type=\"Float64\" Name=\"Points\" NumberOfComponents=\"3\" \
-             format=\"ascii\">\n",
-        );
-        for (p, u) in self.nodes.iter().zip(displacement) {
-            vec3_line(&mut s, [p[0] + u[0], p[1] + u[1], p[2] + u[2]]);
-        }
-        s.push_str("        </DataArray>\n      </Points>\n");
-        s.push_str(&self.cells_xml);
-        s.push_str("      <PointData Vectors=\"displacement\">\n");
-        write_vectors(&mut s, "displacement", displacement);
-        for (fname, field) in extra {
-            match field {
-                PointField::Vector(v) => write_vectors(&mut s, fname, v),
-                PointField::Scalar(v) => {
-                    let _ = writeln!(
-                        s,
-                        "        <DataArray type=\"Float64\" Name=\"{}\" format=\"ascii\">",
-                        xml_attr(fname)
-                    );
-                    for chunk in v.chunks(8) {
-                        s.push_str("          ");
-                        for (i, x) in chunk.iter().enumerate() {
-                            if i > 0 {
-                                s.push(' ');
-                            }
-                            num(&mut s, *x);
-                        }
-                        s.push('\n');
-                    }
-                    s.push_str("        </DataArray>\n");
-                }
-            }
-        }
-        s.push_str("      </PointData>\n");
-        s.push_str("    </Piece>\n  </UnstructuredGrid>\n</VTKFile>\n");
         fs::write(&path, s).map_err(io_err(&path))?;
         self.frames.push((time_s, name));
         Ok(path)
@@ -234,19 +153,7 @@ impl VtkSeriesWriter {
     /// times; returns its path. Call it now and then during a long run to be able to open
     /// the series before the run ends.
     pub fn write_pvd(&self) -> Result<PathBuf, MeshError> {
-        let path = self.dir.join("series.pvd");
-        let mut s = String::new();
-        s.push_str("<?xml version=\"1.0\"?>\n");
-        s.push_str("<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n");
-        s.push_str("  <Collection>\n");
-        for (t, file) in &self.frames {
-            s.push_str("    <DataSet timestep=\"");
-            num(&mut s, *t);
-            let _ = writeln!(s, "\" group=\"\" part=\"0\" file=\"{}\"/>", xml_attr(file));
-        }
-        s.push_str("  </Collection>\n</VTKFile>\n");
-        fs::write(&path, s).map_err(io_err(&path))?;
-        Ok(path)
+        write_pvd_file(&self.dir, &self.frames)
     }
 
     /// Write `DIR/series.pvd` listing every frame with its time and close the series;
@@ -254,6 +161,145 @@ impl VtkSeriesWriter {
     pub fn finish(self) -> Result<PathBuf, MeshError> {
         self.write_pvd()
     }
+}
+
+/// The `<Cells>` and `<CellData>` sections (the same in every frame): connectivity of
+/// `per_cell` nodes each, offsets, VTK type `vtk_type`, and one Int32 cell field `data_name`.
+fn cells_xml<'a>(
+    cells: impl ExactSizeIterator<Item = &'a [u32]>,
+    per_cell: usize,
+    vtk_type: u8,
+    data_name: &str,
+    data: impl Iterator<Item = String>,
+) -> String {
+    let n = cells.len();
+    let mut c = String::new();
+    let _ = writeln!(c, "      <Cells>");
+    let _ = writeln!(
+        c,
+        "        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">"
+    );
+    for cell in cells {
+        let line: Vec<String> = cell.iter().map(|i| i.to_string()).collect();
+        let _ = writeln!(c, "          {}", line.join(" "));
+    }
+    let _ = writeln!(c, "        </DataArray>");
+    let _ = writeln!(
+        c,
+        "        <DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">"
+    );
+    for chunk in (1..=n).collect::<Vec<_>>().chunks(16) {
+        let line: Vec<String> = chunk.iter().map(|i| (per_cell * i).to_string()).collect();
+        let _ = writeln!(c, "          {}", line.join(" "));
+    }
+    let _ = writeln!(c, "        </DataArray>");
+    let _ = writeln!(
+        c,
+        "        <DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">"
+    );
+    let t = vtk_type.to_string();
+    for k in (0..n).step_by(32) {
+        let line = vec![t.as_str(); (n - k).min(32)];
+        let _ = writeln!(c, "          {}", line.join(" "));
+    }
+    let _ = writeln!(c, "        </DataArray>");
+    let _ = writeln!(c, "      </Cells>");
+    let _ = writeln!(c, "      <CellData Scalars=\"{data_name}\">");
+    let _ = writeln!(
+        c,
+        "        <DataArray type=\"Int32\" Name=\"{data_name}\" format=\"ascii\">"
+    );
+    let data: Vec<String> = data.collect();
+    for chunk in data.chunks(32) {
+        let _ = writeln!(c, "          {}", chunk.join(" "));
+    }
+    let _ = writeln!(c, "        </DataArray>");
+    let _ = writeln!(c, "      </CellData>");
+    c
+}
+
+/// One frame's `.vtu` text: deformed points (`reference + displacement`), the fixed cell
+/// sections, the point vector "displacement" and any extra point fields, the time as field
+/// data "TimeValue".
+fn frame_xml(
+    time_s: f64,
+    reference: &[[f64; 3]],
+    displacement: &[[f64; 3]],
+    cells_xml: &str,
+    n_cells: usize,
+    extra: &[(&str, PointField<'_>)],
+) -> String {
+    let n = reference.len();
+    let mut s = String::with_capacity(128 * n + cells_xml.len() + 1024);
+    s.push_str("<?xml version=\"1.0\"?>\n");
+    s.push_str("<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n");
+    s.push_str("  <UnstructuredGrid>\n");
+    s.push_str("    <FieldData>\n");
+    s.push_str(
+        "      <DataArray type=\"Float64\" Name=\"TimeValue\" NumberOfTuples=\"1\" \
+         format=\"ascii\">\n        ",
+    );
+    num(&mut s, time_s);
+    s.push_str("\n      </DataArray>\n    </FieldData>\n");
+    let _ = writeln!(
+        s,
+        "    <Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n_cells}\">"
+    );
+    s.push_str("      <Points>\n");
+    s.push_str(
+        "        <DataArray type=\"Float64\" Name=\"Points\" NumberOfComponents=\"3\" \
+         format=\"ascii\">\n",
+    );
+    for (p, u) in reference.iter().zip(displacement) {
+        vec3_line(&mut s, [p[0] + u[0], p[1] + u[1], p[2] + u[2]]);
+    }
+    s.push_str("        </DataArray>\n      </Points>\n");
+    s.push_str(cells_xml);
+    s.push_str("      <PointData Vectors=\"displacement\">\n");
+    write_vectors(&mut s, "displacement", displacement);
+    for (fname, field) in extra {
+        match field {
+            PointField::Vector(v) => write_vectors(&mut s, fname, v),
+            PointField::Scalar(v) => {
+                let _ = writeln!(
+                    s,
+                    "        <DataArray type=\"Float64\" Name=\"{}\" format=\"ascii\">",
+                    xml_attr(fname)
+                );
+                for chunk in v.chunks(8) {
+                    s.push_str("          ");
+                    for (i, x) in chunk.iter().enumerate() {
+                        if i > 0 {
+                            s.push(' ');
+                        }
+                        num(&mut s, *x);
+                    }
+                    s.push('\n');
+                }
+                s.push_str("        </DataArray>\n");
+            }
+        }
+    }
+    s.push_str("      </PointData>\n");
+    s.push_str("    </Piece>\n  </UnstructuredGrid>\n</VTKFile>\n");
+    s
+}
+
+/// Writes `DIR/series.pvd` listing `frames` (time, file name); returns its path.
+fn write_pvd_file(dir: &Path, frames: &[(f64, String)]) -> Result<PathBuf, MeshError> {
+    let path = dir.join("series.pvd");
+    let mut s = String::new();
+    s.push_str("<?xml version=\"1.0\"?>\n");
+    s.push_str("<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n");
+    s.push_str("  <Collection>\n");
+    for (t, file) in frames {
+        s.push_str("    <DataSet timestep=\"");
+        num(&mut s, *t);
+        let _ = writeln!(s, "\" group=\"\" part=\"0\" file=\"{}\"/>", xml_attr(file));
+    }
+    s.push_str("  </Collection>\n</VTKFile>\n");
+    fs::write(&path, s).map_err(io_err(&path))?;
+    Ok(path)
 }
 
 fn vec3_line(s: &mut String, v: [f64; 3]) {
@@ -332,46 +378,13 @@ impl SurfaceSeriesWriter {
             }
         }
         fs::create_dir_all(dir).map_err(io_err(dir))?;
-        let mut c = String::new();
-        let _ = writeln!(c, "      <Cells>");
-        let _ = writeln!(
-            c,
-            "        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">"
+        let c = cells_xml(
+            quads.iter().map(|q| &q[..]),
+            4,
+            9,
+            "group",
+            quad_groups.iter().map(|g| g.to_string()),
         );
-        for q in &quads {
-            let _ = writeln!(c, "          {} {} {} {}", q[0], q[1], q[2], q[3]);
-        }
-        let _ = writeln!(c, "        </DataArray>");
-        let _ = writeln!(
-            c,
-            "        <DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">"
-        );
-        for chunk in (1..=quads.len()).collect::<Vec<_>>().chunks(16) {
-            let line: Vec<String> = chunk.iter().map(|i| (4 * i).to_string()).collect();
-            let _ = writeln!(c, "          {}", line.join(" "));
-        }
-        let _ = writeln!(c, "        </DataArray>");
-        let _ = writeln!(
-            c,
-            "        <DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">"
-        );
-        for chunk in quads.chunks(32) {
-            let line = vec!["9"; chunk.len()];
-            let _ = writeln!(c, "          {}", line.join(" "));
-        }
-        let _ = writeln!(c, "        </DataArray>");
-        let _ = writeln!(c, "      </Cells>");
-        let _ = writeln!(c, "      <CellData Scalars=\"group\">");
-        let _ = writeln!(
-            c,
-            "        <DataArray type=\"Int32\" Name=\"group\" format=\"ascii\">"
-        );
-        for chunk in quad_groups.chunks(32) {
-            let line: Vec<String> = chunk.iter().map(|g| g.to_string()).collect();
-            let _ = writeln!(c, "          {}", line.join(" "));
-        }
-        let _ = writeln!(c, "        </DataArray>");
-        let _ = writeln!(c, "      </CellData>");
         Ok(SurfaceSeriesWriter {
             dir: dir.to_path_buf(),
             reference,
@@ -405,38 +418,14 @@ impl SurfaceSeriesWriter {
                 msg: format!("frame time {time_s} is not finite"),
             });
         }
-        let mut s = String::with_capacity(128 * n + self.cells_xml.len() + 1024);
-        s.push_str("<?xml version=\"1.0\"?>\n");
-        s.push_str(
-            "<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n",
+        let s = frame_xml(
+            time_s,
+            &self.reference,
+            displacement,
+            &self.cells_xml,
+            self.n_cells,
+            &[],
         );
-        s.push_str("  <UnstructuredGrid>\n");
-        s.push_str("    <FieldData>\n");
-        s.push_str(
-            "      <DataArray type=\"Float64\" Name=\"TimeValue\" NumberOfTuples=\"1\" \
-             format=\"ascii\">\n        ",
-        );
-        num(&mut s, time_s);
-        s.push_str("\n      </DataArray>\n    </FieldData>\n");
-        let _ = writeln!(
-            s,
-            "    <Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{}\">",
-            self.n_cells
-        );
-        s.push_str("      <Points>\n");
-        s.push_str(
-            "        <DataArray type=\"Float64\" Name=\"Points\" NumberOfComponents=\"3\" \
-             format=\"ascii\">\n",
-        );
-        for (p, u) in self.reference.iter().zip(displacement) {
-            vec3_line(&mut s, [p[0] + u[0], p[1] + u[1], p[2] + u[2]]);
-        }
-        s.push_str("        </DataArray>\n      </Points>\n");
-        s.push_str(&self.cells_xml);
-        s.push_str("      <PointData Vectors=\"displacement\">\n");
-        write_vectors(&mut s, "displacement", displacement);
-        s.push_str("      </PointData>\n");
-        s.push_str("    </Piece>\n  </UnstructuredGrid>\n</VTKFile>\n");
         fs::write(&path, s).map_err(io_err(&path))?;
         self.frames.push((time_s, name));
         Ok(())
@@ -445,19 +434,7 @@ impl SurfaceSeriesWriter {
     /// Write (or rewrite) `DIR/series.pvd` listing the frames written so far; returns its
     /// path.
     pub fn write_pvd(&self) -> Result<PathBuf, MeshError> {
-        let path = self.dir.join("series.pvd");
-        let mut s = String::new();
-        s.push_str("<?xml version=\"1.0\"?>\n");
-        s.push_str("<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n");
-        s.push_str("  <Collection>\n");
-        for (t, file) in &self.frames {
-            s.push_str("    <DataSet timestep=\"");
-            num(&mut s, *t);
-            let _ = writeln!(s, "\" group=\"\" part=\"0\" file=\"{}\"/>", xml_attr(file));
-        }
-        s.push_str("  </Collection>\n</VTKFile>\n");
-        fs::write(&path, s).map_err(io_err(&path))?;
-        Ok(path)
+        write_pvd_file(&self.dir, &self.frames)
     }
 
     /// Writes series.pvd, returns its path.

@@ -310,7 +310,7 @@ enum Phase {
 }
 
 /// Global-network statistics of one board (for reports).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct GlobalStats {
     pub packets_sent: u64,
     pub bytes_sent: u64,
@@ -1156,6 +1156,16 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
         self.cs.places.get(c).is_some_and(|p| p.owned)
     }
 
+    /// An owned node of a surface that takes part in a pair (its owner exchanges it).
+    fn owns_pair_node(&self, c: usize) -> bool {
+        self.owns_contact(c)
+            && self
+                .cs
+                .nodes
+                .get(c)
+                .is_some_and(|n| n.surfaces & self.header.contact.pair_surfaces != 0)
+    }
+
     fn is_check_step(&self) -> bool {
         self.step
             .is_multiple_of(self.header.contact.check_interval_steps.max(1) as u64)
@@ -1350,9 +1360,7 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
                         let mut lo = [f64::INFINITY; 3];
                         let mut hi = [f64::NEG_INFINITY; 3];
                         for c in 0..self.header.counts.contact_nodes as usize {
-                            if !self.owns_contact(c)
-                                || self.cs.nodes[c].surfaces & p.pair_surfaces == 0
-                            {
+                            if !self.owns_pair_node(c) {
                                 continue;
                             }
                             if let Some(x) = self.contact_position(c) {
@@ -1419,9 +1427,7 @@ impl<'a, T: WireReal, E: HexElement<T> + DeserializeOwned> Runtime<'a, T, E> {
                         // Own pair-surface nodes the partner may need until the next check.
                         let reach = grow(&other, p.box_margin_m);
                         for c in 0..self.header.counts.contact_nodes as usize {
-                            if !self.owns_contact(c)
-                                || self.cs.nodes[c].surfaces & p.pair_surfaces == 0
-                            {
+                            if !self.owns_pair_node(c) {
                                 continue;
                             }
                             let Some(x) = self.contact_position(c) else {
