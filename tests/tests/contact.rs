@@ -95,3 +95,115 @@ fn a_surface_faster_than_the_speed_bound_is_reported() {
         FaultKind::Physics(PhysicsError::ContactSpeedBound { .. })
     ));
 }
+
+/// `two_blocks.toml`: two equal 10 x 10 x 5 mm blocks (ν = 0) 0.3 mm apart, the lower held
+/// at its base, the upper pushed down 0.4 mm at its top, touching only through the
+/// node-to-surface pair (each surface slave against the other's faces, averaged). At rest:
+/// - the contact forces of the pair sum to zero to round-off (1e-12 of their magnitudes);
+/// - the force the base carries is equal and opposite to the push (1e-6: equilibrium);
+/// - each block carries the uniaxial closed form `A μ (1/λ − λ)` at the stretch its own
+///   nodes reached (1e-4: the compression is homogeneous, which the hexahedra represent
+///   exactly; what is left is the interface's slightly uneven penetration, measured
+///   1e-6), so the forces across the interface are equal and opposite and of the right
+///   size;
+/// - the interface penetrates less than the tolerance and less than 5% of the gap closure.
+#[test]
+fn two_blocks_pressed_together_push_equal_and_opposite() {
+    let (p, _) = file_problem("two_blocks.toml");
+    let out = solver::run(&p, "two_blocks", &mut ()).unwrap();
+    let c = out.report.contact.as_ref().unwrap();
+    let push = out.report.prescribed_reaction_n[2];
+    let base = out.report.fixed_reaction_n[2];
+    println!(
+        "push {push:.6e} N, base {base:.6e} N, pair sum {:.1e}, KE {:.1e} J",
+        c.pair_force_sum_rel_max, out.report.kinetic_energy_final
+    );
+    assert!(c.pair_force_sum_rel_max < 1e-12);
+    assert!(base > 0.0 && (base + push).abs() < 1e-6 * base);
+    let (h, a, mu) = (0.005, 1e-4, 10e3 / 2.0);
+    let mean_uz = |z: f64| {
+        let nodes: Vec<usize> = (0..p.mesh.nodes.len())
+            .filter(|&n| (p.mesh.nodes[n][2] - z).abs() < 1e-9)
+            .collect();
+        nodes.iter().map(|&n| out.displacements[n][2]).sum::<f64>() / nodes.len() as f64
+    };
+    let (lower_top, upper_bottom, upper_top) = (mean_uz(0.005), mean_uz(0.0053), mean_uz(0.0103));
+    for (name, l) in [
+        ("lower", 1.0 + lower_top / h),
+        ("upper", 1.0 + (upper_top - upper_bottom) / h),
+    ] {
+        let closed = a * mu * (1.0 / l - l);
+        println!("{name}: stretch {l:.5}, closed form {closed:.6e} N");
+        assert!(
+            (base - closed).abs() < 1e-4 * closed,
+            "{name}: {base} vs {closed}"
+        );
+    }
+    let pen = lower_top - (0.0003 + upper_bottom);
+    println!(
+        "mean interface penetration {pen:.3e} m, max {:.3e} m",
+        c.max_penetration_m
+    );
+    assert!(c.max_penetration_m <= c.tolerance_m);
+    assert!(c.max_penetration_m < 0.05 * (0.0004 - 0.0003 + pen));
+}
+
+/// The pair of `two_blocks.toml` on one board is bit for bit the serial run; split so the
+/// interface runs across board boundaries (1x1x2: between the blocks; 2x2x2 and the full
+/// 4x4x4 array) it agrees to 1e-10 relative, the tolerance of the probe across boards.
+#[test]
+fn pair_contact_across_boards_equals_one_board() {
+    let (p, src) = file_problem("two_blocks.toml");
+    let serial = solver::run(&p, "serial", &mut ()).unwrap();
+    for m in ["1x1x1", "1x1x2", "2x2x2", "4x4x4"] {
+        let dir = compile(&p, &src, m, &format!("pair-{m}"));
+        let out = run(&dir, &SimOptions::default(), &mut |_, _| {}).unwrap();
+        let d = max_rel_diff(&serial.displacements, &out.displacements);
+        println!("{m}: max relative difference {d:e}");
+        if m == "1x1x1" {
+            assert_eq!(d, 0.0);
+        }
+        assert!(d < 1e-10, "{m}: {d:e}");
+    }
+}
+
+/// `approach.toml`: a rigid block approaches a soft one at exactly the speed bound from
+/// farther than the bounding boxes reach, and presses into it. With the interval `K` the
+/// bound gives (168 steps here) the run is the same as with a search every step (gap so
+/// small that K = 1): bit for bit serially, and to 1e-10 on boards where the blocks meet
+/// across a board boundary. A missed contact would leave the soft block untouched (or
+/// trip the tolerance), so the final state would differ by the whole indentation.
+#[test]
+fn the_bounding_box_interval_never_misses_a_surface_at_the_speed_bound() {
+    let (p, src) = file_problem("approach.toml");
+    let mut every_step = p.clone();
+    if let Some(c) = every_step.contact.as_mut() {
+        c.settings.gap = 1e-6;
+    }
+    let reference = solver::run(&every_step, "every step", &mut ()).unwrap();
+    let rc = reference.report.contact.as_ref().unwrap();
+    assert_eq!(rc.check_interval_steps, 1);
+    let out = solver::run(&p, "interval", &mut ()).unwrap();
+    let c = out.report.contact.as_ref().unwrap();
+    let soft_top = (0..p.mesh.nodes.len())
+        .filter(|&n| (p.mesh.nodes[n][2] - 0.005).abs() < 1e-9)
+        .map(|n| out.displacements[n][2])
+        .fold(0.0, f64::min);
+    println!(
+        "K = {} ({} checks) vs 1; soft top pressed {soft_top:.3e} m; max penetration {:.3e} m",
+        c.check_interval_steps, c.checks, c.max_penetration_m
+    );
+    assert!(c.check_interval_steps > 100);
+    assert!(soft_top < -5e-4, "the rigid block pressed the soft one");
+    assert_eq!(
+        max_rel_diff(&reference.displacements, &out.displacements),
+        0.0
+    );
+    for m in ["1x1x2", "2x2x2"] {
+        let dir = compile(&p, &src, m, &format!("approach-{m}"));
+        let b = run(&dir, &SimOptions::default(), &mut |_, _| {}).unwrap();
+        let d = max_rel_diff(&reference.displacements, &b.displacements);
+        println!("{m}: max relative difference to a search every step {d:e}");
+        assert!(d < 1e-10, "{m}: {d:e}");
+    }
+}

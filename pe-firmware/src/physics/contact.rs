@@ -9,9 +9,11 @@
 //! - **Tissue against tissue**, node to surface as in Székely et al.: the nodes of one
 //!   surface (slave) against the faces of the other (master), then the roles flipped, each
 //!   direction with half the penalty ("flipped and averaged"). A slave node below a master
-//!   triangle's plane by `0 < p ≤ depth_max`, with its projection inside the triangle,
-//!   penetrates it; of all the triangles it penetrates, the shallowest wins (ties: the
-//!   lowest face index), so the answer does not depend on search order. The slave takes
+//!   triangle's plane by `0 < p ≤ depth_max`, with its projection inside the triangle
+//!   (or outside an edge by at most [`EDGE_TOLERANCE`], so a node on the rim of two equal
+//!   bodies cannot slip between faces), penetrates it; of all the triangles it penetrates,
+//!   the shallowest wins (depths within [`DEPTH_TIE_M`] are a tie, won by the lowest face
+//!   index), so the answer depends neither on search order nor on round-off. The slave takes
 //!   `F = ½ k p n` and the triangle's nodes `−wᵢ F` (barycentric `wᵢ`, `Σ wᵢ = 1`): each
 //!   contact's forces sum to zero to round-off.
 //!
@@ -145,8 +147,22 @@ pub struct FacePenetration {
     pub weights: [f64; 4],
 }
 
+/// How far outside a master triangle (in barycentric weight) a slave's projection may
+/// fall and still count: a node on the rim of a body pressed against an equal one lies on
+/// the master's edge, and round-off must not let it slip through.
+pub const EDGE_TOLERANCE: f64 = 0.02;
+
+/// Depths closer than this are a tie, won by the first face (or triangle) in table order.
+/// A node over a vertex or an edge shared by faces tilted alike is at exactly equal depths
+/// in exact arithmetic; which one wins must not depend on the round-off of the position
+/// (which differs between the serial run and boards that sum forces in another order),
+/// because the faces' normals differ. A picometre is five orders above that round-off and
+/// six below any penetration that matters.
+pub const DEPTH_TIE_M: f64 = 1e-12;
+
 /// Penetration of point `x` into the triangle `t` (outward normal `(t1 − t0) × (t2 − t0)`)
-/// if `0 < depth ≤ depth_max` and its projection lies inside (edges included).
+/// if `0 < depth ≤ depth_max` and its projection lies inside, or outside an edge by at most
+/// [`EDGE_TOLERANCE`].
 fn triangle_penetration(x: V3, t: [V3; 3], depth_max: f64) -> Option<(f64, V3, [f64; 3])> {
     let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
     let n2 = dot(n, n);
@@ -164,10 +180,14 @@ fn triangle_penetration(x: V3, t: [V3; 3], depth_max: f64) -> Option<(f64, V3, [
     let w0 = dot(cross(b, c), n) / n2;
     let w1 = dot(cross(c, a), n) / n2;
     let w2 = 1.0 - w0 - w1;
-    if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
+    if w0 < -EDGE_TOLERANCE || w1 < -EDGE_TOLERANCE || w2 < -EDGE_TOLERANCE {
         return None;
     }
-    Some((-g, nh, [w0, w1, w2]))
+    // Just outside an edge (a node on the rim of two touching bodies, or over a crease):
+    // the force goes to the nearest edge, weights clipped to the triangle, still summing to 1.
+    let (c0, c1, c2) = (w0.max(0.0), w1.max(0.0), w2.max(0.0));
+    let sum = c0 + c1 + c2;
+    Some((-g, nh, [c0 / sum, c1 / sum, c2 / sum]))
 }
 
 /// Penetration of `x` into the quad `q` (split along the diagonal 0–2 into triangles
@@ -187,7 +207,11 @@ pub fn quad_penetration(x: V3, q: &[V3; 4], depth_max: f64) -> Option<FacePenetr
             weights: [w[0], 0.0, w[1], w[2]],
         });
     match (t1, t2) {
-        (Some(a), Some(b)) => Some(if b.depth_m < a.depth_m { b } else { a }),
+        (Some(a), Some(b)) => Some(if b.depth_m < a.depth_m - DEPTH_TIE_M {
+            b
+        } else {
+            a
+        }),
         (a, b) => a.or(b),
     }
 }
@@ -393,7 +417,7 @@ pub fn evaluate_pairs(
                 continue;
             };
             if let Some(p) = quad_penetration(x, &q, depth_max) {
-                if best.is_none_or(|(_, b)| p.depth_m < b.depth_m) {
+                if best.is_none_or(|(_, b)| p.depth_m < b.depth_m - DEPTH_TIE_M) {
                     best = Some((c.face as usize, p));
                 }
             }
@@ -505,7 +529,9 @@ pub fn check_travel(
     pair_surfaces: u8,
     travel_max_m: f64,
 ) -> Result<(), PhysicsError> {
-    let lim2 = travel_max_m * travel_max_m;
+    // A surface moving at exactly the bound covers `travel_max_m` up to round-off.
+    let lim = travel_max_m * (1.0 + 1e-9);
+    let lim2 = lim * lim;
     for (c, node) in m.nodes.iter().enumerate() {
         if node.surfaces & pair_surfaces == 0 || !apply(c) {
             continue;
@@ -575,5 +601,90 @@ mod tests {
         assert!(quad_penetration([0.3, 0.6, 0.01], &q, 0.1).is_none());
         assert!(quad_penetration([0.3, 0.6, -0.2], &q, 0.1).is_none());
         assert!(quad_penetration([1.3, 0.6, -0.01], &q, 0.1).is_none());
+    }
+
+    /// Just outside an edge (within [`EDGE_TOLERANCE`] of the triangle's weights) still
+    /// counts, with the force moved onto the edge (weights clipped, summing to 1 to
+    /// 1e-15); farther out it does not.
+    #[test]
+    fn a_node_just_outside_an_edge_is_caught_on_the_edge() {
+        let q = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ];
+        let p = quad_penetration([1.005, 0.5, -0.01], &q, 0.1).expect("caught");
+        assert!(p.weights.iter().all(|&w| w >= 0.0));
+        assert!((p.weights.iter().sum::<f64>() - 1.0).abs() < 1e-15);
+        let proj: V3 = core::array::from_fn(|i| (0..4).map(|k| p.weights[k] * q[k][i]).sum());
+        assert!((proj[0] - 1.0).abs() < 1e-12, "on the edge x = 1: {proj:?}");
+        assert!(quad_penetration([1.0 + 3.0 * EDGE_TOLERANCE, 0.5, -0.01], &q, 0.1).is_none());
+    }
+
+    /// A node under the ridge of two faces tilted alike is at equal depths in exact
+    /// arithmetic: the lower face index wins whichever way round-off tips the depths
+    /// (a shift of 1e-13 m across the ridge changes the depths by 2e-14 m), so the serial run and the boards agree.
+    #[test]
+    fn equal_depths_are_a_tie_won_by_the_lower_face() {
+        // A roof: faces 0 (x ≤ 0) and 1 (x ≥ 0) rising to a ridge along y at z = 0.1.
+        let nodes: [V3; 6] = [
+            [-1.0, 0.0, 0.0],
+            [0.0, 0.0, 0.1],
+            [0.0, 1.0, 0.1],
+            [-1.0, 1.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+        ];
+        let table: [ContactNode; 7] = core::array::from_fn(|i| ContactNode {
+            global: i as u32,
+            reference: if i < 6 { nodes[i] } else { [0.0; 3] },
+            penalty_n_per_m: 1.0,
+            surfaces: if i < 6 { 1 } else { 2 },
+        });
+        let faces = [
+            ContactFace {
+                nodes: [0, 1, 2, 3],
+                surface: 0,
+            },
+            ContactFace {
+                nodes: [1, 4, 5, 2],
+                surface: 0,
+            },
+        ];
+        let pairs = [ContactPair {
+            a: 1,
+            b: 0,
+            depth_max_m: 0.5,
+        }];
+        let m = ContactModel {
+            nodes: &table,
+            faces: &faces,
+            pairs: &pairs,
+            tools: &[],
+        };
+        let candidates = [
+            Candidate {
+                direction: 0,
+                slave: 6,
+                face: 0,
+            },
+            Candidate {
+                direction: 0,
+                slave: 6,
+                face: 1,
+            },
+        ];
+        for shift in [-1e-13, 0.0, 1e-13] {
+            let slave = [shift, 0.5, 0.05];
+            let pos = |c: usize| Some(if c < 6 { nodes[c] } else { slave });
+            let mut force = [[0.0; 3]; 7];
+            let mut stats = ContactStats::default();
+            evaluate_pairs(&m, &candidates, pos, |_| true, 1.0, &mut force, &mut stats)
+                .expect("evaluates");
+            // Face 0's outward normal leans to −x: the slave is pushed that way.
+            assert!(force[6][0] < 0.0, "shift {shift:e}: {:?}", force[6]);
+            assert_eq!(force[4], [0.0; 3], "face 1's own node takes nothing");
+        }
     }
 }
