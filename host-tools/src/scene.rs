@@ -108,7 +108,9 @@ pub struct MeshSpec {
     /// Gmsh MSH 4.1 or legacy VTK hexahedra, relative to the scene file.
     pub file: Option<PathBuf>,
     pub generate: Option<GenerateSpec>,
-    /// Built-in anatomy: "uterus".
+    /// Built-in anatomy: "uterus" (uterus and both tubes) or "uterus_ovary" (plus the
+    /// right ovary under the right tube, region `right_ovary`, its lower part the node set
+    /// `right_ovary_base`).
     pub builtin: Option<String>,
     /// Level of the built-in anatomy: "coarse" (~300), "medium" (~2000), "fine" (~20000).
     pub level: Option<String>,

@@ -70,8 +70,8 @@ pub fn load(spec: &MeshSpec, scene_dir: &Path) -> Result<(Mesh, BTreeMap<String,
         ));
     }
     let name = spec.builtin.as_deref().unwrap_or_default();
-    if name != "uterus" {
-        bail!("[mesh] builtin = \"{name}\": only \"uterus\" is built in");
+    if name != "uterus" && name != "uterus_ovary" {
+        bail!("[mesh] builtin = \"{name}\": the built-in meshes are \"uterus\" (uterus and both tubes) and \"uterus_ovary\" (plus the right ovary under the right tube)");
     }
     let level: Level = spec
         .level
@@ -79,8 +79,12 @@ pub fn load(spec: &MeshSpec, scene_dir: &Path) -> Result<(Mesh, BTreeMap<String,
         .unwrap_or("medium")
         .parse()
         .map_err(|e| anyhow!("[mesh] level: {e}"))?;
-    let a = builtin::generate(level);
+    let mut a = builtin::generate(level);
     let mut sets = BTreeMap::new();
+    if name == "uterus_ovary" {
+        let site = crate::ovary::add_right_ovary(&mut a, level);
+        sets.insert("right_ovary_base".to_string(), site.fixed_nodes);
+    }
     sets.insert("cervix".to_string(), a.cervix_nodes.clone());
     sets.insert("probe".to_string(), probe_nodes(&a));
     for (region, name) in [
@@ -114,7 +118,7 @@ fn tube_end_nodes(mesh: &Mesh, region: i32) -> Vec<u32> {
 /// Probe tip radius (m): a blunt 5 mm laparoscopic probe.
 pub const PROBE_TIP_RADIUS_M: f64 = 0.0025;
 /// How far the probe pushes the tube (m) and over what time (s).
-pub const PROBE_PUSH_M: f64 = 0.005;
+pub const PROBE_PUSH_M: f64 = 0.0035;
 pub const PROBE_PUSH_S: f64 = 0.5;
 /// The probe starts this far above the tube (m).
 pub const PROBE_START_GAP_M: f64 = 0.001;
@@ -170,7 +174,7 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
         mesh: MeshSpec {
             file: None,
             generate: None,
-            builtin: Some("uterus".into()),
+            builtin: Some("uterus_ovary".into()),
             level: Some(level.into()),
             blocks: vec![],
         },
@@ -179,15 +183,22 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
             mat(None, 10.0e3),
             mat(Some("left_oviduct"), 3.0e3),
             mat(Some("right_oviduct"), 3.0e3),
+            mat(Some("right_ovary"), 5.0e3),
         ],
-        // Held at the cervix; the tubes' far ends are held by their ligaments.
-        fixed: ["cervix", "left_tube_end", "right_tube_end"]
-            .map(|s| FixedSpec {
-                box_: None,
-                sphere: None,
-                set: Some(s.into()),
-            })
-            .to_vec(),
+        // Held at the cervix; the tubes' far ends are held by their ligaments, the ovary's
+        // lower part by its own.
+        fixed: [
+            "cervix",
+            "left_tube_end",
+            "right_tube_end",
+            "right_ovary_base",
+        ]
+        .map(|s| FixedSpec {
+            box_: None,
+            sphere: None,
+            set: Some(s.into()),
+        })
+        .to_vec(),
         prescribed: vec![],
         load: vec![],
         // The organs rest on their neighbours in the pelvis, which carry their weight; a
@@ -198,17 +209,30 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
             duration: Some(0.6),
             ..SolverSpec::default()
         },
+        // The probe moves at 1 cm/s; 5 mm of gap at the 10 cm/s bound checks the boxes
+        // every 25 ms (the seed's 2 cm would list every tube node within 2 cm of the ovary
+        // as a candidate).
         contact: Some(ContactSpec {
             penalty: 0.3,
+            gap: 0.005,
             ..ContactSpec::default()
         }),
-        surface: vec![SurfaceSpec {
-            name: "right_tube".into(),
-            region: Some(RegionRef::Name("right_oviduct".into())),
-            box_: None,
-            sphere: None,
-            set: None,
-        }],
+        surface: ["right_tube", "right_ovary"]
+            .map(|name| SurfaceSpec {
+                name: name.into(),
+                region: Some(RegionRef::Name(
+                    if name == "right_tube" {
+                        "right_oviduct"
+                    } else {
+                        name
+                    }
+                    .into(),
+                )),
+                box_: None,
+                sphere: None,
+                set: None,
+            })
+            .to_vec(),
         tool: vec![ToolSpec {
             name: "probe".into(),
             shape: "capsule".into(),
@@ -218,6 +242,10 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
             path: vec![[0.0, 0.0, 0.0, 0.0], [PROBE_PUSH_S, d[0], d[1], d[2]]],
             surface: "right_tube".into(),
         }],
-        contact_pair: vec![],
+        // The pushed tube presses on the ovary and slides over its curved top.
+        contact_pair: vec![ContactPairSpec {
+            surfaces: ["right_tube".into(), "right_ovary".into()],
+            depth: None,
+        }],
     })
 }

@@ -213,7 +213,7 @@ fn nearly_incompressible_runs_stable_without_locking() {
 }
 
 /// f32 and f64 agree to f32 precision on a short run of the built-in scene (coarse, 1200
-/// steps: the probe reaches the tube after about 600): the largest displacement difference is below 1e-4 of the largest displacement
+/// steps: the probe reaches the tube after about 800): the largest displacement difference is below 1e-4 of the largest displacement
 /// (f32 round-off is 6e-8 per operation; a few hundred steps of a well-conditioned explicit
 /// run amplify it by far less than 1e3).
 #[test]
