@@ -205,18 +205,22 @@ fn builtin(
     };
     let (sim, pr) = execute(&images, args)?;
     // What a user of the trainer wants to know: what the probe did to the tube.
-    let tube_max = pr
-        .mesh
-        .cells
-        .iter()
-        .zip(&pr.mesh.cell_regions)
-        .filter(|(_, r)| **r == host_tools::builtin::REGION_RIGHT_OVIDUCT)
-        .flat_map(|(c, _)| c.iter().map(|&n| n as usize))
-        .map(|n| {
-            let u = sim.displacements[n];
-            (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()
-        })
-        .fold(0.0, f64::max);
+    let region_max = |region: i32| {
+        pr.mesh
+            .cells
+            .iter()
+            .zip(&pr.mesh.cell_regions)
+            .filter(|(_, r)| **r == region)
+            .flat_map(|(c, _)| c.iter().map(|&n| n as usize))
+            .map(|n| {
+                let u = sim.displacements[n];
+                (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()
+            })
+            .fold(0.0, f64::max)
+    };
+    let tube_max = region_max(host_tools::builtin::REGION_RIGHT_OVIDUCT);
+    // The ovary moves only through the tube-ovary contact pair.
+    let ovary_max = region_max(host_tools::ovary::REGION_RIGHT_OVARY);
     let sim_s = sim.steps as f64 * sim.manifest.dt_s;
     let f = sim.tool_force.last().copied().unwrap_or([0.0; 3]);
     println!("summary:");
@@ -228,8 +232,9 @@ fn builtin(
         (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt()
     );
     println!(
-        "  right tube: largest displacement {:.3} mm",
-        tube_max * 1e3
+        "  right tube: largest displacement {:.3} mm; right ovary (pressed by the tube through their contact pair): {:.3} mm",
+        tube_max * 1e3,
+        ovary_max * 1e3
     );
     println!(
         "  {} steps, {:.3} s simulated in {:.2} s wall on {} emulated boards: real-time factor {:.3}",
