@@ -698,6 +698,29 @@ pub fn check_fit(images: &[BoardImage], profile: &BoardProfile) -> Result<()> {
             }
         }
     }
+    // The contact tables are the same on every board.
+    if let Some(im) = images.first() {
+        let counts = &im.header.counts;
+        for (what, n, max) in [
+            (
+                "contact-surface nodes",
+                counts.contact_nodes,
+                profile.contact_nodes_max,
+            ),
+            (
+                "contact-surface faces",
+                counts.contact_faces,
+                profile.contact_faces_max,
+            ),
+        ] {
+            if n > max {
+                problems.push(format!(
+                    "every board: {n} {what} exceed the {max} the {} firmware holds (declare smaller [[surface]]s)",
+                    profile.name
+                ));
+            }
+        }
+    }
     if problems.is_empty() {
         Ok(())
     } else {

@@ -217,22 +217,27 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
             gap: 0.005,
             ..ContactSpec::default()
         }),
-        surface: ["right_tube", "right_ovary"]
-            .map(|name| SurfaceSpec {
-                name: name.into(),
-                region: Some(RegionRef::Name(
-                    if name == "right_tube" {
-                        "right_oviduct"
-                    } else {
-                        name
-                    }
-                    .into(),
-                )),
+        // Only what the scene needs takes part: the tube within 25 mm of the probe site
+        // (the ovary reaches 15 mm from it), and the ovary.
+        surface: vec![
+            SurfaceSpec {
+                name: "right_tube".into(),
+                region: Some(RegionRef::Name("right_oviduct".into())),
+                box_: None,
+                sphere: Some(SphereSpec {
+                    center: probe.contact_point,
+                    radius: 0.025,
+                }),
+                set: None,
+            },
+            SurfaceSpec {
+                name: "right_ovary".into(),
+                region: Some(RegionRef::Name("right_ovary".into())),
                 box_: None,
                 sphere: None,
                 set: None,
-            })
-            .to_vec(),
+            },
+        ],
         tool: vec![ToolSpec {
             name: "probe".into(),
             shape: "capsule".into(),

@@ -26,6 +26,10 @@ pub struct BoardProfile {
     pub image_origin: u64,
     /// probe-rs `--chip` of the board's MCU (empty for an emulation profile).
     pub probe_chip: &'static str,
+    /// Contact tables the firmware holds (the same on every board): surface nodes and
+    /// faces of all declared contact surfaces.
+    pub contact_nodes_max: u32,
+    pub contact_faces_max: u32,
 }
 
 /// The custom PE board: STM32H7-class Cortex-M7 at 480 MHz with a double-precision FPU,
@@ -43,6 +47,8 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
     global_bytes_per_s: 12_500_000,
     image_origin: 0x0810_0000,
     probe_chip: "STM32H743ZITx",
+    contact_nodes_max: 512,
+    contact_faces_max: 512,
 };
 
 /// QEMU's `mps2-an500` (Cortex-M7, FLASH at 0x0 and RAM at 0x20000000, 4 MiB each), the
@@ -59,6 +65,8 @@ pub const QEMU_MPS2_AN500: BoardProfile = BoardProfile {
     global_bytes_per_s: 12_500_000,
     image_origin: 0x0020_0000,
     probe_chip: "",
+    contact_nodes_max: 512,
+    contact_faces_max: 512,
 };
 
 pub const PROFILES: [BoardProfile; 2] = [PE_BOARD, QEMU_MPS2_AN500];

@@ -256,3 +256,27 @@ fn builtin_scene_probe_tube_and_ovary_on_64_boards_equal_serial() {
     let scale = (fs[0] * fs[0] + fs[1] * fs[1] + fs[2] * fs[2]).sqrt();
     assert!((0..3).all(|i| (fb[i] - fs[i]).abs() < 1e-9 * scale));
 }
+
+/// Contact tables larger than the firmware holds are refused when the schedule is
+/// compiled, naming the table and both counts (not only at load time on the board).
+#[test]
+fn contact_tables_too_large_for_the_firmware_are_refused_at_compile_time() {
+    use host_tools::compile::{check_fit, compile_images, plan};
+    use host_tools::partition::Machine;
+    use pe_firmware::profile::{BoardProfile, PE_BOARD};
+    let (p, _) = file_problem("two_blocks.toml");
+    let images = compile_images(&p, &plan(&p, Machine::parse("1x1x2").unwrap()).unwrap()).unwrap();
+    assert!(check_fit(&images, &PE_BOARD).is_ok());
+    let small = BoardProfile {
+        name: "small",
+        contact_nodes_max: 40,
+        ..PE_BOARD
+    };
+    let e = check_fit(&images, &small).unwrap_err().to_string();
+    println!("{e}");
+    // Two 5 x 5 node grids: 50 contact nodes in the table every board holds.
+    assert!(
+        e.contains("every board: 50 contact-surface nodes exceed the 40 the small firmware holds"),
+        "{e}"
+    );
+}

@@ -45,8 +45,8 @@ pub const LOADS: usize = 256;
 pub const MATERIALS: usize = 8;
 
 /// Contact and graphics capacities.
-pub const CONTACT_NODES: usize = 512;
-pub const CONTACT_FACES: usize = 512;
+pub const CONTACT_NODES: usize = PROFILE.contact_nodes_max as usize;
+pub const CONTACT_FACES: usize = PROFILE.contact_faces_max as usize;
 pub const CONTACT_CANDIDATES: usize = 2048;
 pub const CONTACT_SENDS: usize = 1024;
 pub type ContactStatic = pe_firmware::runtime::StaticContactStorage<
