@@ -160,6 +160,11 @@ pub const EDGE_TOLERANCE: f64 = 0.02;
 /// six below any penetration that matters.
 pub const DEPTH_TIE_M: f64 = 1e-12;
 
+/// Whether depth `d` beats the best so far, `best`: shallower by more than a tie.
+fn shallower(d: f64, best: f64) -> bool {
+    d < best - DEPTH_TIE_M
+}
+
 /// Penetration of point `x` into the triangle `t` (outward normal `(t1 − t0) × (t2 − t0)`)
 /// if `0 < depth ≤ depth_max` and its projection lies inside, or outside an edge by at most
 /// [`EDGE_TOLERANCE`].
@@ -207,7 +212,7 @@ pub fn quad_penetration(x: V3, q: &[V3; 4], depth_max: f64) -> Option<FacePenetr
             weights: [w[0], 0.0, w[1], w[2]],
         });
     match (t1, t2) {
-        (Some(a), Some(b)) => Some(if b.depth_m < a.depth_m - DEPTH_TIE_M {
+        (Some(a), Some(b)) => Some(if shallower(b.depth_m, a.depth_m) {
             b
         } else {
             a
@@ -417,7 +422,7 @@ pub fn evaluate_pairs(
                 continue;
             };
             if let Some(p) = quad_penetration(x, &q, depth_max) {
-                if best.is_none_or(|(_, b)| p.depth_m < b.depth_m - DEPTH_TIE_M) {
+                if best.is_none_or(|(_, b)| shallower(p.depth_m, b.depth_m)) {
                     best = Some((c.face as usize, p));
                 }
             }
