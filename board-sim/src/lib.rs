@@ -14,14 +14,11 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, bail, Context, Result};
 use host_tools::compile::{image_file_name, read_manifest, Manifest};
 use link_proto::Links;
-use pe_firmware::image::{ContactFace, ContactNode, ContactNodePlace};
-use pe_firmware::image::{ImageReader, Integration, Precision, RecvEntry};
-use pe_firmware::physics::contact::Candidate;
-use pe_firmware::physics::{HexElement, HexFull, HexReduced, MaterialLaw};
+use pe_firmware::image::{ElementRecord, ImageError, ImageReader, Integration, Precision};
+use pe_firmware::physics::{HexFull, HexReduced};
 use pe_firmware::runtime::{
-    ContactStorage, Fault, GlobalStats, LinkStats, Runtime, RuntimeConfig, Storage, WireReal,
+    Capacities, Fault, GlobalStats, LinkStats, Runtime, RuntimeConfig, Shelf, StorageBuf, WireReal,
 };
-use serde::de::DeserializeOwned;
 
 use links::{build_links, FaultSpec, FaultyLinks, Injected, ThreadEnv};
 
@@ -37,6 +34,8 @@ pub struct SimOptions {
     /// Host threads the boards are multiplexed over (default: the machine's cores; as many
     /// as boards gives one thread per board).
     pub workers: Option<usize>,
+    /// How each board's storage is sized.
+    pub storage: StorageSizing,
 }
 
 impl Default for SimOptions {
@@ -47,6 +46,7 @@ impl Default for SimOptions {
             link_timeout: Duration::from_secs(10),
             frame_every: 0,
             workers: None,
+            storage: StorageSizing::Exact,
         }
     }
 }
@@ -183,165 +183,71 @@ impl std::fmt::Display for SimFault {
 }
 impl std::error::Error for SimFault {}
 
-/// Exact-size storage for one board on the host.
-struct OwnedStorage<T, E> {
-    laws: Vec<MaterialLaw<T>>,
-    elements: Vec<E>,
-    nodes: Vec<pe_firmware::image::NodeRecord<T>>,
-    ext_stage: Vec<u8>,
-    u: Vec<[T; 3]>,
-    u_prev: Vec<[T; 3]>,
-    force: Vec<[T; 3]>,
-    sends: Vec<u16>,
-    recvs: Vec<RecvEntry>,
-    path_points: Vec<pe_firmware::image::PathPoint>,
-    loads: Vec<pe_firmware::image::LoadRecord>,
-    contact: OwnedContact,
-}
+/// Growable vectors: board-sim's storage, sized when a board is loaded.
+pub struct VecShelf;
 
-/// Contact storage for one board on the host: exact sizes from the image, generous
-/// candidate and send-list room (they depend on the motion).
-struct OwnedContact {
-    nodes: Vec<ContactNode>,
-    places: Vec<ContactNodePlace>,
-    faces: Vec<ContactFace>,
-    at_check: Vec<[f64; 3]>,
-    force: Vec<[f64; 3]>,
-    remote_u: Vec<[f64; 3]>,
-    remote_stamp: Vec<u32>,
-    candidates: Vec<Candidate>,
-    send_list: Vec<u32>,
-    contact_of: Vec<u32>,
-    graphics: Vec<u16>,
-}
-
-impl OwnedContact {
-    fn new(c: &pe_firmware::image::Counts) -> Self {
-        let nc = c.contact_nodes as usize;
-        let zero = ContactNode {
-            global: 0,
-            reference: [0.0; 3],
-            penalty_n_per_m: 0.0,
-            surfaces: 0,
-        };
-        OwnedContact {
-            nodes: vec![zero; nc],
-            places: vec![
-                ContactNodePlace {
-                    local: None,
-                    owned: false
-                };
-                nc
-            ],
-            faces: vec![
-                ContactFace {
-                    nodes: [0; 4],
-                    surface: 0
-                };
-                c.contact_faces as usize
-            ],
-            at_check: vec![[0.0; 3]; nc],
-            force: vec![[0.0; 3]; nc],
-            remote_u: vec![[0.0; 3]; 2 * nc],
-            remote_stamp: vec![0; 2 * nc],
-            candidates: vec![Candidate::default(); if c.pairs > 0 { 64 * nc.max(16) } else { 0 }],
-            send_list: vec![
-                0;
-                if c.pairs > 0 {
-                    nc * c.contact_boards as usize
-                } else {
-                    0
-                }
-            ],
-            contact_of: vec![u32::MAX; if nc > 0 { c.nodes as usize } else { 0 }],
-            graphics: vec![0; c.graphics_nodes as usize],
-        }
+impl Shelf for VecShelf {
+    type Of<R: Copy, const N: usize> = Vec<R>;
+    fn empty<R: Copy, const N: usize>() -> Vec<R> {
+        Vec::new()
     }
-    fn storage(&mut self) -> ContactStorage<'_> {
-        ContactStorage {
-            nodes: &mut self.nodes,
-            places: &mut self.places,
-            faces: &mut self.faces,
-            at_check: &mut self.at_check,
-            force: &mut self.force,
-            remote_u: &mut self.remote_u,
-            remote_stamp: &mut self.remote_stamp,
-            candidates: &mut self.candidates,
-            send_list: &mut self.send_list,
-            contact_of: &mut self.contact_of,
-            graphics: &mut self.graphics,
-        }
+    fn fill<R: Copy, const N: usize>(v: &mut Vec<R>, len: usize, value: R) -> bool {
+        v.clear();
+        v.resize(len, value);
+        true
     }
 }
 
-impl<T: WireReal, E: Copy> OwnedStorage<T, E> {
-    fn new(image: &[u8], element: E) -> Result<Self, pe_firmware::image::ImageError> {
-        let h = ImageReader::new(image, None)?.header;
-        let c = h.counts;
-        let nn = c.nodes as usize;
-        let zero = pe_firmware::image::NodeRecord {
-            global: 0,
-            gain: T::ZERO,
-            motion: pe_firmware::image::NodeMotion::Free,
-            owner: false,
-            gravity: [T::ZERO; 3],
-        };
-        Ok(OwnedStorage {
-            laws: vec![
-                MaterialLaw::NeoHookean(pe_firmware::physics::LameParameters {
-                    mu: T::ZERO,
-                    lambda: T::ZERO
-                });
-                c.materials as usize
-            ],
-            elements: vec![element; c.elements as usize],
-            nodes: vec![zero; nn],
-            ext_stage: vec![0; nn],
-            u: vec![[T::ZERO; 3]; nn],
-            u_prev: vec![[T::ZERO; 3]; nn],
-            force: vec![[T::ZERO; 3]; nn],
-            sends: vec![0; c.sends as usize],
-            recvs: vec![
-                RecvEntry {
-                    node: 0,
-                    combine: pe_firmware::image::Combine::Replace
-                };
-                c.recvs as usize
-            ],
-            path_points: vec![
-                pe_firmware::image::PathPoint {
-                    path: 0,
-                    t_s: 0.0,
-                    value: [0.0; 3]
-                };
-                c.path_points as usize
-            ],
-            loads: vec![
-                pe_firmware::image::LoadRecord {
-                    node: 0,
-                    force: [0.0; 3],
-                    ramp: None
-                };
-                c.loads as usize
-            ],
-            contact: OwnedContact::new(&c),
+/// One board's storage on the host (capacities chosen at run time).
+type HostStorage<T, E> = StorageBuf<VecShelf, T, E, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0>;
+
+/// How board-sim sizes each board's storage.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum StorageSizing {
+    /// Exactly what each image needs (with room for the contact search).
+    Exact,
+    /// As the firmware of this profile does ([`Capacities::for_board`]): an image the board
+    /// would refuse is refused here, with the same message.
+    Board(pe_firmware::profile::BoardProfile),
+}
+
+impl StorageSizing {
+    fn capacities<T, E>(&self, image: &[u8]) -> Result<Capacities, ImageError> {
+        Ok(match self {
+            StorageSizing::Exact => {
+                Capacities::exact(&ImageReader::new(image, None)?.header.counts)
+            }
+            StorageSizing::Board(p) => Capacities::for_board::<T, E>(p),
         })
     }
-    fn storage(&mut self) -> (Storage<'_, T, E>, ContactStorage<'_>) {
-        let st = Storage {
-            laws: &mut self.laws,
-            elements: &mut self.elements,
-            nodes: &mut self.nodes,
-            ext_stage: &mut self.ext_stage,
-            u: &mut self.u,
-            u_prev: &mut self.u_prev,
-            force: &mut self.force,
-            sends: &mut self.sends,
-            recvs: &mut self.recvs,
-            path_points: &mut self.path_points,
-            loads: &mut self.loads,
-        };
-        (st, self.contact.storage())
+}
+
+/// Loads `image` for `board` into storage sized by `sizing`, as a board-sim worker does,
+/// and drops it: what board-sim says of an image before running it.
+pub fn load_check(image: &[u8], board: [u8; 3], sizing: StorageSizing) -> Result<(), ImageError> {
+    fn typed<T: WireReal, E: ElementRecord<T>>(
+        image: &[u8],
+        board: [u8; 3],
+        sizing: StorageSizing,
+    ) -> Result<(), ImageError> {
+        let mut buf = HostStorage::<T, E>::empty();
+        let st = buf
+            .fill(&sizing.capacities::<T, E>(image)?)
+            .ok_or(ImageError::Malformed {
+                record: "zero record (storage)",
+            })?;
+        Runtime::load(image, board, st, RuntimeConfig::default()).map(|_| ())
+    }
+    let h = ImageReader::new(image, Some(board))?.header;
+    match (h.precision, h.integration) {
+        (Precision::F64, Integration::Reduced) => {
+            typed::<f64, HexReduced<f64>>(image, board, sizing)
+        }
+        (Precision::F64, Integration::Full) => typed::<f64, HexFull<f64>>(image, board, sizing),
+        (Precision::F32, Integration::Reduced) => {
+            typed::<f32, HexReduced<f32>>(image, board, sizing)
+        }
+        (Precision::F32, Integration::Full) => typed::<f32, HexFull<f32>>(image, board, sizing),
     }
 }
 
@@ -379,9 +285,9 @@ struct BoardCtx {
 
 /// Runs a worker's boards: each is polled in turn as far as its links allow; when no board
 /// can move, the worker waits on its doorbell.
-fn run_worker<T: WireReal, E: HexElement<T> + DeserializeOwned + Copy>(
+fn run_worker<T: WireReal, E: ElementRecord<T>>(
     boards: Vec<BoardCtx>,
-    element: E,
+    sizing: StorageSizing,
     links: &mut [Box<dyn Links + Send>],
     env: &mut ThreadEnv,
     out: &mpsc::Sender<Report>,
@@ -393,16 +299,20 @@ fn run_worker<T: WireReal, E: HexElement<T> + DeserializeOwned + Copy>(
             kind: pe_firmware::runtime::FaultKind::Image(e),
         }
     };
-    let mut storages = Vec::with_capacity(boards.len());
-    for ctx in &boards {
-        storages
-            .push(OwnedStorage::<T, E>::new(&ctx.image, element).map_err(load_fault(ctx.coords))?);
-    }
+    let mut storages: Vec<HostStorage<T, E>> = Vec::with_capacity(boards.len());
+    storages.resize_with(boards.len(), HostStorage::empty);
     let mut rts: Vec<Runtime<'_, T, E>> = Vec::with_capacity(boards.len());
-    for (st, ctx) in storages.iter_mut().zip(&boards) {
-        let (st, cs) = st.storage();
+    for (buf, ctx) in storages.iter_mut().zip(&boards) {
+        let caps = sizing
+            .capacities::<T, E>(&ctx.image)
+            .map_err(load_fault(ctx.coords))?;
+        let st = buf.fill(&caps).ok_or_else(|| {
+            load_fault(ctx.coords)(ImageError::Malformed {
+                record: "zero record (storage)",
+            })
+        })?;
         rts.push(
-            Runtime::load(&ctx.image, ctx.coords.map(|c| c as u8), st, cs, ctx.config)
+            Runtime::load(&ctx.image, ctx.coords.map(|c| c as u8), st, ctx.config)
                 .map_err(load_fault(ctx.coords))?,
         );
     }
@@ -439,7 +349,7 @@ fn run_worker<T: WireReal, E: HexElement<T> + DeserializeOwned + Copy>(
                             frames_sent: st.frames_sent,
                             bytes_sent: st.bytes_sent,
                             wait_s: st.wait_ns as f64 * 1e-9,
-                            global: rt.global,
+                            global: rt.global_stats(),
                         },
                         reaction_prescribed: rt.reaction_prescribed,
                         reaction_fixed: rt.reaction_fixed,
@@ -582,6 +492,7 @@ pub fn run(
         let out = tx.clone();
         let bell = bells[w].clone();
         let stop2 = stop.clone();
+        let sizing = opts.storage;
         let h = std::thread::Builder::new()
             .name(format!("board-worker-{w}"))
             .stack_size(16 << 20)
@@ -589,6 +500,7 @@ pub fn run(
                 let mut env = ThreadEnv::new(bell);
                 if let Err(f) = dispatch(
                     ctxs,
+                    sizing,
                     &mut ls,
                     &mut env,
                     &out,
@@ -695,41 +607,25 @@ pub fn run(
 
 fn dispatch(
     ctx: Vec<BoardCtx>,
+    sizing: StorageSizing,
     links: &mut [Box<dyn Links + Send>],
     env: &mut ThreadEnv,
     out: &mpsc::Sender<Report>,
     precision: Precision,
     integration: Integration,
 ) -> Result<(), Fault> {
-    use pe_firmware::physics::GaussPoint;
-    fn reduced<T: WireReal>() -> HexReduced<T> {
-        HexReduced {
-            nodes: [0; 8],
-            material: 0,
-            volume: T::ZERO,
-            gradients: [[T::ZERO; 3]; 8],
-            hourglass: [[T::ZERO; 4]; 8],
-            hourglass_stiffness: T::ZERO,
-        }
-    }
-    fn full<T: WireReal>() -> HexFull<T> {
-        HexFull {
-            nodes: [0; 8],
-            material: 0,
-            gauss: [GaussPoint {
-                gradients: [[T::ZERO; 3]; 8],
-                volume: T::ZERO,
-            }; 8],
-        }
-    }
     match (precision, integration) {
         (Precision::F64, Integration::Reduced) => {
-            run_worker(ctx, reduced::<f64>(), links, env, out)
+            run_worker::<f64, HexReduced<f64>>(ctx, sizing, links, env, out)
         }
-        (Precision::F64, Integration::Full) => run_worker(ctx, full::<f64>(), links, env, out),
+        (Precision::F64, Integration::Full) => {
+            run_worker::<f64, HexFull<f64>>(ctx, sizing, links, env, out)
+        }
         (Precision::F32, Integration::Reduced) => {
-            run_worker(ctx, reduced::<f32>(), links, env, out)
+            run_worker::<f32, HexReduced<f32>>(ctx, sizing, links, env, out)
         }
-        (Precision::F32, Integration::Full) => run_worker(ctx, full::<f32>(), links, env, out),
+        (Precision::F32, Integration::Full) => {
+            run_worker::<f32, HexFull<f32>>(ctx, sizing, links, env, out)
+        }
     }
 }

@@ -136,7 +136,7 @@ fn bench(level: &str, boards: &str, steps: u64) -> Result<()> {
     let serial_s = t.elapsed().as_secs_f64();
     let dir = std::env::temp_dir().join(format!("board-sim-bench-{}", std::process::id()));
     let name = format!("builtin:{level}");
-    let machine = host_tools::partition::Machine::parse(boards)?;
+    let machine = host_tools::compile::partition::Machine::parse(boards)?;
     host_tools::compile::compile_to_dir(
         &name,
         &name,
@@ -159,7 +159,7 @@ fn bench(level: &str, boards: &str, steps: u64) -> Result<()> {
             ..Default::default()
         };
         let out = run(&dir, &opts, &mut |_, _| {})?;
-        let d = host_tools::compile::max_rel_diff(&serial.displacements, &out.displacements);
+        let d = host_tools::firmware::max_rel_diff(&serial.displacements, &out.displacements);
         println!(
             "  board-sim, {workers} worker threads: {:.1} steps/s = {:.2}x the serial run's time (max relative difference {d:.1e})",
             steps as f64 / out.wall_s,
@@ -181,7 +181,7 @@ fn builtin(
     let scene = builtin_scene(level)?;
     let problem = Problem::from_scene(&scene, std::path::Path::new("."))?;
     let images = out.join("images");
-    let machine = host_tools::partition::Machine::parse(boards)?;
+    let machine = host_tools::compile::partition::Machine::parse(boards)?;
     let name = format!("builtin:{level}");
     let rep = host_tools::compile::compile_to_dir(
         &name,

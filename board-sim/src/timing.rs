@@ -1,6 +1,7 @@
 //! Link timing model: would the board array keep the scene's step rate on the real links?
 //!
-//! Replays one step of every board's schedule in model time: batches take
+//! Replays one step of every board's schedule (the firmware's own step program,
+//! [`pe_firmware::runtime::Program`]) in model time: batches take
 //! `elements × cycles_per_element / clock`, a frame arrives `latency + bytes / bandwidth`
 //! after it is sent (links are full duplex, one frame at a time per direction), a receive
 //! waits for its frame. The cycles per element-step and per node update are the firmware's
@@ -10,6 +11,7 @@
 use host_tools::compile::{decode_image, image_file_name, DecodedImage};
 use pe_firmware::image::{Integration, Precision};
 use pe_firmware::profile::{measured_cost, BoardProfile};
+use pe_firmware::runtime::{Op, Program, ROUNDS_PER_AXIS_MAX};
 use serde::Serialize;
 
 /// Model inputs.
@@ -84,94 +86,75 @@ pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::R
         imgs.push(decode_image(&bytes, None).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?);
     }
     let h = imgs[0].header;
-    let width = if h.precision == pe_firmware::image::Precision::F64 {
-        8
-    } else {
-        4
-    };
+    let width = if h.precision == Precision::F64 { 8 } else { 4 };
     let cpe = if h.integration == Integration::Full {
         t.cycles_per_element_full
     } else {
         t.cycles_per_element_reduced
     };
-    let batch_s = |im: &DecodedImage, k: usize| {
-        let e = im.header.counts.batch_ends;
-        let n = if k == 0 { e[0] } else { e[k] - e[k - 1] };
-        n as f64 * cpe / t.clock_hz
-    };
-    let mut now = vec![0.0f64; count];
-    let mut compute = vec![0.0f64; count];
-    for b in 0..count {
-        now[b] = batch_s(&imgs[b], 0);
-        compute[b] = now[b];
-    }
-    for axis in 0..3 {
-        let rounds = h.counts.rounds[axis] as usize;
-        for r in 0..rounds {
-            // Sends of this round leave at each board's current time.
-            let sent_at = now.clone();
-            if r == 0 {
-                for b in 0..count {
-                    let c = batch_s(&imgs[b], axis + 1);
-                    now[b] += c;
-                    compute[b] += c;
-                }
-            }
-            for b in 0..count {
-                let c = [
-                    b % dims[0],
-                    (b / dims[0]) % dims[1],
-                    b / (dims[0] * dims[1]),
-                ];
-                let mut ready = now[b];
-                for f in 0..2 {
-                    let n_recv = imgs[b].rounds[axis]
-                        .get(r)
-                        .map(|x| x.recv[f].len())
-                        .unwrap_or(0);
-                    if n_recv == 0 {
-                        continue;
-                    }
-                    let mut d = c;
-                    if f == 0 {
-                        d[axis] += 1;
-                    } else {
-                        d[axis] -= 1;
-                    }
-                    let nb = index(d);
-                    ready = ready.max(sent_at[nb] + frame_s(&t, 3 * n_recv, width));
-                }
-                now[b] = ready;
-            }
-        }
-        if rounds == 0 {
-            for b in 0..count {
-                let c = batch_s(&imgs[b], axis + 1);
-                now[b] += c;
-                compute[b] += c;
-            }
-        }
-    }
-    let mut worst = (0.0, 0);
-    for b in 0..count {
-        let upd = imgs[b].header.counts.nodes as f64 * t.cycles_per_node_update / t.clock_hz;
-        now[b] += upd;
-        compute[b] += upd;
-        if now[b] > worst.0 {
-            worst = (now[b], b);
-        }
-    }
-    let b = worst.1;
-    Ok(StepTiming {
-        inputs: t,
-        step_s: worst.0,
-        compute_s: compute[b],
-        dt_s: h.params.dt_s,
-        real_time: worst.0 <= h.params.dt_s,
-        slowest_board: [
+    let coords = |b: usize| {
+        [
             b % dims[0],
             (b / dims[0]) % dims[1],
             b / (dims[0] * dims[1]),
-        ],
+        ]
+    };
+    // Every board walks the firmware's own step program in model time. Sends of an
+    // operation happen before the receives that wait for them (the program's order), so
+    // walking it operation by operation across the boards is exact.
+    let program = Program::new(&h.counts.rounds, false, false);
+    let mut now = vec![0.0f64; count];
+    let mut compute = vec![0.0f64; count];
+    // Send time per board, axis, round and face.
+    let mut sent = vec![[[[0.0f64; 2]; ROUNDS_PER_AXIS_MAX]; 3]; count];
+    for &op in program.ops() {
+        for b in 0..count {
+            let im = &imgs[b];
+            match op {
+                Op::Batch(k) => {
+                    let e = im.header.counts.batch_ends;
+                    let k = k as usize;
+                    let n = if k == 0 { e[0] } else { e[k] - e[k - 1] };
+                    let c = n as f64 * cpe / t.clock_hz;
+                    now[b] += c;
+                    compute[b] += c;
+                }
+                Op::Update => {
+                    let c = im.header.counts.nodes as f64 * t.cycles_per_node_update / t.clock_hz;
+                    now[b] += c;
+                    compute[b] += c;
+                }
+                Op::Send(a, r, f) => sent[b][a as usize][r as usize][f as usize] = now[b],
+                Op::Recv(a, r, f) => {
+                    let (a, r, f) = (a as usize, r as usize, f as usize);
+                    let n_recv = im.rounds[a].get(r).map_or(0, |x| x.recv[f].len());
+                    if n_recv == 0 {
+                        continue;
+                    }
+                    // Face 0 (+axis) receives what the +axis neighbour sent on its −axis face.
+                    let mut d = coords(b);
+                    if f == 0 {
+                        d[a] += 1;
+                    } else {
+                        d[a] -= 1;
+                    }
+                    let from = sent[index(d)][a][r][1 - f];
+                    now[b] = now[b].max(from + frame_s(&t, 3 * n_recv, width));
+                }
+                Op::Begin | Op::Graphics | Op::Contact | Op::External(_) => {}
+            }
+        }
+    }
+    let (step_s, b) = now
+        .iter()
+        .enumerate()
+        .fold((0.0, 0), |w, (b, &s)| if s > w.0 { (s, b) } else { w });
+    Ok(StepTiming {
+        inputs: t,
+        step_s,
+        compute_s: compute[b],
+        dt_s: h.params.dt_s,
+        real_time: step_s <= h.params.dt_s,
+        slowest_board: coords(b),
     })
 }

@@ -4,9 +4,8 @@
 //! bit for bit).
 //!
 //! The firmware is the crate `pe-firmware/board` (its own workspace, built only for
-//! `thumbv7em-none-eabihf`). Its schedule region at `ORIGIN(IMAGE)` holds a `u32` length
-//! (little-endian) and the schedule image; its identity record is the 16 bytes
-//! `PE-BOARD-ID\0`, x, y, z, `x ^ y ^ z ^ 0xA5`.
+//! `thumbv7em-none-eabihf`). The schedule blob and the identity record are defined once, in
+//! [`pe_firmware::image::blob`].
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -14,32 +13,22 @@ use std::process::Command;
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
+use pe_firmware::image::blob;
+
 use crate::compile::{image_file_name, read_manifest};
 
-/// The marker of the firmware's identity record (exactly once in the ELF).
-pub const IDENTITY_MARKER: &[u8; 12] = b"PE-BOARD-ID\0";
-
-/// The schedule region's content for an image: `u32` length (LE) then the image.
+/// The schedule region's content for an image ([`blob::write_blob`]).
 pub fn schedule_blob(image: &[u8]) -> Vec<u8> {
-    let mut b = Vec::with_capacity(image.len() + 4);
-    b.extend_from_slice(&(image.len() as u32).to_le_bytes());
-    b.extend_from_slice(image);
+    let mut b = vec![0; blob::blob_len(image.len())];
+    let len = blob::write_blob(image, &mut b).unwrap_or(0);
+    b.truncate(len);
     b
 }
 
-/// A copy of the firmware ELF that believes it is board `board`.
+/// A copy of the firmware ELF that believes it is board `board`: its one identity record
+/// ([`blob::find_identity`]) rewritten with [`blob::identity_record`].
 pub fn patch_identity(elf: &[u8], board: [u8; 3]) -> Result<Vec<u8>> {
-    let hits: Vec<usize> = elf
-        .windows(IDENTITY_MARKER.len())
-        .enumerate()
-        .filter(|(k, w)| {
-            *w == IDENTITY_MARKER
-                && elf
-                    .get(k + 12..k + 16)
-                    .is_some_and(|id| id[0] ^ id[1] ^ id[2] ^ 0xA5 == id[3])
-        })
-        .map(|(k, _)| k)
-        .collect();
+    let hits: Vec<usize> = blob::find_identity(elf).collect();
     let [at] = hits[..] else {
         bail!(
             "the firmware ELF holds {} identity records (expected exactly one): not a pe-board ELF?",
@@ -47,12 +36,29 @@ pub fn patch_identity(elf: &[u8], board: [u8; 3]) -> Result<Vec<u8>> {
         );
     };
     let mut out = elf.to_vec();
-    let [x, y, z] = board;
-    let id = at + IDENTITY_MARKER.len();
-    out.get_mut(id..id + 4)
+    out.get_mut(at..at + blob::IDENTITY_LEN)
         .context("identity record cut off at the end of the ELF")?
-        .copy_from_slice(&[x, y, z, x ^ y ^ z ^ 0xA5]);
+        .copy_from_slice(&blob::identity_record(board));
     Ok(out)
+}
+
+/// Largest `|a − b|` over all components, relative to the largest `|a|`; infinite when the
+/// two fields differ in length (a shorter output never passes for an equal one).
+pub fn max_rel_diff(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    if a.len() != b.len() {
+        return f64::INFINITY;
+    }
+    let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    let d = a
+        .iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    if scale > 0.0 {
+        d / scale
+    } else {
+        d
+    }
 }
 
 /// The repository root (for building the firmware).
@@ -329,12 +335,12 @@ mod tests {
     #[test]
     fn identity_is_patched_once() {
         let mut elf = vec![0u8; 64];
-        elf[20..32].copy_from_slice(IDENTITY_MARKER);
+        elf[20..32].copy_from_slice(&blob::IDENTITY_MARKER);
         elf[32..36].copy_from_slice(&[0, 0, 0, 0xA5]);
         let p = patch_identity(&elf, [1, 2, 3]).unwrap();
         assert_eq!(&p[32..36], &[1, 2, 3, 0xA5]); // 1 ^ 2 ^ 3 == 0
         assert_eq!(p.len(), elf.len());
-        elf[40..52].copy_from_slice(IDENTITY_MARKER);
+        elf[40..52].copy_from_slice(&blob::IDENTITY_MARKER);
         elf[52..56].copy_from_slice(&[0, 0, 0, 0xA5]);
         assert!(patch_identity(&elf, [1, 2, 3]).is_err());
         assert!(patch_identity(&[0u8; 8], [0; 3]).is_err());

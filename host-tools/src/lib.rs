@@ -13,7 +13,6 @@ pub mod mesh;
 pub mod mesh_io;
 pub mod output;
 pub mod ovary;
-pub mod partition;
 pub mod problem;
 pub mod render;
 pub mod scene;

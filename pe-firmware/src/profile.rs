@@ -1,5 +1,6 @@
-//! Board profiles: the figures `memory.x`, the schedule compiler's fit check and the
-//! capacity report share.
+//! Board profiles: the figures `memory.x`, the firmware's storage, the schedule compiler's
+//! fit check, board-sim's board-sized storage and the capacity report share. The capacity
+//! table is here and in [`crate::runtime::Capacities::for_board`], nowhere else.
 
 /// What the compiler needs to know about a board.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -9,7 +10,8 @@ pub struct BoardProfile {
     pub clock_hz: u64,
     /// RAM available to the firmware (bytes), as in `memory.x`.
     pub ram_bytes: u64,
-    /// RAM kept for the stack, link buffers and firmware statics (bytes).
+    /// RAM kept for the stack and the runtime itself (bytes); the link buffers and the
+    /// storage are counted by [`crate::runtime::Capacities::for_board`].
     pub ram_reserved_bytes: u64,
     /// Flash (bytes), as in `memory.x`.
     pub flash_bytes: u64,
@@ -30,6 +32,16 @@ pub struct BoardProfile {
     /// faces of all declared contact surfaces.
     pub contact_nodes_max: u32,
     pub contact_faces_max: u32,
+    /// The rest of the firmware's capacity table (see
+    /// [`crate::runtime::Capacities::for_board`], which adds the elements and nodes):
+    /// materials, exchange entries (sends and receives each), path points, loads, contact
+    /// candidates found at a check, contact-node displacements sent until the next check.
+    pub materials_max: u32,
+    pub exchange_max: u32,
+    pub path_points_max: u32,
+    pub loads_max: u32,
+    pub contact_candidates_max: u32,
+    pub contact_sends_max: u32,
 }
 
 /// The custom PE board: STM32H7-class Cortex-M7 at 480 MHz with a double-precision FPU,
@@ -49,6 +61,12 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
     probe_chip: "STM32H743ZITx",
     contact_nodes_max: 512,
     contact_faces_max: 512,
+    materials_max: 8,
+    exchange_max: 4096,
+    path_points_max: 64,
+    loads_max: 256,
+    contact_candidates_max: 2048,
+    contact_sends_max: 1024,
 };
 
 /// QEMU's `mps2-an500` (Cortex-M7, FLASH at 0x0 and RAM at 0x20000000, 4 MiB each), the
@@ -67,6 +85,12 @@ pub const QEMU_MPS2_AN500: BoardProfile = BoardProfile {
     probe_chip: "",
     contact_nodes_max: 512,
     contact_faces_max: 512,
+    materials_max: 8,
+    exchange_max: 4096,
+    path_points_max: 64,
+    loads_max: 256,
+    contact_candidates_max: 2048,
+    contact_sends_max: 1024,
 };
 
 pub const PROFILES: [BoardProfile; 2] = [PE_BOARD, QEMU_MPS2_AN500];

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use host_tools::compile::compile_to_dir;
-use host_tools::partition::Machine;
+use host_tools::compile::partition::Machine;
 use host_tools::problem::Problem;
 use host_tools::scene::Scene;
 use host_tools::scene_mesh::builtin_scene;
@@ -66,4 +66,4 @@ pub fn compile(problem: &Problem, source: &str, machine: &str, name: &str) -> Pa
     dir
 }
 
-pub use host_tools::compile::max_rel_diff;
+pub use host_tools::firmware::max_rel_diff;

@@ -261,8 +261,8 @@ fn builtin_scene_probe_tube_and_ovary_on_64_boards_equal_serial() {
 /// compiled, naming the table and both counts (not only at load time on the board).
 #[test]
 fn contact_tables_too_large_for_the_firmware_are_refused_at_compile_time() {
+    use host_tools::compile::partition::Machine;
     use host_tools::compile::{check_fit, compile_images, plan};
-    use host_tools::partition::Machine;
     use pe_firmware::profile::{BoardProfile, PE_BOARD};
     let (p, _) = file_problem("two_blocks.toml");
     let images = compile_images(&p, &plan(&p, Machine::parse("1x1x2").unwrap()).unwrap()).unwrap();

@@ -2,8 +2,8 @@
 
 use std::collections::BTreeSet;
 
+use host_tools::compile::partition::{partition, Machine};
 use host_tools::compile::{check_fit, compile_images, decode_image, plan, FACE_NAMES};
-use host_tools::partition::{partition, Machine};
 use host_tools::problem::Problem;
 use host_tools::scene::Scene;
 use pe_firmware::image::ImageError;
@@ -54,9 +54,10 @@ fn replicas_are_consistent() {
             }
         }
     }
-    let around = host_tools::partition::node_elements(&p.mesh);
+    let around = host_tools::compile::partition::node_elements(&p.mesh);
     for (n, els) in around.iter().enumerate() {
-        let (lo, hi) = host_tools::partition::node_board_range(m, &plan.element_board, els);
+        let (lo, hi) =
+            host_tools::compile::partition::node_board_range(m, &plan.element_board, els);
         let mut owners = 0;
         for (b, bp) in plan.boards.iter().enumerate() {
             let c = m.coords(b);
@@ -213,10 +214,15 @@ fn overflowing_a_small_board_is_reported() {
             && e.contains("by "),
         "{e}"
     );
+    // The tiny board's RAM holds the fixed tables but no room for elements.
+    assert!(
+        e.contains("elements exceed the 0 the tiny firmware holds"),
+        "{e}"
+    );
     // On two boards each holds over 1024 nodes: more than the PE board's firmware holds.
     let e = check_fit(&images, &PE_BOARD).unwrap_err().to_string();
     assert!(
-        e.contains("nodes exceed the firmware's 1024 nodes per board"),
+        e.contains("board (0,0,0): 1768 nodes exceed the 1024 the pe-board firmware holds"),
         "{e}"
     );
     // On 4x2x2 it fits.

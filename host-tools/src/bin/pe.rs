@@ -294,7 +294,7 @@ fn main() -> Result<()> {
             if let Some(n) = steps {
                 sc.solver.steps = Some(n);
             }
-            let machine = host_tools::partition::Machine::parse(&boards)?;
+            let machine = host_tools::compile::partition::Machine::parse(&boards)?;
             let prof = pe_firmware::profile::profile(&profile).with_context(|| {
                 format!("--profile {profile:?}: known profiles are pe-board, qemu-mps2-an500")
             })?;

@@ -6,7 +6,7 @@
 #![no_main]
 
 use cortex_m_rt::{entry, exception, ExceptionFrame};
-use pe_board::config::{Element, Scalar, ELEMENTS, PROFILE, VARIANT};
+use pe_board::config::{Element, Scalar, CAPACITIES, PROFILE, VARIANT};
 use pe_board::log_info;
 use pe_board::region::{board_position, schedule_image};
 use pe_board::{clock, links, report, storage};
@@ -28,7 +28,7 @@ fn main() -> ! {
         board[0],
         board[1],
         board[2],
-        ELEMENTS
+        CAPACITIES.elements
     );
     let image = match schedule_image() {
         Ok(i) => i,
@@ -40,11 +40,7 @@ fn main() -> ! {
     let Some(store) = storage::take() else {
         report::fault(board, format_args!("storage taken twice"));
     };
-    let Some(contact) = storage::take_contact() else {
-        report::fault(board, format_args!("contact storage taken twice"));
-    };
-    let rt =
-        Runtime::<Scalar, Element>::load(image, board, store, contact, RuntimeConfig::default());
+    let rt = Runtime::<Scalar, Element>::load(image, board, store, RuntimeConfig::default());
     let mut rt = match rt {
         Ok(rt) => rt,
         Err(e) => report::fault(

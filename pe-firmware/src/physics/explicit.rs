@@ -189,3 +189,50 @@ pub fn stored_energy<T: Real, E: HexElement<T>>(
     }
     Ok(total)
 }
+
+/// How a node moves this step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum NodeMove<T> {
+    /// Free: `gain = C / m_inertial` and the residual `f_ext − f_int`.
+    Free { gain: T, residual: [T; 3] },
+    /// Fixed (zero) or prescribed: the displacement at `t_{n+1}`.
+    Held([T; 3]),
+}
+
+/// The node update of the serial solver and of every board (one function, so they compute
+/// the same bits): `u⁺ = A u − B u⁻ + gain (f_ext − f_int)` for a free node, the held value
+/// otherwise; then `u⁻ := u`, `u := u⁺`. Refuses a non-finite `u⁺` and a half-step speed
+/// `|u⁺ − u⁻| / 2Δt` above `speed_limit_m_per_s`, naming `node`. Returns the squared speed
+/// (m²/s², for the kinetic energy).
+#[inline]
+pub fn update_node<T: Real>(
+    cd: &CentralDifference<T>,
+    u: &mut [T; 3],
+    u_prev: &mut [T; 3],
+    step: NodeMove<T>,
+    inv_2dt_per_s: f64,
+    speed_limit_m_per_s: f64,
+    node: u32,
+) -> Result<f64, PhysicsError> {
+    let next = match step {
+        NodeMove::Free { gain, residual } => {
+            let next = cd.advance(u, u_prev, gain, &residual);
+            if !next.iter().all(|v| v.is_finite()) {
+                return Err(PhysicsError::NonFinite { node });
+            }
+            next
+        }
+        NodeMove::Held(next) => next,
+    };
+    let v: [f64; 3] = core::array::from_fn(|i| (next[i] - u_prev[i]).to_f64() * inv_2dt_per_s);
+    let v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    if v2 > speed_limit_m_per_s * speed_limit_m_per_s {
+        return Err(PhysicsError::SpeedLimit {
+            node,
+            speed_m_per_s: libm::sqrt(v2),
+        });
+    }
+    *u_prev = *u;
+    *u = next;
+    Ok(v2)
+}

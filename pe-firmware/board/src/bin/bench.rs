@@ -20,10 +20,9 @@
 use core::hint::black_box;
 
 use cortex_m_rt::entry;
-use pe_board::config::{Element, Scalar, MATERIALS, VARIANT};
+use pe_board::config::{Element, Scalar, CAPACITIES, VARIANT};
 use pe_board::region::{board_position, schedule_image};
 use pe_board::{links, report, storage};
-use pe_firmware::image::ImageReader;
 use pe_firmware::physics::{accumulate_internal_forces, HexElement, MaterialLaw, Real};
 use pe_firmware::runtime::{Environment, Runtime, RuntimeConfig};
 
@@ -57,10 +56,8 @@ fn main() -> ! {
     let board = board_position().unwrap_or_else(|| fail("identity"));
     let image = schedule_image().unwrap_or_else(|_| fail("no schedule image"));
     let store = storage::take().unwrap_or_else(|| fail("storage"));
-    let contact = storage::take_contact().unwrap_or_else(|| fail("contact storage"));
-    let mut rt =
-        Runtime::<Scalar, Element>::load(image, board, store, contact, RuntimeConfig::default())
-            .unwrap_or_else(|e| report::fault(board, format_args!("bench: image refused: {e}")));
+    let mut rt = Runtime::<Scalar, Element>::load(image, board, store, RuntimeConfig::default())
+        .unwrap_or_else(|e| report::fault(board, format_args!("bench: image refused: {e}")));
     let links = links::take().unwrap_or_else(|| fail("links"));
     let mut env = CallClock(0);
     let steps = rt.header.params.steps;
@@ -70,28 +67,25 @@ fn main() -> ! {
         }
     }
 
-    // The sampled elements and the law, decoded from the image again.
-    let ne = rt.header.counts.elements as usize;
-    let mut reader = ImageReader::new(image, None).unwrap_or_else(|_| fail("image"));
-    let mut laws: heapless::Vec<MaterialLaw<Scalar>, MATERIALS> = heapless::Vec::new();
-    for _ in 0..rt.header.counts.materials {
-        let l: MaterialLaw<f64> = reader.next("material").unwrap_or_else(|_| fail("material"));
-        if laws.push(l.cast()).is_err() {
-            fail("too many materials");
-        }
+    // The sampled elements and the laws, as the runtime loaded them.
+    let (elements, loaded_laws) = rt.elements();
+    let ne = elements.len();
+    let mut laws: heapless::Vec<MaterialLaw<Scalar>, { CAPACITIES.materials }> =
+        heapless::Vec::new();
+    if laws.extend_from_slice(loaded_laws).is_err() {
+        fail("too many materials");
     }
     // Stack-frugal: the elements are large (1.6 KB for f64 full) and the statics fill RAM.
     let mut list: heapless::Vec<Element, SAMPLES> = heapless::Vec::new();
     let mut ues: heapless::Vec<[[Scalar; 3]; 8], SAMPLES> = heapless::Vec::new();
     let u = rt.displacements();
-    for k in 0..ne {
-        let e: Element = reader.next("element").unwrap_or_else(|_| fail("element"));
+    for (k, e) in elements.iter().enumerate() {
         if k % (ne / SAMPLES).max(1) == 0 && !list.is_full() {
             let ue = e
                 .nodes()
                 .map(|n| u.get(n as usize).copied().unwrap_or([Scalar::ZERO; 3]));
             let _ = ues.push(ue);
-            let _ = list.push(e);
+            let _ = list.push(*e);
         }
     }
     let measured = list.len();

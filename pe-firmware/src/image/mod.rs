@@ -2,31 +2,36 @@
 //! the schedule compiler (`pe compile`) and read by the board runtime. The Rust types here
 //! are the schema: both sides serialise them with postcard, so they cannot disagree.
 //!
-//! Layout: `MAGIC` (4 bytes), then postcard records: one [`ImageHeader`], then
-//! `materials` × [`MaterialLaw<f64>`], `elements` × element (`HexReduced<T>` or
-//! `HexFull<T>` by `integration`, `T` by `precision`, local node indices, batch order),
-//! `nodes` × ([`NodeRecord<T>`], `u8` stage at which an owned node's external force is
-//! added: 0/1/2 before the x/y/z exchange, 3 before the update, 255 not owned), then the
-//! exchange rounds: for each axis x, y, z, `rounds[axis]` rounds, each with, for the faces
-//! (+axis, −axis) in turn, a `u16` count and that many `u16` local node indices to send,
-//! then a `u16` count and that many [`RecvEntry`]; then `path_points` × [`PathPoint`],
-//! `loads` × [`LoadRecord`]; then the contact tables (the same on every board):
-//! `contact_nodes` × ([`ContactNode`], [`ContactNodePlace`]), `contact_faces` ×
-//! [`ContactFace`], `pairs` × [`ContactPair`], `tools` × [`Tool`], `contact_boards` × `u8`
-//! (global-network addresses of every board that owns a node of a contact pair's
-//! surface), `graphics_nodes` × `u16` (this board's owned surface nodes, local indices,
-//! sent to the graphics engine); last, a CRC-32 (little-endian) of everything before it.
+//! Layout: `MAGIC` (4 bytes), one [`ImageHeader`] (postcard), then the sections, each a run
+//! of records whose count the header's [`Counts`] gives, in the order of
+//! [`codec::transcode`], the one place that order is written: the compiler's writer, the
+//! runtime's loader and `pe inspect`'s decoder all go through it. Last, a CRC-32
+//! (little-endian) of everything before it. [`blob`] holds the flash region's framing of an
+//! image and the board's identity record.
+//!
+//! Rooms: `mod.rs` the record types and errors, [`codec`] the section order, writer and
+//! reader, [`blob`] the flash blob and identity record, [`path`] piecewise-linear paths.
 //!
 //! Reading never panics: a short, corrupted or foreign image is an [`ImageError`].
 
-use serde::{de::DeserializeOwned, Deserialize, Serialize};
+pub mod blob;
+pub mod codec;
+pub mod path;
+
+pub use codec::{
+    read_image, transcode, validate, write_image, zero_record, Codec, ElementRecord, ImageParts,
+    ImageReader, ImageReal, ImageWriter,
+};
+pub use path::{path_value, piecewise_linear};
+
+use serde::{Deserialize, Serialize};
 
 pub use crate::physics::contact::{ContactFace, ContactNode, ContactPair, Tool};
 
 /// First four bytes of every schedule image.
 pub const MAGIC: [u8; 4] = *b"PESI";
 /// Format version; bumped whenever a record type changes.
-pub const FORMAT_VERSION: u16 = 2;
+pub const FORMAT_VERSION: u16 = 3;
 
 /// Scalar type of the image's element and node records.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -35,11 +40,31 @@ pub enum Precision {
     F64,
 }
 
+impl Precision {
+    /// The name scenes and reports use ("f32", "f64").
+    pub const fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
+}
+
 /// Element kind of the image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Integration {
     Reduced,
     Full,
+}
+
+impl Integration {
+    /// The name scenes and reports use ("reduced", "full").
+    pub const fn name(self) -> &'static str {
+        match self {
+            Integration::Reduced => "reduced",
+            Integration::Full => "full",
+        }
+    }
 }
 
 /// Record counts (and the capacities they must fit).
@@ -65,6 +90,13 @@ pub struct Counts {
     pub tools: u8,
     pub contact_boards: u8,
     pub graphics_nodes: u16,
+}
+
+impl Counts {
+    /// Send/receive lists ([`ExchangeList`]): two faces per round of every axis.
+    pub fn exchange_lists(&self) -> usize {
+        2 * self.rounds.iter().map(|&r| r as usize).sum::<usize>()
+    }
 }
 
 /// Contact search parameters (all zero without contact).
@@ -156,6 +188,20 @@ pub struct NodeRecord<T> {
     pub owner: bool,
     /// Gravity force (true mass), N; zero on replicas.
     pub gravity: [T; 3],
+    /// When an owned node's external force is added: 0/1/2 before the x/y/z exchange, 3
+    /// before the update ([`STAGE_NOT_OWNED`] on replicas).
+    pub stage: u8,
+}
+
+/// [`NodeRecord::stage`] of a replica: its external force is added by its owner.
+pub const STAGE_NOT_OWNED: u8 = 255;
+
+/// One send/receive list of an exchange round: how many entries of the flat `sends` and
+/// `recvs` sections it takes. Lists come in the order axis, round, face (+axis, −axis).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ExchangeList {
+    pub sends: u16,
+    pub recvs: u16,
 }
 
 /// How a received value combines with the node's current value `v`. Every replica of a node
@@ -263,138 +309,4 @@ impl core::fmt::Display for ImageError {
             ImageError::BufferFull => write!(f, "output buffer too small for the image"),
         }
     }
-}
-
-/// Writes an image record by record into a caller's buffer.
-pub struct ImageWriter<'a> {
-    buf: &'a mut [u8],
-    len: usize,
-}
-
-impl<'a> ImageWriter<'a> {
-    pub fn new(buf: &'a mut [u8], header: &ImageHeader) -> Result<Self, ImageError> {
-        if buf.len() < MAGIC.len() {
-            return Err(ImageError::BufferFull);
-        }
-        buf[..4].copy_from_slice(&MAGIC);
-        let mut w = ImageWriter { buf, len: 4 };
-        w.push(header)?;
-        Ok(w)
-    }
-
-    pub fn push<R: Serialize>(&mut self, record: &R) -> Result<(), ImageError> {
-        let rest = self.buf.get_mut(self.len..).ok_or(ImageError::BufferFull)?;
-        let used = postcard::to_slice(record, rest)
-            .map_err(|_| ImageError::BufferFull)?
-            .len();
-        self.len += used;
-        Ok(())
-    }
-
-    /// Appends the CRC; returns the image length.
-    pub fn finish(self) -> Result<usize, ImageError> {
-        let crc = link_proto::frame::crc32(&self.buf[..self.len]);
-        let end = self.len + 4;
-        let dst = self
-            .buf
-            .get_mut(self.len..end)
-            .ok_or(ImageError::BufferFull)?;
-        dst.copy_from_slice(&crc.to_le_bytes());
-        Ok(end)
-    }
-}
-
-/// Reads an image: checks magic, CRC and version up front, then hands out records in order.
-pub struct ImageReader<'a> {
-    pub header: ImageHeader,
-    rest: &'a [u8],
-}
-
-impl<'a> ImageReader<'a> {
-    /// Checks the image; `expected_board` (if given) must match the header's position.
-    pub fn new(image: &'a [u8], expected_board: Option<[u8; 3]>) -> Result<Self, ImageError> {
-        if image.len() < MAGIC.len() + 4 {
-            return Err(ImageError::TooShort);
-        }
-        if image[..4] != MAGIC {
-            return Err(ImageError::BadMagic);
-        }
-        let (body, tail) = image.split_at(image.len() - 4);
-        let stored = u32::from_le_bytes([tail[0], tail[1], tail[2], tail[3]]);
-        let computed = link_proto::frame::crc32(body);
-        if stored != computed {
-            return Err(ImageError::BadCrc { stored, computed });
-        }
-        let (header, rest): (ImageHeader, _) = postcard::take_from_bytes(&body[4..])
-            .map_err(|_| ImageError::Malformed { record: "header" })?;
-        if header.version != FORMAT_VERSION {
-            return Err(ImageError::WrongVersion {
-                found: header.version,
-                expected: FORMAT_VERSION,
-            });
-        }
-        if let Some(b) = expected_board {
-            if b != header.board {
-                return Err(ImageError::WrongBoard {
-                    image: header.board,
-                    expected: b,
-                });
-            }
-        }
-        Ok(ImageReader { header, rest })
-    }
-
-    /// The next record.
-    pub fn next<R: DeserializeOwned>(&mut self, record: &'static str) -> Result<R, ImageError> {
-        let (r, rest) =
-            postcard::take_from_bytes(self.rest).map_err(|_| ImageError::Malformed { record })?;
-        self.rest = rest;
-        Ok(r)
-    }
-
-    /// True when every record has been read.
-    pub fn is_done(&self) -> bool {
-        self.rest.is_empty()
-    }
-}
-
-/// Value at time `t` of a piecewise-linear path through `(t_k, v_k)`, held constant before
-/// the first and after the last point: `v = a + s (b − a)`, `s = (t − t0)/(t1 − t0)`.
-/// The host solver and the board runtime both call this, so they compute the same bits.
-pub fn piecewise_linear(t: f64, len: usize, point: impl Fn(usize) -> (f64, [f64; 3])) -> [f64; 3] {
-    if len == 0 {
-        return [0.0; 3];
-    }
-    let mut k = 0;
-    while k < len && point(k).0 <= t {
-        k += 1;
-    }
-    if k == len {
-        return point(len - 1).1;
-    }
-    if k == 0 {
-        return point(0).1;
-    }
-    let (t0, a) = point(k - 1);
-    let (t1, b) = point(k);
-    let s = (t - t0) / (t1 - t0);
-    [
-        a[0] + s * (b[0] - a[0]),
-        a[1] + s * (b[1] - a[1]),
-        a[2] + s * (b[2] - a[2]),
-    ]
-}
-
-/// Value of path `path` in a table of [`PathPoint`]s (points of one path are contiguous).
-pub fn path_value(points: &[PathPoint], path: u16, t: f64) -> [f64; 3] {
-    let first = points
-        .iter()
-        .position(|p| p.path == path)
-        .unwrap_or(points.len());
-    let len = points[first..]
-        .iter()
-        .take_while(|p| p.path == path)
-        .count();
-    let run = &points[first..first + len];
-    piecewise_linear(t, len, |k| (run[k].t_s, run[k].value))
 }

@@ -1,0 +1,132 @@
+//! The fit check: every image against the board profile's capacity table
+//! ([`Capacities::for_board`], the figures the firmware's statics are sized by), so a
+//! schedule that `pe compile` accepts is one the board loads, and one it refuses names the
+//! board, the table and the overflow.
+
+use anyhow::{bail, Result};
+use pe_firmware::image::{Counts, ImageHeader, Integration, Precision};
+use pe_firmware::physics::{HexFull, HexReduced};
+use pe_firmware::profile::BoardProfile;
+use pe_firmware::runtime::{Capacities, ROUNDS_PER_AXIS_MAX};
+
+use super::image::BoardImage;
+use super::plan::FACE_NAMES;
+
+/// What the `profile` firmware built for this image's precision and integration holds.
+pub fn board_capacities(profile: &BoardProfile, h: &ImageHeader) -> Capacities {
+    match (h.precision, h.integration) {
+        (Precision::F32, Integration::Reduced) => {
+            Capacities::for_board::<f32, HexReduced<f32>>(profile)
+        }
+        (Precision::F32, Integration::Full) => Capacities::for_board::<f32, HexFull<f32>>(profile),
+        (Precision::F64, Integration::Reduced) => {
+            Capacities::for_board::<f64, HexReduced<f64>>(profile)
+        }
+        (Precision::F64, Integration::Full) => Capacities::for_board::<f64, HexFull<f64>>(profile),
+    }
+}
+
+/// Every table of `c` that exceeds `caps`: (what, needed, held), in the loader's order.
+fn shortfalls(caps: &Capacities, c: &Counts) -> Vec<(&'static str, usize, usize)> {
+    let mut caps = *caps;
+    let mut out = Vec::new();
+    // The loader stops at the first; list them all by raising each one found.
+    while let Some((what, n, max)) = caps.first_shortfall(c) {
+        out.push((what, n, max));
+        let raised = match what {
+            "materials" => &mut caps.materials,
+            "elements" => &mut caps.elements,
+            "nodes" => &mut caps.nodes,
+            "exchange sends" | "exchange receives" => &mut caps.exchange,
+            "path points" => &mut caps.path_points,
+            "loads" => &mut caps.loads,
+            "contact nodes" => &mut caps.contact_nodes,
+            "contact faces" => &mut caps.contact_faces,
+            "nodes (contact map)" => &mut caps.contact_map,
+            _ => &mut caps.graphics_nodes,
+        };
+        *raised = n;
+    }
+    out
+}
+
+/// Why the images do not fit `profile`, one line per board and table (empty: they fit).
+pub fn fit_problems(images: &[BoardImage], profile: &BoardProfile) -> Vec<String> {
+    let mut problems = Vec::new();
+    for im in images {
+        let [x, y, z] = im.coords;
+        let at = format!("board ({x},{y},{z})");
+        let len = im.bytes.len() as u64;
+        if len > profile.image_flash_bytes {
+            problems.push(format!(
+                "{at}: image {len} bytes exceeds the {} flash region of {} bytes by {} bytes",
+                profile.name,
+                profile.image_flash_bytes,
+                len - profile.image_flash_bytes
+            ));
+        }
+        let c = &im.header.counts;
+        let caps = board_capacities(profile, &im.header);
+        for (what, n, max) in shortfalls(&caps, c) {
+            if what.starts_with("contact") {
+                continue; // the same on every board: said once below
+            }
+            let why = if what == "elements" {
+                " (the RAM left after the fixed tables)"
+            } else {
+                ""
+            };
+            problems.push(format!(
+                "{at}: {n} {what} exceed the {max} the {} firmware holds{why}, by {}",
+                profile.name,
+                n - max
+            ));
+        }
+        for (a, &r) in c.rounds.iter().enumerate() {
+            if r as usize > ROUNDS_PER_AXIS_MAX {
+                problems.push(format!(
+                    "{at}: {r} exchange rounds along {} exceed the {ROUNDS_PER_AXIS_MAX} the firmware runs",
+                    ["x", "y", "z"][a]
+                ));
+            }
+        }
+        for (f, &n) in c.exchange.iter().enumerate() {
+            if n as usize > link_proto::BORDER_NODES_PER_FACE_MAX {
+                problems.push(format!(
+                    "{at} link {}: {n} border nodes exceed the {} a frame carries",
+                    FACE_NAMES[f],
+                    link_proto::BORDER_NODES_PER_FACE_MAX
+                ));
+            }
+        }
+    }
+    // The contact tables are the same on every board.
+    if let Some(im) = images.first() {
+        let caps = board_capacities(profile, &im.header);
+        for (what, n, max) in shortfalls(&caps, &im.header.counts) {
+            if what.starts_with("contact") {
+                let what = what.replace("contact ", "contact-surface ");
+                problems.push(format!(
+                    "every board: {n} {what} exceed the {max} the {} firmware holds (declare smaller [[surface]]s)",
+                    profile.name
+                ));
+            }
+        }
+    }
+    problems
+}
+
+/// Checks every image against the board profile; the error names each board and table
+/// that does not fit and by how much.
+pub fn check_fit(images: &[BoardImage], profile: &BoardProfile) -> Result<()> {
+    let problems = fit_problems(images, profile);
+    if problems.is_empty() {
+        Ok(())
+    } else {
+        bail!(
+            "the schedule does not fit the {} board profile:\n  {}",
+            profile.name,
+            problems.join("\n  ")
+        )
+    }
+}

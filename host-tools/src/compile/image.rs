@@ -1,0 +1,379 @@
+//! One schedule image per board: the plan's lists in local numbering, the scene's records
+//! in the board's precision and element kind, written through the firmware's codec
+//! ([`pe_firmware::image::write_image`]).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Context, Result};
+use pe_firmware::image::*;
+use pe_firmware::physics::{CentralDifference, MaterialLaw, ReferenceHex};
+use pe_firmware::runtime::Capacities;
+
+use super::plan::Plan;
+use crate::contact::ContactRun;
+use crate::problem::{NodeKind, Problem};
+
+/// A compiled image with its figures.
+pub struct BoardImage {
+    pub coords: [usize; 3],
+    pub header: ImageHeader,
+    pub bytes: Vec<u8>,
+    pub ram_bytes: u64,
+}
+
+/// Prescribed paths first, then the distinct load ramps.
+fn path_table(problem: &Problem) -> (Vec<PathPoint>, Vec<Option<u16>>) {
+    let mut points = Vec::new();
+    for (k, p) in problem.paths.iter().enumerate() {
+        for (t, v) in &p.points {
+            points.push(PathPoint {
+                path: k as u16,
+                t_s: *t,
+                value: *v,
+            });
+        }
+    }
+    let mut ramps: Vec<&crate::problem::Path1<1>> = Vec::new();
+    let mut load_ramp = Vec::new();
+    for l in &problem.loads {
+        load_ramp.push(l.ramp.as_ref().map(|r| {
+            let k = ramps.iter().position(|q| *q == r).unwrap_or_else(|| {
+                ramps.push(r);
+                ramps.len() - 1
+            });
+            (problem.paths.len() + k) as u16
+        }));
+    }
+    for (k, r) in ramps.iter().enumerate() {
+        for (t, v) in &r.points {
+            points.push(PathPoint {
+                path: (problem.paths.len() + k) as u16,
+                t_s: *t,
+                value: [v[0], 0.0, 0.0],
+            });
+        }
+    }
+    (points, load_ramp)
+}
+
+/// What every board's image shares: the contact tables, which nodes are on the surface, the
+/// graphics timing (computed once per compilation).
+struct Shared {
+    dt_s: f64,
+    contact: Option<(ContactRun, Vec<u8>)>,
+    on_surface: Vec<bool>,
+    graphics: GraphicsParams,
+}
+
+fn write_image<T: ImageReal, E: ElementRecord<T>>(
+    problem: &Problem,
+    plan: &Plan,
+    shared: &Shared,
+    b: usize,
+    element: impl Fn(&ReferenceHex, [u32; 8], u16) -> E,
+) -> Result<BoardImage> {
+    let bp = &plan.boards[b];
+    let dt = shared.dt_s;
+    let cd = CentralDifference::<T>::new(dt, problem.solver.damping);
+    if bp.nodes.len() > u16::MAX as usize {
+        bail!(
+            "board {:?} holds {} nodes, more than an image can index",
+            bp.coords,
+            bp.nodes.len()
+        );
+    }
+    let local: BTreeMap<u32, u16> = bp
+        .nodes
+        .iter()
+        .enumerate()
+        .map(|(i, &n)| (n, i as u16))
+        .collect();
+    let lid = |n: u32| -> Result<u16> {
+        local
+            .get(&n)
+            .copied()
+            .ok_or_else(|| anyhow!("internal: node {n} missing on board {:?}", bp.coords))
+    };
+    let (mut points, load_ramp) = path_table(problem);
+    let mut loads: Vec<LoadRecord> = problem
+        .loads
+        .iter()
+        .zip(&load_ramp)
+        .filter(|(l, _)| plan.node_owner[l.node as usize] as usize == b)
+        .map(|(l, r)| {
+            Ok(LoadRecord {
+                node: lid(l.node)?,
+                force: l.force,
+                ramp: *r,
+            })
+        })
+        .collect::<Result<_>>()?;
+    let mut laws: Vec<MaterialLaw<T>> = problem.laws.iter().map(|l| l.cast::<T>()).collect();
+    let mut elements: Vec<E> = bp
+        .elements
+        .iter()
+        .map(|&e| {
+            let nodes = problem.mesh.cells[e as usize].map(|n| local[&n] as u32);
+            element(
+                &problem.reference[e as usize],
+                nodes,
+                problem.cell_material[e as usize],
+            )
+        })
+        .collect();
+    let mut nodes: Vec<NodeRecord<T>> = bp
+        .nodes
+        .iter()
+        .enumerate()
+        .map(|(k, &n)| {
+            let mass = problem.mass[n as usize];
+            let own = bp.owner[k];
+            NodeRecord::<T> {
+                global: n,
+                gain: cd.gain(mass * problem.solver.mass_scaling),
+                motion: match problem.node_kind[n as usize] {
+                    NodeKind::Free => NodeMotion::Free,
+                    NodeKind::Fixed => NodeMotion::Fixed,
+                    NodeKind::Prescribed(p) => NodeMotion::Prescribed(p as u16),
+                },
+                owner: own,
+                gravity: if own {
+                    problem.gravity.map(|g| T::from_f64(g * mass))
+                } else {
+                    [T::ZERO; 3]
+                },
+                stage: bp.ext_stage[k],
+            }
+        })
+        .collect();
+    let (mut lists, mut sends, mut recvs) = (Vec::new(), Vec::new(), Vec::new());
+    for round in bp.rounds.iter().flatten() {
+        for f in 0..2 {
+            lists.push(ExchangeList {
+                sends: round.send[f].len() as u16,
+                recvs: round.recv[f].len() as u16,
+            });
+            for &n in &round.send[f] {
+                sends.push(lid(n)?);
+            }
+            for &(n, combine) in &round.recv[f] {
+                recvs.push(RecvEntry {
+                    node: lid(n)?,
+                    combine,
+                });
+            }
+        }
+    }
+    let (mut contact_nodes, mut faces, mut pairs, mut tools, mut contact_boards) =
+        match &shared.contact {
+            Some((run, boards)) => (
+                run.nodes.clone(),
+                run.faces.clone(),
+                run.pairs.clone(),
+                run.tools.clone(),
+                boards.clone(),
+            ),
+            None => Default::default(),
+        };
+    let mut places: Vec<ContactNodePlace> = contact_nodes
+        .iter()
+        .map(|n| ContactNodePlace {
+            local: local.get(&n.global).copied(),
+            owned: plan.node_owner[n.global as usize] as usize == b,
+        })
+        .collect();
+    let mut graphics_nodes: Vec<u16> = bp
+        .nodes
+        .iter()
+        .enumerate()
+        .filter(|(k, &n)| bp.owner[*k] && shared.on_surface[n as usize])
+        .map(|(k, _)| k as u16)
+        .collect();
+    let header = ImageHeader {
+        version: FORMAT_VERSION,
+        board: bp.coords.map(|c| c as u8),
+        machine: plan.machine.dims.map(|c| c as u8),
+        precision: T::PRECISION,
+        integration: E::INTEGRATION,
+        counts: Counts {
+            materials: laws.len() as u16,
+            elements: elements.len() as u32,
+            batch_ends: bp.batch_ends.map(|e| e as u32),
+            nodes: nodes.len() as u32,
+            exchange: core::array::from_fn(|f| bp.exchange[f].len() as u16),
+            rounds: plan.rounds.map(|r| r as u8),
+            sends: sends.len() as u32,
+            recvs: recvs.len() as u32,
+            path_points: points.len() as u16,
+            loads: loads.len() as u16,
+            contact_nodes: contact_nodes.len() as u32,
+            contact_faces: faces.len() as u32,
+            pairs: pairs.len() as u8,
+            tools: tools.len() as u8,
+            contact_boards: contact_boards.len() as u8,
+            graphics_nodes: graphics_nodes.len() as u16,
+        },
+        params: SceneParams {
+            dt_s: dt,
+            damping_per_s: problem.solver.damping,
+            steps: problem.steps(dt),
+            speed_limit_m_per_s: problem.solver.speed_limit,
+            mass_scaling: problem.solver.mass_scaling,
+            hourglass: problem.solver.hourglass,
+        },
+        scene_elements: problem.mesh.cells.len() as u32,
+        scene_nodes: problem.mesh.nodes.len() as u32,
+        contact: shared
+            .contact
+            .as_ref()
+            .map(|(r, _)| r.params)
+            .unwrap_or_default(),
+        graphics: shared.graphics,
+    };
+    let mut parts = ImageParts {
+        laws: &mut laws,
+        elements: &mut elements,
+        nodes: &mut nodes,
+        lists: &mut lists,
+        sends: &mut sends,
+        recvs: &mut recvs,
+        path_points: &mut points,
+        loads: &mut loads,
+        contact_nodes: &mut contact_nodes,
+        contact_places: &mut places,
+        contact_faces: &mut faces,
+        pairs: &mut pairs,
+        tools: &mut tools,
+        contact_boards: &mut contact_boards,
+        graphics_nodes: &mut graphics_nodes,
+    };
+    let mut buf = vec![0u8; image_bytes_bound::<T, E>(&header.counts)];
+    let len = pe_firmware::image::write_image(&mut buf, &header, &mut parts)
+        .map_err(|e| anyhow!("board {:?}: {e}", bp.coords))?;
+    buf.truncate(len);
+    Ok(BoardImage {
+        coords: bp.coords,
+        header,
+        bytes: buf,
+        ram_bytes: storage_bytes::<T, E>(&header.counts),
+    })
+}
+
+/// An upper bound of an image's length: every record at most its in-memory size plus
+/// postcard's varint overhead (a varint takes at most one byte more per 7 bytes).
+fn image_bytes_bound<T, E>(c: &Counts) -> usize {
+    let caps = Capacities::exact(c);
+    let records = caps.bytes::<T, E>() + c.exchange_lists() * 8 + 64 * 8;
+    1024 + 2 * records
+}
+
+/// Bytes of storage the runtime's arrays take for exactly an image's records and state
+/// (the contact search's working room, which depends on the motion, left out).
+pub fn storage_bytes<T, E>(c: &Counts) -> u64 {
+    let caps = Capacities {
+        contact_candidates: 0,
+        contact_sends: 0,
+        ..Capacities::exact(c)
+    };
+    caps.bytes::<T, E>() as u64
+}
+
+/// The contact tables for step `dt` and the global-network addresses of the boards that
+/// own a node of a pair surface (they exchange bounding boxes).
+pub fn contact_tables(
+    problem: &Problem,
+    plan: &Plan,
+    dt: f64,
+) -> Result<Option<(ContactRun, Vec<u8>)>> {
+    let Some(setup) = problem.contact.as_ref() else {
+        return Ok(None);
+    };
+    let ms = problem.solver.mass_scaling;
+    let inertial: Vec<f64> = problem.mass.iter().map(|m| m * ms).collect();
+    let run = setup.for_step(&problem.mesh, &inertial, dt);
+    let mut owners = std::collections::BTreeSet::new();
+    for n in &run.nodes {
+        if n.surfaces & run.params.pair_surfaces != 0 {
+            owners.insert(plan.node_owner[n.global as usize] as usize);
+        }
+    }
+    let mut boards = Vec::new();
+    for b in owners {
+        let c = plan.machine.coords(b);
+        let id = link_proto::link::board_at(c[0], c[1], c[2]).ok_or_else(|| {
+            anyhow!(
+                "board {c:?} owns contact nodes but has no global-network address: contact needs a machine of at most {g}x{g}x{g} boards",
+                g = link_proto::GRID_DIM
+            )
+        })?;
+        boards.push(id);
+    }
+    Ok(Some((run, boards)))
+}
+
+/// Mesh nodes on the boundary (what the graphics engine draws).
+pub fn surface_node_mask(problem: &Problem) -> Vec<bool> {
+    let mut m = vec![false; problem.mesh.nodes.len()];
+    for q in &problem.surface_faces {
+        for &n in q {
+            m[n as usize] = true;
+        }
+    }
+    m
+}
+
+/// The graphics stream's timing for step `dt`.
+pub fn graphics_params(problem: &Problem, dt: f64) -> GraphicsParams {
+    let interval =
+        ((problem.solver.graphics_interval / dt).round() as u64).clamp(1, u32::MAX as u64) as u32;
+    GraphicsParams {
+        interval_steps: interval,
+        spread_steps: problem
+            .solver
+            .graphics_spread_steps
+            .min(interval)
+            .clamp(1, u16::MAX as u32) as u16,
+    }
+}
+
+/// Compiles every board's image.
+pub fn compile_images(problem: &Problem, plan: &Plan) -> Result<Vec<BoardImage>> {
+    let (dt, _) = problem.time_step()?;
+    let shared = Shared {
+        dt_s: dt,
+        contact: contact_tables(problem, plan, dt)?,
+        on_surface: surface_node_mask(problem),
+        graphics: graphics_params(problem, dt),
+    };
+    let hourglass = problem.solver.hourglass;
+    let modulus = |m: u16| problem.laws[m as usize].hourglass_modulus();
+    let full = problem.solver.integration == "full";
+    let f32 = problem.solver.precision == "f32";
+    (0..plan.boards.len())
+        .map(|b| match (f32, full) {
+            (true, true) => write_image(problem, plan, &shared, b, |r, n, m| r.full::<f32>(n, m)),
+            (false, true) => write_image(problem, plan, &shared, b, |r, n, m| r.full::<f64>(n, m)),
+            (true, false) => write_image(problem, plan, &shared, b, |r, n, m| {
+                r.reduced::<f32>(n, m, modulus(m), hourglass)
+            }),
+            (false, false) => write_image(problem, plan, &shared, b, |r, n, m| {
+                r.reduced::<f64>(n, m, modulus(m), hourglass)
+            }),
+        })
+        .collect()
+}
+
+/// Writes `DIR/board-X-Y-Z.bin`.
+pub fn write_images(dir: &Path, images: &[BoardImage]) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    for im in images {
+        let p = dir.join(image_file_name(im.coords));
+        std::fs::write(&p, &im.bytes).with_context(|| format!("writing {}", p.display()))?;
+    }
+    Ok(())
+}
+
+pub fn image_file_name(c: [usize; 3]) -> String {
+    format!("board-{}-{}-{}.bin", c[0], c[1], c[2])
+}

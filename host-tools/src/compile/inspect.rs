@@ -1,0 +1,88 @@
+//! `pe inspect`: a readable dump of one board's schedule.
+
+use std::path::Path;
+
+use anyhow::{anyhow, Context, Result};
+
+use super::{decode_image, image_file_name, FACE_NAMES};
+
+/// `pe inspect`: a readable dump of one board's schedule.
+pub fn inspect(dir: &Path, board: [usize; 3]) -> Result<String> {
+    let p = dir.join(image_file_name(board));
+    let bytes = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
+    let d = decode_image(&bytes, Some(board.map(|c| c as u8)))
+        .map_err(|e| anyhow!("{}: {e}", p.display()))?;
+    let h = &d.header;
+    let c = &h.counts;
+    let mut s = format!(
+        "{}: board ({},{},{}) of a {}x{}x{} machine, format v{}, {:?} {:?}, {} bytes\n",
+        p.display(),
+        h.board[0],
+        h.board[1],
+        h.board[2],
+        h.machine[0],
+        h.machine[1],
+        h.machine[2],
+        h.version,
+        h.precision,
+        h.integration,
+        bytes.len()
+    );
+    s += &format!(
+        "  dt = {:.4e} s, {} steps, damping {} 1/s\n",
+        h.params.dt_s, h.params.steps, h.params.damping_per_s
+    );
+    let b = c.batch_ends;
+    s += &format!(
+        "  {} elements: batch x {}, batch y {}, batch z {}, inner {}\n",
+        c.elements,
+        b[0],
+        b[1] - b[0],
+        b[2] - b[1],
+        b[3] - b[2]
+    );
+    let owned = d.nodes.iter().filter(|n| n.owner).count();
+    s += &format!(
+        "  {} nodes ({} owned, {} replicas), {} materials, {} path points, {} loads\n",
+        c.nodes,
+        owned,
+        c.nodes as usize - owned,
+        c.materials,
+        c.path_points,
+        c.loads
+    );
+    s += "  schedule: recover x | send ±x | recover y | add ±x | send ±y | recover z | add ±y | send ±z | recover inner | add ±z | update\n";
+    let g = |l: u16| {
+        d.nodes
+            .get(l as usize)
+            .map(|n| n.global)
+            .unwrap_or(u32::MAX)
+    };
+    let list = |v: Vec<u32>| {
+        let shown: Vec<String> = v.iter().take(20).map(|x| x.to_string()).collect();
+        format!(
+            "{} [{}{}]",
+            v.len(),
+            shown.join(" "),
+            if v.len() > 20 { " ..." } else { "" }
+        )
+    };
+    for a in 0..3 {
+        for (k, round) in d.rounds[a].iter().enumerate() {
+            for f in 0..2 {
+                let face = FACE_NAMES[2 * a + f];
+                s += &format!(
+                    "  {} round {k} face {face}: send {}\n",
+                    ["x", "y", "z"][a],
+                    list(round.send[f].iter().map(|&l| g(l)).collect())
+                );
+                s += &format!(
+                    "  {} round {k} face {face}: recv {}\n",
+                    ["x", "y", "z"][a],
+                    list(round.recv[f].iter().map(|e| g(e.node)).collect())
+                );
+            }
+        }
+    }
+    Ok(s)
+}

@@ -1,0 +1,46 @@
+//! The schedule compiler (`pe compile`): partitions a scene onto the board mesh and emits one
+//! static schedule image per board (the seed's section 4).
+//!
+//! Per board: its elements in four batches (x border, y border, z border, inner), the nodes
+//! it holds (own nodes and replicas), and one exchange list per face. A node is held by every
+//! board in the bounding box of the boards whose elements touch it (at most 2 per axis, see
+//! [`partition`]); across a face both boards list the shared nodes in ascending
+//! global order, so frames carry no addresses. The step (both ends know it):
+//!
+//! recover batch x; send ±x; recover batch y; add from ±x; send ±y; recover batch z;
+//! add from ±y; send ±z; recover inner; add from ±z; update positions.
+//!
+//! After the x, y and z exchanges every holder of a node has the same total force, so all
+//! replicas compute identical positions (two-term sums `a + b = b + a` are exact in IEEE).
+//! Gravity and loads are applied once, by the node's owner (the lowest-numbered board whose
+//! elements touch it), into its partial sum just before the node is first sent (or before
+//! the update, if it is never sent).
+//!
+//! Rooms: [`partition`] (elements onto boards), `plan` (batches, replicas, exchange rounds
+//! and their summation trees), `image` (one image per board, through
+//! [`pe_firmware::image::write_image`]), `fit` (the images against the board profile's
+//! capacity table), `report` (figures and the console summary), `decode` (an image read back
+//! through the firmware's own codec, for `pe inspect`, board-sim's timing model and tests),
+//! `manifest` (`DIR/manifest.json` and the whole `pe compile`), `inspect`.
+
+mod decode;
+mod fit;
+mod image;
+mod inspect;
+mod manifest;
+pub mod partition;
+mod plan;
+mod report;
+
+pub use decode::{decode_image, DecodedImage, DecodedRound};
+pub use fit::{check_fit, fit_problems};
+pub use image::{
+    compile_images, contact_tables, graphics_params, image_file_name, surface_node_mask,
+    write_images, BoardImage,
+};
+pub use inspect::inspect;
+pub use manifest::{compile_to_dir, read_manifest, Manifest, ManifestBoard};
+pub use plan::{line_rounds, plan, BoardPlan, Plan, RoundPlan, FACE_NAMES};
+pub use report::{
+    report, summary, BoardSummary, Capacity, CompileReport, ContactCompileReport, GraphicsReport,
+};

@@ -1,0 +1,246 @@
+//! The plan: which board computes which elements (batches x, y, z, inner), which nodes
+//! each holds (owner and replicas), and the exchange rounds with their summation trees.
+
+use anyhow::{bail, Result};
+use pe_firmware::image::{Combine, STAGE_NOT_OWNED};
+
+use super::partition::{node_board_range, node_elements, partition, Machine};
+use crate::problem::Problem;
+
+/// Faces in image order.
+pub const FACE_NAMES: [&str; 6] = ["+x", "-x", "+y", "-y", "+z", "-z"];
+
+/// One exchange round of one axis on one board: per face (+axis, −axis) the global nodes to
+/// send and to receive (with how to combine), in wire order (ascending global id).
+#[derive(Clone, Debug, Default)]
+pub struct RoundPlan {
+    pub send: [Vec<u32>; 2],
+    pub recv: [Vec<(u32, Combine)>; 2],
+}
+
+/// One board's part of the schedule, in global numbering.
+#[derive(Clone, Debug)]
+pub struct BoardPlan {
+    pub coords: [usize; 3],
+    /// Global element ids in batch order.
+    pub elements: Vec<u32>,
+    /// Ends (exclusive) of batches x, y, z, inner in `elements`.
+    pub batch_ends: [usize; 4],
+    /// Global node ids, ascending: the local numbering.
+    pub nodes: Vec<u32>,
+    /// Whether this board owns each local node.
+    pub owner: Vec<bool>,
+    /// Distinct global nodes exchanged across each face (+x, −x, +y, −y, +z, −z).
+    pub exchange: [Vec<u32>; 6],
+    /// Exchange rounds per axis.
+    pub rounds: [Vec<RoundPlan>; 3],
+    /// Stage (0 = x, 1 = y, 2 = z, 3 = before the update) at which each owned node's
+    /// external force is added; [`STAGE_NOT_OWNED`] for nodes this board does not own.
+    pub ext_stage: Vec<u8>,
+}
+
+/// The whole machine's schedule.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    pub machine: Machine,
+    pub element_board: Vec<u32>,
+    /// Owner board of every node.
+    pub node_owner: Vec<u32>,
+    pub rounds: [usize; 3],
+    pub boards: Vec<BoardPlan>,
+}
+
+/// One transfer of a node's value along an axis line: in `round`, from line position
+/// `from` to `to` (adjacent), combined at the receiver by `combine`.
+struct Transfer {
+    round: usize,
+    from: usize,
+    to: usize,
+    combine: Combine,
+}
+
+/// The summation tree of a node held by `m + 1` boards in a line (positions 0..=m).
+/// Two boards: one symmetric exchange (`p0 + p1` on both, exact since `a + b = b + a`).
+/// More: reduce towards the middle board `r = m/2` (left prefix sums `((p0 + p1) + …)`, right
+/// suffix sums), the middle forms `(left + p_r) + right`, then broadcasts the total back.
+fn line_transfers(m: usize) -> Vec<Transfer> {
+    let t = |round, from, to, combine| Transfer {
+        round,
+        from,
+        to,
+        combine,
+    };
+    if m == 1 {
+        return vec![t(0, 0, 1, Combine::Before), t(0, 1, 0, Combine::After)];
+    }
+    let root = m / 2;
+    let reduce = m - root;
+    let mut v = Vec::new();
+    for i in 0..root {
+        v.push(t(i, i, i + 1, Combine::Before));
+    }
+    for j in root + 1..=m {
+        v.push(t(m - j, j, j - 1, Combine::After));
+    }
+    for d in 1..=root {
+        v.push(t(reduce + d - 1, root - d + 1, root - d, Combine::Replace));
+    }
+    for d in 1..=m - root {
+        v.push(t(reduce + d - 1, root + d - 1, root + d, Combine::Replace));
+    }
+    v
+}
+
+/// Rounds the line of `m + 1` boards needs.
+pub fn line_rounds(m: usize) -> usize {
+    match m {
+        0 => 0,
+        1 => 1,
+        _ => 2 * (m - m / 2),
+    }
+}
+
+pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
+    let mesh = &problem.mesh;
+    let element_board = partition(mesh, machine)?;
+    let around = node_elements(mesh);
+    let nb = machine.count();
+    let mut node_box = Vec::with_capacity(mesh.nodes.len());
+    let mut rounds = [0usize; 3];
+    let mut node_owner = vec![0u32; mesh.nodes.len()];
+    for (n, els) in around.iter().enumerate() {
+        if els.is_empty() {
+            bail!(
+                "node {} of mesh {} belongs to no cell",
+                mesh.node_tags[n],
+                mesh.source
+            );
+        }
+        let (lo, hi) = node_board_range(machine, &element_board, els);
+        for a in 0..3 {
+            rounds[a] = rounds[a].max(line_rounds(hi[a] - lo[a]));
+        }
+        node_owner[n] = els
+            .iter()
+            .map(|&e| element_board[e as usize])
+            .min()
+            .unwrap_or(0);
+        node_box.push((lo, hi));
+    }
+    let mut boards: Vec<BoardPlan> = (0..nb)
+        .map(|b| BoardPlan {
+            coords: machine.coords(b),
+            elements: Vec::new(),
+            batch_ends: [0; 4],
+            nodes: Vec::new(),
+            owner: Vec::new(),
+            exchange: Default::default(),
+            rounds: core::array::from_fn(|a| vec![RoundPlan::default(); rounds[a]]),
+            ext_stage: Vec::new(),
+        })
+        .collect();
+    let trees: Vec<Vec<Transfer>> = (0..machine.dims.iter().copied().max().unwrap_or(1))
+        .map(line_transfers)
+        .collect();
+    for (n, &(lo, hi)) in node_box.iter().enumerate() {
+        let n32 = n as u32;
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    let b = machine.index([x, y, z]);
+                    boards[b].nodes.push(n32);
+                    boards[b].owner.push(b as u32 == node_owner[n]);
+                }
+            }
+        }
+        for a in 0..3 {
+            let m = hi[a] - lo[a];
+            if m == 0 {
+                continue;
+            }
+            // Every line of the box along axis a runs the same tree.
+            let (o1, o2) = ((a + 1) % 3, (a + 2) % 3);
+            for p in lo[o1]..=hi[o1] {
+                for q in lo[o2]..=hi[o2] {
+                    let at = |t: usize| {
+                        let mut c = [0; 3];
+                        c[a] = lo[a] + t;
+                        c[o1] = p;
+                        c[o2] = q;
+                        machine.index(c)
+                    };
+                    for tr in &trees[m] {
+                        // face index within the axis: 0 = +axis, 1 = −axis
+                        let (send_face, recv_face) = if tr.to > tr.from { (0, 1) } else { (1, 0) };
+                        boards[at(tr.from)].rounds[a][tr.round].send[send_face].push(n32);
+                        boards[at(tr.to)].rounds[a][tr.round].recv[recv_face]
+                            .push((n32, tr.combine));
+                    }
+                }
+            }
+        }
+    }
+    for (e, &b) in element_board.iter().enumerate() {
+        boards[b as usize].elements.push(e as u32);
+    }
+    for bp in &mut boards {
+        for a in 0..3 {
+            for f in 0..2 {
+                let mut all: Vec<u32> = bp.rounds[a]
+                    .iter()
+                    .flat_map(|r| {
+                        r.send[f]
+                            .iter()
+                            .copied()
+                            .chain(r.recv[f].iter().map(|x| x.0))
+                    })
+                    .collect();
+                all.sort_unstable();
+                all.dedup();
+                bp.exchange[2 * a + f] = all;
+            }
+        }
+        let axis_nodes: [std::collections::HashSet<u32>; 3] = core::array::from_fn(|a| {
+            bp.exchange[2 * a]
+                .iter()
+                .chain(&bp.exchange[2 * a + 1])
+                .copied()
+                .collect()
+        });
+        let stage_of_element = |e: u32| {
+            let cell = &mesh.cells[e as usize];
+            (0..3)
+                .find(|&a| cell.iter().any(|n| axis_nodes[a].contains(n)))
+                .unwrap_or(3)
+        };
+        let mut staged: Vec<(usize, u32)> = bp
+            .elements
+            .iter()
+            .map(|&e| (stage_of_element(e), e))
+            .collect();
+        staged.sort();
+        for s in 0..4 {
+            bp.batch_ends[s] = staged.iter().filter(|(st, _)| *st <= s).count();
+        }
+        bp.elements = staged.into_iter().map(|(_, e)| e).collect();
+        bp.ext_stage = bp
+            .nodes
+            .iter()
+            .zip(&bp.owner)
+            .map(|(n, own)| {
+                if !own {
+                    STAGE_NOT_OWNED
+                } else {
+                    (0..3).find(|&a| axis_nodes[a].contains(n)).unwrap_or(3) as u8
+                }
+            })
+            .collect();
+    }
+    Ok(Plan {
+        machine,
+        element_board,
+        node_owner,
+        rounds,
+        boards,
+    })
+}

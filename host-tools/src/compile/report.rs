@@ -1,0 +1,455 @@
+//! The compile report: elements and nodes per board, exchange traffic, bandwidth, the
+//! capacity at the scene's step rate, contact and graphics figures, and its console summary.
+
+use anyhow::Result;
+use pe_firmware::image::*;
+use pe_firmware::profile::BoardProfile;
+use serde::Serialize;
+
+use super::image::BoardImage;
+use super::image::{contact_tables, graphics_params, image_file_name, surface_node_mask};
+use super::plan::Plan;
+use crate::problem::Problem;
+
+/// Figures of a compiled schedule (`DIR/report.json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct CompileReport {
+    pub scene: String,
+    pub machine: String,
+    /// Exchange rounds per axis (1 where every node spans at most two boards).
+    pub rounds: [usize; 3],
+    pub profile: String,
+    pub precision: String,
+    pub integration: String,
+    pub dt_s: f64,
+    pub steps_per_s: f64,
+    pub elements: usize,
+    pub nodes: usize,
+    pub elements_per_board: Vec<usize>,
+    pub nodes_per_board: Vec<usize>,
+    /// max / mean elements per board.
+    pub load_imbalance: f64,
+    /// Node copies beyond one per node (replicas), in all.
+    pub replicated_nodes: usize,
+    pub border_nodes_per_face_max: [usize; 6],
+    /// Force vectors sent per step, all links, both directions.
+    pub force_vectors_per_step: usize,
+    /// Force vectors per step on the busiest link direction.
+    pub force_vectors_per_link_max: usize,
+    pub bytes_per_step_per_link_max: usize,
+    pub bytes_per_step_total: usize,
+    /// Bandwidth needed at the scene's step rate (bytes/s).
+    pub bandwidth_total_bytes_per_s: f64,
+    pub bandwidth_per_link_max_bytes_per_s: f64,
+    pub link_bandwidth_bytes_per_s: u64,
+    /// Fraction of a step the busiest link is busy at the scene's step rate.
+    pub link_utilisation_max: f64,
+    pub image_bytes_max: usize,
+    pub ram_bytes_max: u64,
+    /// Board compute capacity from the firmware's measured instruction counts
+    /// (`pe_firmware::profile::MEASURED_COST`), one instruction per cycle.
+    pub capacity: Capacity,
+    pub boards: Vec<BoardSummary>,
+    pub graphics: GraphicsReport,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub contact: Option<ContactCompileReport>,
+}
+
+/// The graphics stream's cost.
+#[derive(Clone, Debug, Serialize)]
+pub struct GraphicsReport {
+    pub interval_steps: u32,
+    pub spread_steps: u16,
+    pub surface_nodes: usize,
+    /// Packets and bytes per frame (all boards), and the mean rate (bytes/s).
+    pub packets_per_frame: usize,
+    pub bytes_per_frame: usize,
+    pub bytes_per_s: f64,
+    pub seed_bytes_per_s: f64,
+}
+
+/// Contact figures: the tables and the collision traffic with the tissue at rest.
+#[derive(Clone, Debug, Serialize)]
+pub struct ContactCompileReport {
+    pub contact_nodes: usize,
+    pub contact_faces: usize,
+    pub pairs: usize,
+    pub tools: usize,
+    pub contact_boards: usize,
+    pub check_interval_steps: u32,
+    pub travel_max_m: f64,
+    pub box_margin_m: f64,
+    /// With the tissue at rest: board pairs that open a channel, contact-node vectors sent
+    /// per step, and bytes per second at the scene's step rate.
+    pub channels_at_rest: usize,
+    pub vectors_per_step_at_rest: usize,
+    pub bytes_per_s_at_rest: f64,
+    pub seed_vectors_per_step: usize,
+    pub seed_bytes_per_s: f64,
+}
+
+/// The contact traffic at rest: the runtime's box test on the reference positions.
+fn contact_report(
+    problem: &Problem,
+    plan: &Plan,
+    dt: f64,
+    rate: f64,
+) -> Result<Option<ContactCompileReport>> {
+    let Some((run, boards)) = contact_tables(problem, plan, dt)? else {
+        return Ok(None);
+    };
+    let p = run.params;
+    let owner_of = |c: &pe_firmware::physics::contact::ContactNode| {
+        plan.node_owner[c.global as usize] as usize
+    };
+    let board_index: Vec<usize> = boards
+        .iter()
+        .map(|&a| {
+            let (x, y, z) = link_proto::link::board_coords(a).unwrap_or((0, 0, 0));
+            plan.machine.index([x, y, z])
+        })
+        .collect();
+    let pair_nodes = |b: usize| {
+        run.nodes
+            .iter()
+            .filter(move |n| n.surfaces & p.pair_surfaces != 0 && owner_of(n) == b)
+    };
+    let bbox = |b: usize| {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for n in pair_nodes(b) {
+            for i in 0..3 {
+                lo[i] = lo[i].min(n.reference[i]);
+                hi[i] = hi[i].max(n.reference[i]);
+            }
+        }
+        (lo, hi)
+    };
+    let boxes: Vec<_> = board_index.iter().map(|&b| bbox(b)).collect();
+    let grow = |b: &([f64; 3], [f64; 3])| -> ([f64; 3], [f64; 3]) {
+        (
+            core::array::from_fn(|i| b.0[i] - p.box_margin_m),
+            core::array::from_fn(|i| b.1[i] + p.box_margin_m),
+        )
+    };
+    let (mut channels, mut vectors) = (0, 0);
+    for (i, &bi) in board_index.iter().enumerate() {
+        for (j, other) in boxes.iter().enumerate() {
+            if i == j {
+                continue;
+            }
+            let g = grow(&boxes[i]);
+            if !(0..3).all(|k| other.0[k] <= g.1[k] && g.0[k] <= other.1[k]) {
+                continue;
+            }
+            channels += 1;
+            let r = grow(other);
+            vectors += pair_nodes(bi)
+                .filter(|n| (0..3).all(|k| r.0[k] <= n.reference[k] && n.reference[k] <= r.1[k]))
+                .count();
+        }
+    }
+    Ok(Some(ContactCompileReport {
+        contact_nodes: run.nodes.len(),
+        contact_faces: run.faces.len(),
+        pairs: run.pairs.len(),
+        tools: run.tools.len(),
+        contact_boards: boards.len(),
+        check_interval_steps: p.check_interval_steps,
+        travel_max_m: p.travel_max_m,
+        box_margin_m: p.box_margin_m,
+        channels_at_rest: channels / 2,
+        vectors_per_step_at_rest: vectors,
+        bytes_per_s_at_rest: (vectors * link_proto::payload::NODE_ENTRY_LEN) as f64 * rate,
+        seed_vectors_per_step: 300,
+        seed_bytes_per_s: 72e6,
+    }))
+}
+
+/// What the scene asks of the busiest board's processor, from measured instruction counts.
+#[derive(Clone, Debug, Serialize)]
+pub struct Capacity {
+    pub clock_hz: u64,
+    pub instructions_per_element_step: u32,
+    pub instructions_per_node_update: u32,
+    /// Instructions of one step on the busiest board (no exchange).
+    pub step_instructions_max: f64,
+    /// That step's time at one instruction per cycle (s), against the scene's `dt_s`.
+    pub step_compute_s_max: f64,
+    pub compute_keeps_real_time: bool,
+    /// Elements one board computes per step at the scene's rate and at 10 kHz, with this
+    /// scene's nodes per element on its busiest board.
+    pub elements_per_board_at_scene_rate: f64,
+    pub elements_per_board_at_10_khz: f64,
+    /// Boards the scene needs at 10 kHz (compute only).
+    pub boards_needed_at_10_khz: usize,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct BoardSummary {
+    pub board: [usize; 3],
+    pub file: String,
+    pub elements: usize,
+    pub batches: [usize; 4],
+    pub nodes: usize,
+    pub owned_nodes: usize,
+    pub exchange: [usize; 6],
+    pub image_bytes: usize,
+    pub ram_bytes: u64,
+}
+
+pub fn report(
+    scene: &str,
+    problem: &Problem,
+    plan: &Plan,
+    images: &[BoardImage],
+    profile: &BoardProfile,
+) -> Result<CompileReport> {
+    let (dt, _) = problem.time_step()?;
+    let w = if problem.solver.precision == "f32" {
+        4
+    } else {
+        8
+    };
+    let epb: Vec<usize> = plan.boards.iter().map(|b| b.elements.len()).collect();
+    let npb: Vec<usize> = plan.boards.iter().map(|b| b.nodes.len()).collect();
+    let mean = epb.iter().sum::<usize>() as f64 / epb.len() as f64;
+    // Values sent per link direction per step, over all rounds (one frame per round).
+    let per_link: Vec<usize> = plan
+        .boards
+        .iter()
+        .flat_map(|b| {
+            (0..6).map(move |f| {
+                b.rounds[f / 2]
+                    .iter()
+                    .map(|r| r.send[f % 2].len())
+                    .sum::<usize>()
+            })
+        })
+        .collect();
+    let frames_per_link: Vec<usize> = plan
+        .boards
+        .iter()
+        .flat_map(|b| {
+            (0..6).map(move |f| {
+                b.rounds[f / 2]
+                    .iter()
+                    .filter(|r| !r.send[f % 2].is_empty())
+                    .count()
+            })
+        })
+        .collect();
+    let vectors: usize = per_link.iter().sum();
+    let link_max = per_link.iter().copied().max().unwrap_or(0);
+    let overhead = link_proto::FRAME_HEADER_LEN + link_proto::CRC_LEN;
+    let link_bytes: Vec<usize> = per_link
+        .iter()
+        .zip(&frames_per_link)
+        .map(|(&n, &f)| 3 * w * n + f * overhead)
+        .collect();
+    let frame_bytes_max = link_bytes.iter().copied().max().unwrap_or(0);
+    let bytes_total: usize = link_bytes.iter().sum();
+    let rate = 1.0 / dt;
+    let cost = pe_firmware::profile::measured_cost(
+        if problem.solver.precision == "f32" {
+            Precision::F32
+        } else {
+            Precision::F64
+        },
+        if problem.solver.integration == "full" {
+            Integration::Full
+        } else {
+            Integration::Reduced
+        },
+    );
+    let busiest = plan
+        .boards
+        .iter()
+        .map(|b| cost.step_instructions(b.elements.len(), b.nodes.len()))
+        .fold(0.0f64, f64::max);
+    let npe = plan
+        .boards
+        .iter()
+        .max_by_key(|b| b.elements.len())
+        .map(|b| b.nodes.len() as f64 / b.elements.len().max(1) as f64)
+        .unwrap_or(2.0);
+    let at_10k = cost.elements_per_board(profile, 1e4, npe);
+    let capacity = Capacity {
+        clock_hz: profile.clock_hz,
+        instructions_per_element_step: cost.per_element_step,
+        instructions_per_node_update: cost.per_node_update,
+        step_instructions_max: busiest,
+        step_compute_s_max: busiest / profile.clock_hz as f64,
+        compute_keeps_real_time: busiest / profile.clock_hz as f64 <= dt,
+        elements_per_board_at_scene_rate: cost.elements_per_board(profile, rate, npe),
+        elements_per_board_at_10_khz: at_10k,
+        boards_needed_at_10_khz: (problem.mesh.cells.len() as f64 / at_10k).ceil() as usize,
+    };
+    let boards = plan
+        .boards
+        .iter()
+        .zip(images)
+        .map(|(b, im)| BoardSummary {
+            board: b.coords,
+            file: image_file_name(b.coords),
+            elements: b.elements.len(),
+            batches: [
+                b.batch_ends[0],
+                b.batch_ends[1] - b.batch_ends[0],
+                b.batch_ends[2] - b.batch_ends[1],
+                b.batch_ends[3] - b.batch_ends[2],
+            ],
+            nodes: b.nodes.len(),
+            owned_nodes: b.owner.iter().filter(|o| **o).count(),
+            exchange: core::array::from_fn(|f| b.exchange[f].len()),
+            image_bytes: im.bytes.len(),
+            ram_bytes: im.ram_bytes,
+        })
+        .collect();
+    let gp = graphics_params(problem, dt);
+    let mask = surface_node_mask(problem);
+    let surface_nodes = mask.iter().filter(|m| **m).count();
+    let packets_per_frame: usize = plan
+        .boards
+        .iter()
+        .map(|b| {
+            let n = b
+                .nodes
+                .iter()
+                .zip(&b.owner)
+                .filter(|(n, o)| **o && mask[**n as usize])
+                .count();
+            // One packet per spread step (more if a slice overflows a packet).
+            (0..gp.spread_steps as usize)
+                .map(|j| {
+                    let len =
+                        (j + 1) * n / gp.spread_steps as usize - j * n / gp.spread_steps as usize;
+                    len.div_ceil(link_proto::payload::SURFACE_NODES_PER_PACKET_MAX)
+                        .max(1)
+                })
+                .sum::<usize>()
+        })
+        .sum();
+    let overhead = link_proto::PACKET_HEADER_LEN
+        + link_proto::CRC_LEN
+        + link_proto::payload::SURFACE_HEADER_LEN;
+    let bytes_per_frame =
+        packets_per_frame * overhead + surface_nodes * link_proto::payload::SURFACE_ENTRY_LEN;
+    let graphics = GraphicsReport {
+        interval_steps: gp.interval_steps,
+        spread_steps: gp.spread_steps,
+        surface_nodes,
+        packets_per_frame,
+        bytes_per_frame,
+        bytes_per_s: bytes_per_frame as f64 / (gp.interval_steps as f64 * dt),
+        seed_bytes_per_s: 18e6,
+    };
+    let contact = contact_report(problem, plan, dt, rate)?;
+    Ok(CompileReport {
+        graphics,
+        contact,
+        scene: scene.to_string(),
+        machine: plan.machine.to_string(),
+        rounds: plan.rounds,
+        profile: profile.name.to_string(),
+        precision: problem.solver.precision.clone(),
+        integration: problem.solver.integration.clone(),
+        dt_s: dt,
+        steps_per_s: rate,
+        elements: problem.mesh.cells.len(),
+        nodes: problem.mesh.nodes.len(),
+        load_imbalance: epb.iter().copied().max().unwrap_or(0) as f64 / mean,
+        elements_per_board: epb,
+        replicated_nodes: npb.iter().sum::<usize>() - problem.mesh.nodes.len(),
+        nodes_per_board: npb,
+        border_nodes_per_face_max: core::array::from_fn(|f| {
+            plan.boards
+                .iter()
+                .map(|b| b.exchange[f].len())
+                .max()
+                .unwrap_or(0)
+        }),
+        force_vectors_per_step: vectors,
+        force_vectors_per_link_max: link_max,
+        bytes_per_step_per_link_max: frame_bytes_max,
+        bytes_per_step_total: bytes_total,
+        bandwidth_total_bytes_per_s: bytes_total as f64 * rate,
+        bandwidth_per_link_max_bytes_per_s: frame_bytes_max as f64 * rate,
+        link_bandwidth_bytes_per_s: profile.link_bytes_per_s,
+        link_utilisation_max: frame_bytes_max as f64 * rate / profile.link_bytes_per_s as f64,
+        image_bytes_max: images.iter().map(|i| i.bytes.len()).max().unwrap_or(0),
+        ram_bytes_max: images.iter().map(|i| i.ram_bytes).max().unwrap_or(0),
+        capacity,
+        boards,
+    })
+}
+
+/// The readable summary printed by `pe compile`.
+pub fn summary(r: &CompileReport) -> String {
+    let min = r.elements_per_board.iter().min().copied().unwrap_or(0);
+    let max = r.elements_per_board.iter().max().copied().unwrap_or(0);
+    let mut s = String::new();
+    s += &format!(
+        "{}: {} elements, {} nodes on {} boards ({}), {} {}\n",
+        r.scene,
+        r.elements,
+        r.nodes,
+        r.elements_per_board.len(),
+        r.machine,
+        r.precision,
+        r.integration
+    );
+    s += &format!("  elements per board {min}..{max} (imbalance max/mean {:.3}); nodes per board {}..{}; {} replicas\n",
+        r.load_imbalance, r.nodes_per_board.iter().min().copied().unwrap_or(0), r.nodes_per_board.iter().max().copied().unwrap_or(0), r.replicated_nodes);
+    s += &format!(
+        "  exchange rounds per step: x {}, y {}, z {}\n",
+        r.rounds[0], r.rounds[1], r.rounds[2]
+    );
+    s += &format!(
+        "  border nodes per face (max over boards): +x {} -x {} +y {} -y {} +z {} -z {}\n",
+        r.border_nodes_per_face_max[0],
+        r.border_nodes_per_face_max[1],
+        r.border_nodes_per_face_max[2],
+        r.border_nodes_per_face_max[3],
+        r.border_nodes_per_face_max[4],
+        r.border_nodes_per_face_max[5]
+    );
+    s += &format!(
+        "  force vectors per step: {} in all, {} on the busiest link direction\n",
+        r.force_vectors_per_step, r.force_vectors_per_link_max
+    );
+    s += &format!("  bytes per step: {} in all, {} on the busiest link; at dt = {:.3e} s ({:.0} steps/s): {:.3} GB/s in all, {:.1} MB/s on the busiest link ({:.0}% of its {:.0} MB/s)\n",
+        r.bytes_per_step_total, r.bytes_per_step_per_link_max, r.dt_s, r.steps_per_s, r.bandwidth_total_bytes_per_s / 1e9,
+        r.bandwidth_per_link_max_bytes_per_s / 1e6, 100.0 * r.link_utilisation_max, r.link_bandwidth_bytes_per_s as f64 / 1e6);
+    s += &format!(
+        "  largest image {} bytes, largest run-time state {} bytes ({} profile)\n",
+        r.image_bytes_max, r.ram_bytes_max, r.profile
+    );
+    let c = &r.capacity;
+    s += &format!(
+        "  board compute ({} profile, {:.0} MHz, measured {} instructions per element-step and {} per node update, one instruction per cycle assumed): busiest board {:.1} us per step against dt = {:.1} us ({}); {:.1} elements per board at this scene's rate, {:.1} at 10 kHz, so {} boards for this scene at 10 kHz\n",
+        r.profile, c.clock_hz as f64 / 1e6, c.instructions_per_element_step, c.instructions_per_node_update,
+        c.step_compute_s_max * 1e6, r.dt_s * 1e6,
+        if c.compute_keeps_real_time { "keeps real time" } else { "does NOT keep real time" },
+        c.elements_per_board_at_scene_rate, c.elements_per_board_at_10_khz, c.boards_needed_at_10_khz
+    );
+    let g = &r.graphics;
+    s += &format!(
+        "  graphics: {} surface nodes every {} steps ({:.1} ms) spread over {} steps: {} packets, {} bytes per frame, {:.3} MB/s (the seed: 18 MB/s)\n",
+        g.surface_nodes, g.interval_steps, g.interval_steps as f64 * r.dt_s * 1e3, g.spread_steps, g.packets_per_frame, g.bytes_per_frame, g.bytes_per_s / 1e6
+    );
+    if let Some(c) = &r.contact {
+        s += &format!(
+            "  contact: {} nodes, {} faces, {} pairs, {} tools on {} boards; bounding boxes every {} steps (travel {:.2} mm, box margin {:.2} mm); at rest {} channels, {} node vectors per step, {:.2} MB/s (the seed: ~300 vectors, 72 MB/s)\n",
+            c.contact_nodes, c.contact_faces, c.pairs, c.tools, c.contact_boards, c.check_interval_steps, c.travel_max_m * 1e3, c.box_margin_m * 1e3,
+            c.channels_at_rest, c.vectors_per_step_at_rest, c.bytes_per_s_at_rest / 1e6
+        );
+    }
+    s += "  seed's reference case: 2000 elements on 4x4x4 boards at dt = 100 us: 5600 force vectors per step, 1.35 GB/s in all\n";
+    s += &format!(
+        "  this scene at dt = 100 us: {} force vectors per step, {:.3} GB/s in all\n",
+        r.force_vectors_per_step,
+        r.bytes_per_step_total as f64 * 1e4 / 1e9
+    );
+    s
+}

@@ -1,0 +1,114 @@
+//! How an image sits in a board's flash, and how a board knows where it is: the one
+//! definition of both, used by `pe image` (writing) and the board firmware (reading).
+//!
+//! - The schedule region at `ORIGIN(IMAGE)` holds a blob: a `u32` length (little-endian),
+//!   then that many bytes of schedule image. Blank flash (`0xFFFF_FFFF`) or zeroed memory
+//!   reads as "no image".
+//! - The identity record is 16 bytes in the firmware: [`IDENTITY_MARKER`] (`PE-BOARD-ID`
+//!   and a NUL), then x, y, z and a check byte `x ^ y ^ z ^ 0xA5`. The firmware ships with
+//!   (0,0,0); `pe image` writes each board's position into its copy of the ELF.
+//!
+//! Nothing here panics.
+
+/// Bytes of the blob's length word.
+pub const BLOB_HEADER_LEN: usize = 4;
+
+/// Why a region holds no image to hand to the loader.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BlobError {
+    /// The length word is 0 or blank flash: nothing was flashed or loaded.
+    Empty,
+    /// The length word claims more bytes than the region holds.
+    TooLong { len: u32, region: u32 },
+    /// Writing: the output is too small for the blob.
+    BufferFull,
+}
+
+impl core::fmt::Display for BlobError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            BlobError::Empty => write!(
+                f,
+                "no schedule image in the IMAGE region (flash a board-X-Y-Z.sched at its origin)"
+            ),
+            BlobError::TooLong { len, region } => write!(
+                f,
+                "schedule region claims {len} bytes but holds at most {region}: not a schedule blob"
+            ),
+            BlobError::BufferFull => write!(f, "output buffer too small for the schedule blob"),
+        }
+    }
+}
+
+/// Bytes of the blob of an image of `image_len` bytes.
+pub const fn blob_len(image_len: usize) -> usize {
+    BLOB_HEADER_LEN + image_len
+}
+
+/// Writes the blob of `image` into `out`; returns its length.
+pub fn write_blob(image: &[u8], out: &mut [u8]) -> Result<usize, BlobError> {
+    let len = blob_len(image.len());
+    let dst = out.get_mut(..len).ok_or(BlobError::BufferFull)?;
+    let (head, body) = dst.split_at_mut(BLOB_HEADER_LEN);
+    head.copy_from_slice(&(image.len() as u32).to_le_bytes());
+    body.copy_from_slice(image);
+    Ok(len)
+}
+
+/// The schedule image stored in a region's bytes (without the length word).
+pub fn read_blob(region: &[u8]) -> Result<&[u8], BlobError> {
+    let (head, rest) = region.split_at(region.len().min(BLOB_HEADER_LEN));
+    let len = match head {
+        [a, b, c, d] => u32::from_le_bytes([*a, *b, *c, *d]),
+        _ => 0,
+    };
+    if len == 0 || len == u32::MAX {
+        return Err(BlobError::Empty);
+    }
+    rest.get(..len as usize).ok_or(BlobError::TooLong {
+        len,
+        region: rest.len() as u32,
+    })
+}
+
+/// The marker that starts the identity record.
+pub const IDENTITY_MARKER: [u8; 12] = *b"PE-BOARD-ID\0";
+/// Bytes of the identity record.
+pub const IDENTITY_LEN: usize = 16;
+
+/// The identity record of the board at `board`.
+pub const fn identity_record(board: [u8; 3]) -> [u8; IDENTITY_LEN] {
+    let mut r = [0u8; IDENTITY_LEN];
+    let mut k = 0;
+    while k < IDENTITY_MARKER.len() {
+        r[k] = IDENTITY_MARKER[k];
+        k += 1;
+    }
+    r[12] = board[0];
+    r[13] = board[1];
+    r[14] = board[2];
+    r[15] = identity_check(board);
+    r
+}
+
+/// The check byte of a position.
+pub const fn identity_check(board: [u8; 3]) -> u8 {
+    board[0] ^ board[1] ^ board[2] ^ 0xA5
+}
+
+/// The position in an identity record, or `None` if its check byte is wrong. Only the
+/// check byte is compared, not the marker: a copy of the marker in the firmware's code would
+/// be a second match for the host's search.
+pub fn identity_position(record: &[u8; IDENTITY_LEN]) -> Option<[u8; 3]> {
+    let board = [record[12], record[13], record[14]];
+    (identity_check(board) == record[15]).then_some(board)
+}
+
+/// Offsets of the identity records in a firmware file: the marker followed by a valid
+/// position and check byte.
+pub fn find_identity(elf: &[u8]) -> impl Iterator<Item = usize> + '_ {
+    elf.windows(IDENTITY_LEN).enumerate().filter_map(|(k, w)| {
+        let r: &[u8; IDENTITY_LEN] = w.try_into().ok()?;
+        (r[..12] == IDENTITY_MARKER && identity_position(r).is_some()).then_some(k)
+    })
+}

@@ -1,0 +1,400 @@
+//! The image's one codec: [`transcode`] walks the sections in their fixed order, and the
+//! writer ([`ImageWriter`], the compiler), the reader ([`ImageReader`], the runtime's loader
+//! and `pe inspect`) both go through it, so the order and the record type of every section
+//! are written once. [`validate`] checks every index a loaded image holds.
+//!
+//! Sections (counts from the header's [`Counts`]): materials × [`MaterialLaw<T>`], elements
+//! × `E` (batch order x, y, z, inner), nodes × [`NodeRecord<T>`], exchange lists ×
+//! [`ExchangeList`] (axis, round, face), sends × `u16` (local nodes), receives ×
+//! [`RecvEntry`], path points × [`PathPoint`], loads × [`LoadRecord`], contact nodes ×
+//! [`ContactNode`], contact-node places × [`ContactNodePlace`], contact faces ×
+//! [`ContactFace`], pairs × [`ContactPair`], tools × [`Tool`], contact boards × `u8`
+//! (global-network addresses of the boards that own a pair-surface node), graphics nodes ×
+//! `u16` (this board's owned surface nodes, local indices).
+//!
+//! Nothing here panics or allocates: a record that does not fit its slots is
+//! [`ImageError::Capacity`], a record that does not decode [`ImageError::Malformed`].
+
+use serde::{de::DeserializeOwned, Serialize};
+
+use super::*;
+use crate::physics::{HexElement, HexFull, HexReduced, MaterialLaw, Real};
+
+/// A scalar an image can hold.
+pub trait ImageReal: Real + Serialize + DeserializeOwned {
+    const PRECISION: Precision;
+}
+
+impl ImageReal for f32 {
+    const PRECISION: Precision = Precision::F32;
+}
+
+impl ImageReal for f64 {
+    const PRECISION: Precision = Precision::F64;
+}
+
+/// An element record: the image header's `integration` says which one an image holds.
+pub trait ElementRecord<T: Real>: HexElement<T> + Serialize + DeserializeOwned + Copy {
+    const INTEGRATION: Integration;
+}
+
+impl<T: ImageReal> ElementRecord<T> for HexReduced<T> {
+    const INTEGRATION: Integration = Integration::Reduced;
+}
+
+impl<T: ImageReal> ElementRecord<T> for HexFull<T> {
+    const INTEGRATION: Integration = Integration::Full;
+}
+
+/// Where an image's records live: one slice per section, at least as long as its count (the
+/// slice lengths are the capacities). The compiler lends its tables, the runtime its
+/// storage, the decoder vectors sized from the header.
+pub struct ImageParts<'a, T, E> {
+    pub laws: &'a mut [MaterialLaw<T>],
+    pub elements: &'a mut [E],
+    pub nodes: &'a mut [NodeRecord<T>],
+    pub lists: &'a mut [ExchangeList],
+    pub sends: &'a mut [u16],
+    pub recvs: &'a mut [RecvEntry],
+    pub path_points: &'a mut [PathPoint],
+    pub loads: &'a mut [LoadRecord],
+    pub contact_nodes: &'a mut [ContactNode],
+    pub contact_places: &'a mut [ContactNodePlace],
+    pub contact_faces: &'a mut [ContactFace],
+    pub pairs: &'a mut [ContactPair],
+    pub tools: &'a mut [Tool],
+    pub contact_boards: &'a mut [u8],
+    pub graphics_nodes: &'a mut [u16],
+}
+
+/// One direction of the codec: the writer emits `*record`, the reader decodes into it.
+pub trait Codec {
+    fn record<R: Serialize + DeserializeOwned>(
+        &mut self,
+        what: &'static str,
+        record: &mut R,
+    ) -> Result<(), ImageError>;
+}
+
+/// Transcodes the first `count` records of one section.
+fn section<C: Codec, R: Serialize + DeserializeOwned>(
+    codec: &mut C,
+    what: &'static str,
+    count: usize,
+    slots: &mut [R],
+) -> Result<(), ImageError> {
+    let max = slots.len();
+    let slots = slots.get_mut(..count).ok_or(ImageError::Capacity {
+        what,
+        count: count as u32,
+        max: max as u32,
+    })?;
+    for r in slots {
+        codec.record(what, r)?;
+    }
+    Ok(())
+}
+
+/// The image's sections after the header, in order: the one definition of the layout.
+pub fn transcode<T: ImageReal, E: ElementRecord<T>, C: Codec>(
+    codec: &mut C,
+    c: &Counts,
+    p: &mut ImageParts<'_, T, E>,
+) -> Result<(), ImageError> {
+    section(codec, "materials", c.materials as usize, p.laws)?;
+    section(codec, "elements", c.elements as usize, p.elements)?;
+    section(codec, "nodes", c.nodes as usize, p.nodes)?;
+    section(codec, "exchange lists", c.exchange_lists(), p.lists)?;
+    section(codec, "exchange sends", c.sends as usize, p.sends)?;
+    section(codec, "exchange receives", c.recvs as usize, p.recvs)?;
+    section(codec, "path points", c.path_points as usize, p.path_points)?;
+    section(codec, "loads", c.loads as usize, p.loads)?;
+    let nc = c.contact_nodes as usize;
+    section(codec, "contact nodes", nc, p.contact_nodes)?;
+    section(codec, "contact nodes", nc, p.contact_places)?;
+    section(
+        codec,
+        "contact faces",
+        c.contact_faces as usize,
+        p.contact_faces,
+    )?;
+    section(codec, "contact pairs", c.pairs as usize, p.pairs)?;
+    section(codec, "tools", c.tools as usize, p.tools)?;
+    section(
+        codec,
+        "contact boards",
+        c.contact_boards as usize,
+        p.contact_boards,
+    )?;
+    section(
+        codec,
+        "graphics nodes",
+        c.graphics_nodes as usize,
+        p.graphics_nodes,
+    )
+}
+
+fn index_ok(what: &'static str, index: usize, ok: bool) -> Result<(), ImageError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ImageError::BadIndex {
+            what,
+            index: index as u32,
+        })
+    }
+}
+
+/// Checks what a loaded image refers to: batch ends, element nodes and materials, list
+/// lengths, local node indices, contact surfaces. `p` holds the records `c` counts.
+pub fn validate<T: ImageReal, E: ElementRecord<T>>(
+    c: &Counts,
+    p: &ImageParts<'_, T, E>,
+) -> Result<(), ImageError> {
+    let (ne, nn, nc) = (
+        c.elements as usize,
+        c.nodes as usize,
+        c.contact_nodes as usize,
+    );
+    let b = c.batch_ends;
+    if !(b[0] <= b[1] && b[1] <= b[2] && b[2] <= b[3] && b[3] as usize == ne) {
+        return Err(ImageError::Malformed {
+            record: "batch ends",
+        });
+    }
+    for (k, e) in p.elements[..ne].iter().enumerate() {
+        index_ok(
+            "node of element",
+            k,
+            e.nodes().iter().all(|&n| (n as usize) < nn),
+        )?;
+        index_ok(
+            "material of element",
+            k,
+            e.material() < c.materials as usize,
+        )?;
+    }
+    let lists = &p.lists[..c.exchange_lists()];
+    let sends: usize = lists.iter().map(|l| l.sends as usize).sum();
+    let recvs: usize = lists.iter().map(|l| l.recvs as usize).sum();
+    if sends != c.sends as usize || recvs != c.recvs as usize {
+        return Err(ImageError::Malformed {
+            record: "exchange list lengths",
+        });
+    }
+    for &v in &p.sends[..c.sends as usize] {
+        index_ok("node of send list", v as usize, (v as usize) < nn)?;
+    }
+    for r in &p.recvs[..c.recvs as usize] {
+        index_ok(
+            "node of receive list",
+            r.node as usize,
+            (r.node as usize) < nn,
+        )?;
+    }
+    for (k, l) in p.loads[..c.loads as usize].iter().enumerate() {
+        index_ok("node of load", k, (l.node as usize) < nn)?;
+    }
+    for (k, pl) in p.contact_places[..nc].iter().enumerate() {
+        index_ok(
+            "local node of contact node",
+            k,
+            pl.local.is_none_or(|l| (l as usize) < nn),
+        )?;
+    }
+    for (k, f) in p.contact_faces[..c.contact_faces as usize]
+        .iter()
+        .enumerate()
+    {
+        index_ok(
+            "node of contact face",
+            k,
+            f.nodes.iter().all(|&n| (n as usize) < nc),
+        )?;
+    }
+    let surfaces = crate::physics::contact::SURFACES_MAX;
+    for (k, q) in p.pairs[..c.pairs as usize].iter().enumerate() {
+        index_ok(
+            "surface of contact pair",
+            k,
+            (q.a as usize) < surfaces && (q.b as usize) < surfaces,
+        )?;
+    }
+    for (k, t) in p.tools[..c.tools as usize].iter().enumerate() {
+        index_ok("surface of tool", k, (t.surface as usize) < surfaces)?;
+    }
+    for (k, &g) in p.graphics_nodes[..c.graphics_nodes as usize]
+        .iter()
+        .enumerate()
+    {
+        index_ok("graphics node", k, (g as usize) < nn)?;
+    }
+    Ok(())
+}
+
+/// Writes `header` and the records `parts` holds into `buf`; returns the image length.
+pub fn write_image<T: ImageReal, E: ElementRecord<T>>(
+    buf: &mut [u8],
+    header: &ImageHeader,
+    parts: &mut ImageParts<'_, T, E>,
+) -> Result<usize, ImageError> {
+    if header.precision != T::PRECISION || header.integration != E::INTEGRATION {
+        return Err(ImageError::Malformed {
+            record: "header's precision or integration differs from its records",
+        });
+    }
+    let mut w = ImageWriter::new(buf, header)?;
+    transcode(&mut w, &header.counts, parts)?;
+    w.finish()
+}
+
+/// Checks `image` (for board `expected_board`, if given), loads its records into `parts`
+/// and validates them; returns the header.
+pub fn read_image<T: ImageReal, E: ElementRecord<T>>(
+    image: &[u8],
+    expected_board: Option<[u8; 3]>,
+    parts: &mut ImageParts<'_, T, E>,
+) -> Result<ImageHeader, ImageError> {
+    let mut r = ImageReader::new(image, expected_board)?;
+    let h = r.header;
+    if h.precision != T::PRECISION {
+        return Err(ImageError::Malformed {
+            record: "precision differs from this runtime's",
+        });
+    }
+    if h.integration != E::INTEGRATION {
+        return Err(ImageError::Malformed {
+            record: "integration differs from this runtime's",
+        });
+    }
+    transcode(&mut r, &h.counts, parts)?;
+    if !r.is_done() {
+        return Err(ImageError::Malformed {
+            record: "trailing bytes",
+        });
+    }
+    validate(&h.counts, parts)?;
+    Ok(h)
+}
+
+/// A record decoded from zero bytes: all numbers zero, every enum its first variant, every
+/// option `None`. Storage is filled with it before an image is loaded over it.
+pub fn zero_record<R: DeserializeOwned>() -> Option<R> {
+    const ZEROS: [u8; 2048] = [0; 2048];
+    postcard::take_from_bytes::<R>(&ZEROS).ok().map(|(r, _)| r)
+}
+
+/// Writes an image into a caller's buffer: the header here, the sections through [`transcode`].
+pub struct ImageWriter<'a> {
+    buf: &'a mut [u8],
+    len: usize,
+}
+
+impl<'a> ImageWriter<'a> {
+    pub fn new(buf: &'a mut [u8], header: &ImageHeader) -> Result<Self, ImageError> {
+        if buf.len() < MAGIC.len() {
+            return Err(ImageError::BufferFull);
+        }
+        buf[..4].copy_from_slice(&MAGIC);
+        let mut w = ImageWriter { buf, len: 4 };
+        w.push(header)?;
+        Ok(w)
+    }
+
+    fn push<R: Serialize>(&mut self, record: &R) -> Result<(), ImageError> {
+        let rest = self.buf.get_mut(self.len..).ok_or(ImageError::BufferFull)?;
+        let used = postcard::to_slice(record, rest)
+            .map_err(|_| ImageError::BufferFull)?
+            .len();
+        self.len += used;
+        Ok(())
+    }
+
+    /// Appends the CRC; returns the image length.
+    pub fn finish(self) -> Result<usize, ImageError> {
+        let crc = link_proto::frame::crc32(&self.buf[..self.len]);
+        let end = self.len + 4;
+        let dst = self
+            .buf
+            .get_mut(self.len..end)
+            .ok_or(ImageError::BufferFull)?;
+        dst.copy_from_slice(&crc.to_le_bytes());
+        Ok(end)
+    }
+}
+
+/// Reads an image: checks magic, CRC and version up front; the sections go through
+/// [`transcode`].
+pub struct ImageReader<'a> {
+    pub header: ImageHeader,
+    rest: &'a [u8],
+}
+
+impl<'a> ImageReader<'a> {
+    /// Checks the image; `expected_board` (if given) must match the header's position.
+    pub fn new(image: &'a [u8], expected_board: Option<[u8; 3]>) -> Result<Self, ImageError> {
+        if image.len() < MAGIC.len() + 4 {
+            return Err(ImageError::TooShort);
+        }
+        if image[..4] != MAGIC {
+            return Err(ImageError::BadMagic);
+        }
+        let (body, tail) = image.split_at(image.len() - 4);
+        let stored = u32::from_le_bytes([tail[0], tail[1], tail[2], tail[3]]);
+        let computed = link_proto::frame::crc32(body);
+        if stored != computed {
+            return Err(ImageError::BadCrc { stored, computed });
+        }
+        let (header, rest): (ImageHeader, _) = postcard::take_from_bytes(&body[4..])
+            .map_err(|_| ImageError::Malformed { record: "header" })?;
+        if header.version != FORMAT_VERSION {
+            return Err(ImageError::WrongVersion {
+                found: header.version,
+                expected: FORMAT_VERSION,
+            });
+        }
+        if let Some(b) = expected_board {
+            if b != header.board {
+                return Err(ImageError::WrongBoard {
+                    image: header.board,
+                    expected: b,
+                });
+            }
+        }
+        Ok(ImageReader { header, rest })
+    }
+
+    /// The next record.
+    fn next<R: DeserializeOwned>(&mut self, record: &'static str) -> Result<R, ImageError> {
+        let (r, rest) =
+            postcard::take_from_bytes(self.rest).map_err(|_| ImageError::Malformed { record })?;
+        self.rest = rest;
+        Ok(r)
+    }
+
+    /// True when every record has been read.
+    pub fn is_done(&self) -> bool {
+        self.rest.is_empty()
+    }
+}
+
+impl Codec for ImageWriter<'_> {
+    fn record<R: Serialize + DeserializeOwned>(
+        &mut self,
+        _what: &'static str,
+        record: &mut R,
+    ) -> Result<(), ImageError> {
+        self.push(record)
+    }
+}
+
+impl Codec for ImageReader<'_> {
+    fn record<R: Serialize + DeserializeOwned>(
+        &mut self,
+        what: &'static str,
+        record: &mut R,
+    ) -> Result<(), ImageError> {
+        *record = self.next(what)?;
+        Ok(())
+    }
+}

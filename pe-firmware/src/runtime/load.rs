@@ -1,0 +1,146 @@
+//! Loading: an image into a board's storage through the image codec
+//! ([`crate::image::read_image`]), then the runtime's own indexes (exchange ranges, contact
+//! map, this board's contact slot, the step program).
+
+use link_proto::FRAME_LEN_MAX;
+
+use super::contact::ContactState;
+use super::exchange::{Exchange, LISTS_MAX};
+use super::storage::SmallTables;
+use super::{
+    global, FrameBuffers, LinkStats, Program, Runtime, RuntimeConfig, Storage, WireReal,
+    ROUNDS_PER_AXIS_MAX,
+};
+use crate::image::{read_image, ElementRecord, ImageError, ImageHeader};
+use crate::physics::CentralDifference;
+
+impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
+    /// Checks and loads `image` for board `board` into `st`. An image that needs more than
+    /// `st` holds is [`ImageError::Capacity`], naming the section.
+    pub fn load(
+        image: &[u8],
+        board: [u8; 3],
+        mut st: Storage<'a, T, E>,
+        config: RuntimeConfig,
+    ) -> Result<Self, ImageError> {
+        let mut exchange = Exchange::<T>::new();
+        let mut contact = ContactState::new();
+        let header = {
+            let mut parts = st.image_parts(SmallTables {
+                lists: &mut exchange.lists[..],
+                pairs: &mut contact.pairs[..],
+                tools: &mut contact.tools[..],
+                contact_boards: &mut contact.boards[..],
+            });
+            read_image(image, Some(board), &mut parts)
+        }
+        .map_err(|e| match e {
+            // The small tables are the runtime's: name their limits as capacities.
+            ImageError::Capacity {
+                what: "exchange lists",
+                count,
+                ..
+            } => ImageError::Capacity {
+                what: "exchange rounds per axis",
+                count,
+                max: ROUNDS_PER_AXIS_MAX as u32,
+            },
+            e => e,
+        })?;
+        let c = header.counts;
+        for &n in &c.rounds {
+            if n as usize > ROUNDS_PER_AXIS_MAX {
+                return Err(ImageError::Capacity {
+                    what: "exchange rounds per axis",
+                    count: n as u32,
+                    max: ROUNDS_PER_AXIS_MAX as u32,
+                });
+            }
+        }
+        debug_assert!(c.exchange_lists() <= LISTS_MAX);
+        exchange.index(&c.rounds);
+        let (nn, nc) = (c.nodes as usize, c.contact_nodes as usize);
+        for u in [&mut st.u, &mut st.u_prev] {
+            u.iter_mut().take(nn).for_each(|x| *x = [T::ZERO; 3]);
+        }
+        index_contact(&mut st, nn, nc)?;
+        let address =
+            link_proto::link::board_at(board[0] as usize, board[1] as usize, board[2] as usize)
+                .unwrap_or(u8::MAX);
+        let n_boards = c.contact_boards as usize;
+        contact.slot = contact.boards[..n_boards]
+            .iter()
+            .position(|&b| b == address);
+        let has_contact = c.tools > 0 || c.pairs > 0;
+        let has_graphics = c.graphics_nodes > 0 && header.graphics.interval_steps > 0;
+        Ok(Runtime {
+            header,
+            program: Program::new(&c.rounds, has_contact, has_graphics),
+            pc: 0,
+            waiting_since: None,
+            exchange,
+            io: FrameBuffers {
+                tx: [0; FRAME_LEN_MAX],
+                rx: [0; FRAME_LEN_MAX],
+            },
+            cd: CentralDifference::new(header.params.dt_s, header.params.damping_per_s),
+            step: 0,
+            config,
+            port: global::GlobalPort {
+                address,
+                msg_id: 0,
+                stats: Default::default(),
+            },
+            contact,
+            graphics_cursor: 0,
+            stats: LinkStats::default(),
+            reaction_prescribed: [0.0; 3],
+            reaction_fixed: [0.0; 3],
+            kinetic_energy: 0.0,
+            st,
+        })
+    }
+
+    /// The loaded image's header.
+    pub fn image_header(&self) -> &ImageHeader {
+        &self.header
+    }
+}
+
+/// Maps local nodes to contact nodes and clears the contact buffers.
+fn index_contact<T, E>(st: &mut Storage<'_, T, E>, nn: usize, nc: usize) -> Result<(), ImageError> {
+    let cs = &mut st.contact;
+    if nc > 0 && cs.contact_of.len() < nn {
+        return Err(ImageError::Capacity {
+            what: "nodes (contact map)",
+            count: nn as u32,
+            max: cs.contact_of.len() as u32,
+        });
+    }
+    for (what, len) in [
+        ("contact nodes", cs.at_check.len()),
+        ("contact nodes", cs.force.len()),
+        ("contact nodes", cs.remote.len()),
+    ] {
+        if nc > len {
+            return Err(ImageError::Capacity {
+                what,
+                count: nc as u32,
+                max: len as u32,
+            });
+        }
+    }
+    cs.contact_of
+        .iter_mut()
+        .take(nn)
+        .for_each(|v| *v = u32::MAX);
+    for (k, place) in cs.places[..nc].iter().enumerate() {
+        if let Some(l) = place.local {
+            cs.contact_of[l as usize] = k as u32;
+        }
+    }
+    cs.force[..nc].fill([0.0; 3]);
+    cs.at_check[..nc].fill([0.0; 3]);
+    cs.remote[..nc].fill([(0, [0.0; 3]); 2]);
+    Ok(())
+}

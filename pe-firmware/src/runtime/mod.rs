@@ -1,0 +1,365 @@
+//! The board runtime: loads a schedule image and runs steps by the seed's interleaved
+//! schedule over the link interface. The only place where schedule, physics and links meet.
+//!
+//! Rooms: [`fault`] (what went wrong, where), [`storage`] (the arrays and their
+//! capacities), `load` (an image into storage), [`program`] (the step's operations, also
+//! walked by board-sim's timing model), `exchange` (force frames over the point-to-point
+//! links), `global` (packets on the global network), `contact` (bounding boxes, node
+//! exchange, contact and tool forces), `graphics` (surface nodes to the graphics engine);
+//! this file holds the runtime itself and the step loop.
+//!
+//! Storage is the caller's ([`Storage`], lent by a [`StorageBuf`]). Time and idling come in
+//! through [`Environment`]; links through [`link_proto::Links`]. Nothing here allocates or
+//! panics: bad images, bad frames, stalled links and numerical failure become a [`Fault`]
+//! naming the board, the link or the element, and the step.
+
+mod contact;
+mod exchange;
+pub mod fault;
+mod global;
+mod graphics;
+mod load;
+pub mod program;
+pub mod storage;
+
+use link_proto::{Face, Links, Values, FRAME_LEN_MAX};
+
+use crate::image::*;
+use crate::physics::explicit::{accumulate_internal_forces, update_node, NodeMove};
+use crate::physics::{CentralDifference, HexFull, HexReduced, MaterialLaw};
+
+pub use contact::{ContactState, BOARDS_MAX, PAIRS_MAX, TOOLS_MAX};
+pub use fault::{Fault, FaultKind};
+pub use global::GlobalStats;
+pub use program::{Op, Program, ROUNDS_PER_AXIS_MAX};
+pub use storage::{Capacities, ContactStorage, Heapless, Shelf, Storage, StorageBuf};
+
+/// A scalar that travels in link frames.
+pub trait WireReal: ImageReal {
+    fn wire(values: &[Self]) -> Values<'_>;
+}
+
+impl WireReal for f32 {
+    fn wire(values: &[f32]) -> Values<'_> {
+        Values::F32(values)
+    }
+}
+
+impl WireReal for f64 {
+    fn wire(values: &[f64]) -> Values<'_> {
+        Values::F64(values)
+    }
+}
+
+/// Time and waiting, passed in (never read globally).
+pub trait Environment {
+    /// Monotonic time in ns.
+    fn now_ns(&mut self) -> u64;
+    /// Called while waiting for a link (spin, yield, sleep until an interrupt...).
+    fn idle(&mut self);
+}
+
+/// Runtime settings that are not part of the scene.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RuntimeConfig {
+    /// A link that delivers nothing for this long is a fault (ns).
+    pub link_timeout_ns: u64,
+}
+
+impl Default for RuntimeConfig {
+    fn default() -> Self {
+        RuntimeConfig {
+            link_timeout_ns: 10_000_000_000,
+        }
+    }
+}
+
+/// Link statistics of one board (for reports).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LinkStats {
+    pub frames_sent: [u64; 6],
+    pub bytes_sent: [u64; 6],
+    pub frames_received: [u64; 6],
+    /// Time spent waiting for frames (ns, as the environment measures it).
+    pub wait_ns: u64,
+}
+
+/// The frame (and packet) being sent and the one being received.
+struct FrameBuffers {
+    tx: [u8; FRAME_LEN_MAX],
+    rx: [u8; FRAME_LEN_MAX],
+}
+
+/// One board running its schedule image. `E` is the element type (reduced or full).
+pub struct Runtime<'a, T, E> {
+    pub header: ImageHeader,
+    program: Program,
+    /// Next operation of the current step.
+    pc: usize,
+    /// When the current operation started waiting (ns), if it is waiting.
+    waiting_since: Option<u64>,
+    st: Storage<'a, T, E>,
+    exchange: exchange::Exchange<T>,
+    io: FrameBuffers,
+    cd: CentralDifference<T>,
+    step: u64,
+    config: RuntimeConfig,
+    port: global::GlobalPort,
+    contact: ContactState,
+    graphics_cursor: usize,
+    pub stats: LinkStats,
+    /// Sum of `f_int − f_ext` over owned prescribed and fixed nodes at the last step (N).
+    pub reaction_prescribed: [f64; 3],
+    pub reaction_fixed: [f64; 3],
+    /// Kinetic energy of owned nodes at the last step (J).
+    pub kinetic_energy: f64,
+}
+
+impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
+    pub fn step_index(&self) -> u64 {
+        self.step
+    }
+
+    /// (step, operation): changes whenever the runtime moves on.
+    pub fn progress(&self) -> (u64, usize) {
+        (self.step, self.pc)
+    }
+
+    pub fn is_finished(&self) -> bool {
+        self.step >= self.header.params.steps
+    }
+
+    /// Local nodes (records) and their current displacements.
+    pub fn nodes(&self) -> &[NodeRecord<T>] {
+        &self.st.nodes[..self.header.counts.nodes as usize]
+    }
+
+    pub fn displacements(&self) -> &[[T; 3]] {
+        &self.st.u[..self.header.counts.nodes as usize]
+    }
+
+    /// The loaded elements (batch order) and material laws.
+    pub fn elements(&self) -> (&[E], &[MaterialLaw<T>]) {
+        (
+            &self.st.elements[..self.header.counts.elements as usize],
+            &self.st.laws[..self.header.counts.materials as usize],
+        )
+    }
+
+    /// Global-network traffic of this board.
+    pub fn global_stats(&self) -> GlobalStats {
+        self.port.stats
+    }
+
+    /// Force of the tissue on each tool from this board's nodes at the last step (N).
+    pub fn tool_forces(&self) -> &[[f64; 3]] {
+        &self.contact.tool_force[..self.header.counts.tools as usize]
+    }
+
+    /// What the last step's contact evaluation found.
+    pub fn contact_stats(&self) -> crate::physics::contact::ContactStats {
+        self.contact.stats
+    }
+
+    /// Contact nodes, where they live on this board, and their contact force at the last
+    /// step (non-zero only for owned nodes).
+    pub fn contact_forces(&self) -> (&[ContactNode], &[ContactNodePlace], &[[f64; 3]]) {
+        let n = self.header.counts.contact_nodes as usize;
+        let cs = &self.st.contact;
+        (&cs.nodes[..n], &cs.places[..n], &cs.force[..n])
+    }
+
+    fn fault(&self, kind: FaultKind) -> Fault {
+        Fault {
+            board: self.header.board,
+            step: self.step,
+            kind,
+        }
+    }
+
+    fn batch(&mut self, b: usize) -> Result<(), Fault> {
+        let ends = self.header.counts.batch_ends;
+        let start = if b == 0 { 0 } else { ends[b - 1] as usize };
+        let end = ends[b] as usize;
+        let st = &mut self.st;
+        let n = self.header.counts.nodes as usize;
+        accumulate_internal_forces(
+            &st.elements[start..end],
+            start as u32,
+            st.laws,
+            &st.u[..n],
+            &mut st.force[..n],
+        )
+        .map_err(|e| self.fault(FaultKind::Physics(e)))
+    }
+
+    /// Subtracts the external force (gravity, loads, contact) of owned nodes whose stage
+    /// is `stage`.
+    fn external(&mut self, stage: u8, t: f64) {
+        let c = self.header.counts;
+        let st = &mut self.st;
+        let points = &st.path_points[..c.path_points as usize];
+        let loads = &st.loads[..c.loads as usize];
+        for k in 0..c.nodes as usize {
+            if st.nodes[k].stage != stage {
+                continue;
+            }
+            let mut fe = st.nodes[k].gravity;
+            for l in loads.iter().filter(|l| l.node as usize == k) {
+                let s = l.ramp.map_or(1.0, |p| path_value(points, p, t)[0]);
+                for i in 0..3 {
+                    fe[i] += T::from_f64(l.force[i] * s);
+                }
+            }
+            let cn = st.contact.contact_of.get(k).copied().unwrap_or(u32::MAX);
+            if let Some(f) = st.contact.force.get(cn as usize) {
+                for i in 0..3 {
+                    fe[i] += T::from_f64(f[i]);
+                }
+            }
+            for i in 0..3 {
+                st.force[k][i] -= fe[i];
+            }
+        }
+    }
+
+    /// Advances the current step as far as the links allow without waiting. Returns
+    /// `Ok(true)` when the step is complete, `Ok(false)` when it waits for a link (call
+    /// again later). A link that keeps it waiting longer than the timeout is a fault.
+    pub fn poll_step(
+        &mut self,
+        links: &mut impl Links,
+        env: &mut impl Environment,
+    ) -> Result<bool, Fault> {
+        let n = self.header.counts.nodes as usize;
+        let t = self.step as f64 * self.header.params.dt_s;
+        while let Some(op) = self.program.get(self.pc) {
+            let done = match op {
+                Op::Begin => {
+                    for f in self.st.force[..n].iter_mut() {
+                        *f = [T::ZERO; 3];
+                    }
+                    true
+                }
+                Op::Graphics => self.graphics_poll(links)?,
+                Op::Contact => self.contact_poll(links)?,
+                Op::Batch(k) => {
+                    self.batch(k as usize)?;
+                    true
+                }
+                Op::External(stage) => {
+                    self.external(stage, t);
+                    true
+                }
+                Op::Send(a, r, f) => self.send_face(links, a as usize, r as usize, f as usize)?,
+                Op::Recv(a, r, f) => self.recv_face(links, a as usize, r as usize, f as usize)?,
+                Op::Update => {
+                    self.update(t + self.header.params.dt_s)?;
+                    true
+                }
+            };
+            if !done {
+                let now = env.now_ns();
+                let since = *self.waiting_since.get_or_insert(now);
+                if now.saturating_sub(since) > self.config.link_timeout_ns {
+                    return Err(self.timeout(op));
+                }
+                return Ok(false);
+            }
+            if let Some(since) = self.waiting_since.take() {
+                self.stats.wait_ns += env.now_ns().saturating_sub(since);
+            }
+            self.pc += 1;
+        }
+        self.pc = 0;
+        Ok(true)
+    }
+
+    /// The fault of an operation that waited longer than the link timeout.
+    fn timeout(&self, op: Op) -> Fault {
+        match op {
+            Op::Contact => self.fault(FaultKind::GlobalTimeout {
+                src: self
+                    .contact
+                    .missing_partner(self.step, self.header.counts.contact_boards as usize),
+            }),
+            Op::Send(a, _, f) | Op::Recv(a, _, f) => self.fault(FaultKind::LinkTimeout {
+                face: program::face_of(a as usize, f as usize),
+            }),
+            _ => self.fault(FaultKind::LinkTimeout { face: Face::PosX }),
+        }
+    }
+
+    /// One explicit step by the seed's interleaved schedule, waiting (through
+    /// `env.idle()`) for the links as needed.
+    pub fn step(
+        &mut self,
+        links: &mut impl Links,
+        env: &mut impl Environment,
+    ) -> Result<(), Fault> {
+        while !self.poll_step(links, env)? {
+            links.poll();
+            env.idle();
+        }
+        Ok(())
+    }
+
+    /// Central-difference update of every held node from its total force
+    /// ([`update_node`], the serial solver's function), so replicas and the serial run
+    /// agree.
+    fn update(&mut self, t_next: f64) -> Result<(), Fault> {
+        let n = self.header.counts.nodes as usize;
+        let inv_2dt = 1.0 / (2.0 * self.header.params.dt_s);
+        let limit = self.header.params.speed_limit_m_per_s;
+        let (mut rp, mut rf, mut ke) = ([0.0; 3], [0.0; 3], 0.0);
+        let points = &self.st.path_points[..self.header.counts.path_points as usize];
+        for k in 0..n {
+            let rec = self.st.nodes[k];
+            let total = self.st.force[k];
+            let mv = match rec.motion {
+                NodeMotion::Free => NodeMove::Free {
+                    gain: rec.gain,
+                    residual: [-total[0], -total[1], -total[2]],
+                },
+                NodeMotion::Fixed => NodeMove::Held([T::ZERO; 3]),
+                NodeMotion::Prescribed(p) => {
+                    NodeMove::Held(path_value(points, p, t_next).map(T::from_f64))
+                }
+            };
+            if rec.owner {
+                let r = match rec.motion {
+                    NodeMotion::Free => None,
+                    NodeMotion::Fixed => Some(&mut rf),
+                    NodeMotion::Prescribed(_) => Some(&mut rp),
+                };
+                if let Some(r) = r {
+                    for i in 0..3 {
+                        r[i] += total[i].to_f64();
+                    }
+                }
+            }
+            let (u, u_prev) = (&mut self.st.u[k], &mut self.st.u_prev[k]);
+            let v2 =
+                update_node(&self.cd, u, u_prev, mv, inv_2dt, limit, rec.global).map_err(|e| {
+                    Fault {
+                        board: self.header.board,
+                        step: self.step,
+                        kind: FaultKind::Physics(e),
+                    }
+                })?;
+            if rec.owner {
+                // m_inertial = C / gain
+                ke += 0.5 * (self.cd.c.to_f64() / rec.gain.to_f64()) * v2;
+            }
+        }
+        self.reaction_prescribed = rp;
+        self.reaction_fixed = rf;
+        self.kinetic_energy = ke;
+        self.step += 1;
+        Ok(())
+    }
+}
+
+/// The two element kinds a runtime can be built for.
+pub type ReducedRuntime<'a, T> = Runtime<'a, T, HexReduced<T>>;
+pub type FullRuntime<'a, T> = Runtime<'a, T, HexFull<T>>;
