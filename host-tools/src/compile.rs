@@ -340,7 +340,7 @@ fn path_table(problem: &Problem) -> (Vec<PathPoint>, Vec<Option<u16>>) {
 /// What every board's image shares: the contact tables, which nodes are on the surface, the
 /// graphics timing (computed once per compilation).
 struct Shared {
-    contact: Option<(crate::contact::ContactRun, Vec<u8>)>,
+    contact: Option<(crate::problem::contact::ContactRun, Vec<u8>)>,
     on_surface: Vec<bool>,
     graphics: GraphicsParams,
 }
@@ -584,7 +584,7 @@ pub fn contact_tables(
     problem: &Problem,
     plan: &Plan,
     dt: f64,
-) -> Result<Option<(crate::contact::ContactRun, Vec<u8>)>> {
+) -> Result<Option<(crate::problem::contact::ContactRun, Vec<u8>)>> {
     let Some(setup) = problem.contact.as_ref() else {
         return Ok(None);
     };
@@ -613,13 +613,7 @@ pub fn contact_tables(
 
 /// Mesh nodes on the boundary (what the graphics engine draws).
 pub fn surface_node_mask(problem: &Problem) -> Vec<bool> {
-    let mut m = vec![false; problem.mesh.nodes.len()];
-    for q in &problem.surface_faces {
-        for &n in q {
-            m[n as usize] = true;
-        }
-    }
-    m
+    problem.surface_node_mask()
 }
 
 /// The graphics stream's timing for step `dt`.

@@ -6,8 +6,8 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use host_tools::output;
 use host_tools::problem::Problem;
+use host_tools::scene::builtin::builtin_scene;
 use host_tools::scene::Scene;
-use host_tools::scene_mesh::builtin_scene;
 use host_tools::solver::{self, Observer};
 
 #[derive(Parser)]
@@ -380,21 +380,23 @@ fn main() -> Result<()> {
                 host_tools::compile::inspect(&dir, [c[0], c[1], c[2]])?
             );
         }
-        Command::Bench { elements, steps } => host_tools::bench::run_cli(elements, steps)?,
+        Command::Bench { elements, steps } => {
+            host_tools::analysis::bench::run_cli(elements, steps)?
+        }
         Command::Tradeoff {
             scene,
             output,
             fine,
         } => {
             let (sc, dir, name) = scene.load()?;
-            let opts = host_tools::tradeoff::Options {
+            let opts = host_tools::analysis::tradeoff::Options {
                 fine,
                 level: scene.builtin.then(|| scene.level.clone()),
             };
-            host_tools::tradeoff::run_cli(&sc, &dir, &name, &opts, &output)?
+            host_tools::analysis::tradeoff::run_cli(&sc, &dir, &name, &opts, &output)?
         }
         Command::Stability { output, long, only } => {
-            host_tools::stability::run_cli(output.as_deref(), long, only.as_deref())?
+            host_tools::analysis::stability::run_cli(output.as_deref(), long, only.as_deref())?
         }
     }
     Ok(())

@@ -1,5 +1,5 @@
 //! PNG snapshots of a deformed organ surface, drawn with `plotters` (no system fonts:
-//! DejaVu Sans is registered as "sans-serif", see [`crate::tradeoff`]).
+//! DejaVu Sans is registered as "sans-serif", see [`crate::output::font`]).
 //!
 //! Orthographic projection along the view direction (world z is "up" on the image), the
 //! surface fitted to the image with a margin, quads painted far to near by mean depth, each
@@ -721,7 +721,7 @@ pub fn render_surface_png(path: &Path, img: &SurfaceImage<'_>) -> Result<()> {
         );
     }
     let prep = prepare(img).map_err(|m| anyhow!("rendering {}: {m}", path.display()))?;
-    crate::tradeoff::register_font();
+    crate::output::font::register_font();
     let err = |e: &dyn std::fmt::Display| anyhow!("rendering {}: {e}", path.display());
     let root = BitMapBackend::new(path, img.size_px).into_drawing_area();
     draw(&root, img, &prep).map_err(|e| err(&e))?;
@@ -787,7 +787,7 @@ mod tests {
     /// The RGB pixels `render_surface_png` would write, drawn into memory.
     fn render_rgb(img: &SurfaceImage<'_>) -> (Vec<u8>, Prepared) {
         let prep = prepare(img).unwrap();
-        crate::tradeoff::register_font();
+        crate::output::font::register_font();
         let (w, h) = img.size_px;
         let mut buf = vec![0u8; 3 * (w * h) as usize];
         {

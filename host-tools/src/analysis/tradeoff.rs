@@ -420,7 +420,7 @@ fn run_one(base: &Scene, dir: &Path, levels: &Levels, c: &Config, name: &str) ->
     // Stored energy of the final state evaluated in f64 for every precision: in f32 the
     // strain energy of small strains cancels (W ~ ε² from terms ~ ε) and would measure the
     // evaluation instead of the run.
-    let stored = solver::Elements::<f64>::build(&p)
+    let stored = crate::problem::elements::Elements::<f64>::build(&p)
         .stored_energy(&p.laws, &out.displacements)
         .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
     let row = Row {
@@ -746,7 +746,7 @@ pub fn to_markdown(rows: &[Row], name: &str) -> String {
 /// The PNG: error against cost, log axes, Pareto front drawn as a line, points labelled.
 pub fn plot(rows: &[Row], path: &Path, title: &str) -> Result<()> {
     use plotters::prelude::*;
-    register_font();
+    crate::output::font::register_font();
     let pts: Vec<(f64, f64, &Row)> = rows
         .iter()
         .filter(|r| r.varied != "reference")
@@ -859,18 +859,6 @@ pub fn plot(rows: &[Row], path: &Path, title: &str) -> Result<()> {
         .map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))?;
     Ok(())
-}
-
-/// DejaVu Sans (from the `dejavu` crate) as plotters' "sans-serif": no system fonts needed.
-pub(crate) fn register_font() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        let _ = plotters::style::register_font(
-            "sans-serif",
-            plotters::style::FontStyle::Normal,
-            dejavu::sans::regular(),
-        );
-    });
 }
 
 /// `pe tradeoff`: runs the grid, writes DIR/tradeoff.csv, .md and .png, prints the table.

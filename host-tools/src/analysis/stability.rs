@@ -189,7 +189,7 @@ fn energy_band<T: Real>(
     every: u64,
     from: u64,
 ) -> Result<(f64, f64, f64)> {
-    let ev = solver::Elements::<f64>::build(m.problem);
+    let ev = crate::problem::elements::Elements::<f64>::build(m.problem);
     let (mut lo, mut hi, mut smax) = (f64::MAX, f64::MIN, 0.0f64);
     for k in 0..steps {
         m.advance()
@@ -844,7 +844,7 @@ duration = 1.5
 "#
             );
             let sc = Scene::from_toml(&text)?;
-            let mut mesh = crate::mesh_io::generate_box([0.1, 0.01, 0.01], [10, 2, 2]);
+            let mut mesh = crate::mesh::io::generate_box([0.1, 0.01, 0.01], [10, 2, 2]);
             split_regions(&mut mesh, 0.05);
             let p = Problem::new(&sc, mesh, BTreeMap::new())?;
             // The stiff half sets the critical step: the same as an all-stiff bar's (1%).
@@ -1010,7 +1010,7 @@ fn distorted(name: &str, mesh_of: impl Fn() -> Mesh, expected: &str) -> Result<C
 pub fn distorted_aspect() -> Result<Case> {
     distorted(
         "distorted_aspect_10",
-        || crate::mesh_io::generate_box([0.1, 0.01, 0.01], [4, 4, 4]),
+        || crate::mesh::io::generate_box([0.1, 0.01, 0.01], [4, 4, 4]),
         "aspect ratio 10: stable at 0.99 of critical; the patch test passes in both integrations",
     )
 }
@@ -1027,7 +1027,7 @@ pub fn distorted_skew() -> Result<Case> {
 /// The skewed, perturbed 4×4×4 cube of [`distorted_skew`].
 pub fn skewed_mesh() -> Mesh {
     let h = 0.01 / 4.0;
-    let mut mesh = crate::mesh_io::generate_box([0.01; 3], [4, 4, 4]);
+    let mut mesh = crate::mesh::io::generate_box([0.01; 3], [4, 4, 4]);
     let boundary: std::collections::HashSet<u32> = mesh.boundary_nodes().into_iter().collect();
     let shear = 40f64.to_radians().tan();
     for (n, x) in mesh.nodes.iter_mut().enumerate() {

@@ -1,6 +1,9 @@
 //! Scene files (TOML, SI units): mesh, materials, boundary conditions, loads and solver
 //! settings. Every key is documented in the README; unknown keys are errors.
 
+pub mod builtin;
+pub mod mesh_source;
+
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};

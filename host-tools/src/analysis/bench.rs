@@ -8,9 +8,10 @@ use std::time::Instant;
 use anyhow::Result;
 use pe_firmware::physics::{HexElement, Real};
 
+use crate::problem::elements::Elements;
 use crate::problem::Problem;
 use crate::scene::Scene;
-use crate::solver::{Elements, Model};
+use crate::solver::Model;
 
 thread_local! {
     static FLOPS: Cell<[u64; 4]> = const { Cell::new([0; 4]) };

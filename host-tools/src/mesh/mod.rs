@@ -1,6 +1,10 @@
 //! Hexahedral volume meshes on the host: the common in-memory form every importer and
 //! generator produces.
 
+pub mod builtin;
+pub mod io;
+pub mod ovary;
+
 use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
 

@@ -51,7 +51,7 @@
 //! The ovary's lower part (nodes below `centre.z − c/2`) is meant to be held fixed: the
 //! ovary hangs from its ligaments and does not drop away when pressed from above.
 
-use crate::builtin::{Anatomy, Level, REGION_RIGHT_OVIDUCT};
+use crate::mesh::builtin::{Anatomy, Level, REGION_RIGHT_OVIDUCT};
 
 /// Region (physical group) tag of the right ovary.
 pub const REGION_RIGHT_OVARY: i32 = 6;

@@ -1,6 +1,10 @@
 //! A scene resolved against its mesh: per-cell materials, node sets, constraints and loads,
 //! all in `f64`. This is what the serial solver and the schedule compiler start from.
 
+pub mod contact;
+pub mod elements;
+pub mod frequency;
+
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -65,7 +69,7 @@ pub struct Problem {
     /// True (gravitational) lumped mass per node, kg.
     pub mass: Vec<f64>,
     /// Tools and contact pairs (None: the scene has no contact).
-    pub contact: Option<crate::contact::ContactSetup>,
+    pub contact: Option<crate::problem::contact::ContactSetup>,
     /// Mesh boundary faces (outward), the surface the graphics engine draws, and the cell
     /// each belongs to.
     pub surface_faces: Vec<[u32; 4]>,
@@ -339,10 +343,10 @@ impl Problem {
             (paths.len() - 1) as u32
         };
         let (surface_faces, surface_face_cells): (Vec<[u32; 4]>, Vec<u32>) =
-            crate::contact::boundary_faces_with_cells(&mesh)
+            crate::problem::contact::boundary_faces_with_cells(&mesh)
                 .into_iter()
                 .unzip();
-        let contact = crate::contact::resolve(
+        let contact = crate::problem::contact::resolve(
             scene,
             &mesh,
             &surface_faces,
@@ -415,10 +419,21 @@ impl Problem {
         })
     }
 
+    /// True for the nodes on the mesh's boundary (the surface the graphics engine draws).
+    pub fn surface_node_mask(&self) -> Vec<bool> {
+        let mut m = vec![false; self.mesh.nodes.len()];
+        for q in &self.surface_faces {
+            for &n in q {
+                m[n as usize] = true;
+            }
+        }
+        m
+    }
+
     /// Reads the scene's mesh (file, generated box or built-in anatomy) and resolves it.
     pub fn from_scene(scene: &Scene, scene_dir: &Path) -> Result<Problem> {
-        let (mesh, sets) =
-            crate::scene_mesh::load(&scene.mesh, scene_dir).context("loading the scene's mesh")?;
+        let (mesh, sets) = crate::scene::mesh_source::load(&scene.mesh, scene_dir)
+            .context("loading the scene's mesh")?;
         Problem::new(scene, mesh, sets)
     }
 
@@ -452,8 +467,19 @@ impl Problem {
             return Ok(*c);
         }
         let (estimate, cell) = self.element_dt_estimate();
-        let model = crate::solver::Model::<f64>::new(self, estimate);
-        let omega = model.max_frequency(200)?;
+        // At rest, in f64, from the deterministic start vector: the solver's
+        // `Model::<f64>::max_frequency(200)` without building the model.
+        let elements = elements::Elements::<f64>::build(self);
+        let laws: Vec<MaterialLaw<f64>> = self.laws.iter().map(|l| l.cast::<f64>()).collect();
+        let u = vec![[0.0; 3]; self.mesh.nodes.len()];
+        let state = frequency::Linearised {
+            problem: self,
+            elements: &elements,
+            laws: &laws,
+            u: &u,
+        };
+        let mut v = frequency::start_vector(self);
+        let omega = frequency::max_frequency_from(&state, &mut v, 200)?;
         let power = if omega > 0.0 {
             2.0 / omega
         } else {
