@@ -184,7 +184,7 @@ fn cells_positive_and_well_shaped() {
         );
         assert!(min_sj >= 0.2, "{level}: min scaled Jacobian {min_sj}");
         assert!(min_edge >= 0.15e-3, "{level}: min edge {min_edge} m");
-        let lib = host_tools::mesh::builtin::min_scaled_jacobian(m);
+        let lib = m.min_scaled_jacobian();
         assert!(
             (lib - min_sj).abs() < 1e-12,
             "library {lib} vs test {min_sj}"

@@ -13,6 +13,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
+use crate::geom::{cross, dot, sub};
 use anyhow::{anyhow, bail, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -116,22 +117,6 @@ fn colormap(t: f64) -> [f64; 3] {
 fn rgb(c: [f64; 3], factor: f64) -> RGBColor {
     let ch = |x: f64| (x * factor).round().clamp(0.0, 255.0) as u8;
     RGBColor(ch(c[0]), ch(c[1]), ch(c[2]))
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 fn finite3(p: &[f64; 3]) -> bool {
