@@ -338,11 +338,8 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
     );
     let profile =
         pe_firmware::profile::profile(&manifest.profile).unwrap_or(pe_firmware::profile::PE_BOARD);
-    let precision = if manifest.precision == "f32" {
-        pe_firmware::image::Precision::F32
-    } else {
-        pe_firmware::image::Precision::F64
-    };
+    let precision = host_tools::scene::settings::precision_from_name(&manifest.precision)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", dir.join("manifest.json").display()))?;
     let mut timing = SimTiming::for_precision(&profile, precision);
     if let Some(b) = link_bandwidth {
         timing.link_bytes_per_s = b;

@@ -388,7 +388,7 @@ fn write_image<T: Real + Serialize>(
             })
         })
         .collect::<Result<_>>()?;
-    let integration = if problem.solver.integration == "full" {
+    let integration = if problem.solver.integration == Integration::Full {
         Integration::Full
     } else {
         Integration::Reduced
@@ -639,9 +639,9 @@ pub fn compile_images(problem: &Problem, plan: &Plan) -> Result<Vec<BoardImage>>
         graphics: graphics_params(problem, dt),
     };
     (0..plan.boards.len())
-        .map(|b| match problem.solver.precision.as_str() {
-            "f32" => write_image::<f32>(problem, plan, &shared, b),
-            _ => write_image::<f64>(problem, plan, &shared, b),
+        .map(|b| match problem.solver.precision {
+            Precision::F32 => write_image::<f32>(problem, plan, &shared, b),
+            Precision::F64 => write_image::<f64>(problem, plan, &shared, b),
         })
         .collect()
 }
@@ -935,7 +935,7 @@ pub fn report(
     profile: &BoardProfile,
 ) -> Result<CompileReport> {
     let (dt, _) = problem.time_step()?;
-    let w = if problem.solver.precision == "f32" {
+    let w = if problem.solver.precision == Precision::F32 {
         4
     } else {
         8
@@ -980,12 +980,12 @@ pub fn report(
     let bytes_total: usize = link_bytes.iter().sum();
     let rate = 1.0 / dt;
     let cost = pe_firmware::profile::measured_cost(
-        if problem.solver.precision == "f32" {
+        if problem.solver.precision == Precision::F32 {
             Precision::F32
         } else {
             Precision::F64
         },
-        if problem.solver.integration == "full" {
+        if problem.solver.integration == Integration::Full {
             Integration::Full
         } else {
             Integration::Reduced
@@ -1081,8 +1081,8 @@ pub fn report(
         machine: plan.machine.to_string(),
         rounds: plan.rounds,
         profile: profile.name.to_string(),
-        precision: problem.solver.precision.clone(),
-        integration: problem.solver.integration.clone(),
+        precision: problem.solver.precision.name().to_string(),
+        integration: problem.solver.integration.name().to_string(),
         dt_s: dt,
         steps_per_s: rate,
         elements: problem.mesh.cells.len(),
@@ -1359,8 +1359,8 @@ pub fn compile_to_dir(
         scene_source: scene_source.to_string(),
         machine: machine.dims,
         profile: profile.name.to_string(),
-        precision: problem.solver.precision.clone(),
-        integration: problem.solver.integration.clone(),
+        precision: problem.solver.precision.name().to_string(),
+        integration: problem.solver.integration.name().to_string(),
         dt_s: dt,
         steps: problem.steps(dt),
         boards: images

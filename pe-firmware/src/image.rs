@@ -42,6 +42,38 @@ pub enum Integration {
     Full,
 }
 
+impl Precision {
+    /// The name scenes, manifests and reports use: "f32" | "f64".
+    pub const fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
+}
+
+impl Integration {
+    /// The name scenes, manifests and reports use: "reduced" | "full".
+    pub const fn name(self) -> &'static str {
+        match self {
+            Integration::Reduced => "reduced",
+            Integration::Full => "full",
+        }
+    }
+}
+
+impl core::fmt::Display for Precision {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl core::fmt::Display for Integration {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// Record counts (and the capacities they must fit).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Counts {

@@ -1,6 +1,7 @@
 //! The problem's hexahedra as the physics kernels take them, in scalar type `T`: reduced
 //! or full integration as the scene asks.
 
+use pe_firmware::image::Integration;
 use pe_firmware::physics::explicit::{accumulate_internal_forces, stored_energy};
 use pe_firmware::physics::{HexElement, HexFull, HexReduced, MaterialLaw, PhysicsError, Real};
 
@@ -15,7 +16,7 @@ pub enum Elements<T> {
 impl<T: Real> Elements<T> {
     pub fn build(p: &Problem) -> Self {
         let cells = p.mesh.cells.iter().zip(&p.reference).zip(&p.cell_material);
-        if p.solver.integration == "full" {
+        if p.solver.integration == Integration::Full {
             Elements::Full(cells.map(|((c, r), m)| r.full(*c, *m)).collect())
         } else {
             Elements::Reduced(

@@ -12,7 +12,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use pe_firmware::physics::{LameParameters, MaterialLaw, ReferenceHex, Volumetric};
 
 use crate::mesh::Mesh;
-use crate::scene::{MaterialSpec, RegionRef, Scene, Selector, SolverSpec};
+use crate::scene::{Law, MaterialSpec, RegionRef, Scene, Selector, SolverSpec};
 
 /// A piecewise-linear function of time through `(t, value)` points, held constant outside.
 #[derive(Clone, Debug, PartialEq)]
@@ -104,15 +104,15 @@ fn law_from_spec(m: &MaterialSpec, what: &str) -> Result<MaterialLaw<f64>> {
     if !(m.density > 0.0 && m.density.is_finite()) {
         bail!("{what}: `density` must be positive, got {}", m.density);
     }
-    match m.law.as_str() {
-        "neo-hookean" | "neo-hookean-decoupled" => {
+    match m.law {
+        Law::NeoHookean | Law::NeoHookeanDecoupled => {
             let e = positive(need(m.youngs_modulus, "youngs_modulus")?, "youngs_modulus")?;
             let nu = need(m.poisson_ratio, "poisson_ratio")?;
             if !(-1.0 < nu && nu < 0.5) {
                 bail!("{what}: `poisson_ratio` must lie in (-1, 0.5), got {nu}");
             }
             let l = LameParameters::from_young_poisson(e, nu);
-            Ok(if m.law == "neo-hookean" {
+            Ok(if m.law == Law::NeoHookean {
                 MaterialLaw::NeoHookean(l)
             } else {
                 MaterialLaw::NeoHookeanDecoupled {
@@ -121,7 +121,7 @@ fn law_from_spec(m: &MaterialSpec, what: &str) -> Result<MaterialLaw<f64>> {
                 }
             })
         }
-        "mooney-rivlin" => {
+        Law::MooneyRivlin => {
             let c10 = need(m.c10, "c10")?;
             let c01 = need(m.c01, "c01")?;
             if !(c10 + c01 > 0.0) {
@@ -140,9 +140,6 @@ fn law_from_spec(m: &MaterialSpec, what: &str) -> Result<MaterialLaw<f64>> {
                 volumetric,
             })
         }
-        other => bail!(
-            "{what}: unknown law \"{other}\" (neo-hookean | neo-hookean-decoupled | mooney-rivlin)"
-        ),
     }
 }
 
@@ -360,18 +357,6 @@ impl Problem {
         if !(s.graphics_interval > 0.0) || s.graphics_spread_steps == 0 {
             bail!(
                 "[solver] graphics_interval must be positive and graphics_spread_steps at least 1"
-            );
-        }
-        if !matches!(s.precision.as_str(), "f32" | "f64") {
-            bail!(
-                "[solver] precision = \"{}\": expected \"f32\" or \"f64\"",
-                s.precision
-            );
-        }
-        if !matches!(s.integration.as_str(), "reduced" | "full") {
-            bail!(
-                "[solver] integration = \"{}\": expected \"reduced\" or \"full\"",
-                s.integration
             );
         }
         if !(s.mass_scaling >= 1.0) {

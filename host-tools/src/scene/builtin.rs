@@ -33,7 +33,7 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
     let d = probe.push_direction.map(|v| v * travel);
     let mat = |region: Option<&str>, e: f64| MaterialSpec {
         region: region.map(|r| RegionRef::Name(r.into())),
-        law: "neo-hookean".into(),
+        law: Law::NeoHookean,
         youngs_modulus: Some(e),
         poisson_ratio: Some(0.45),
         c10: None,

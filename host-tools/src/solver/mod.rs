@@ -4,6 +4,7 @@
 use std::time::Instant;
 
 use anyhow::{anyhow, Result};
+use pe_firmware::image::Precision;
 use pe_firmware::physics::contact::{
     build_candidates, check_travel, evaluate_pairs, evaluate_tools, Candidate, ContactModel,
     ContactStats,
@@ -426,9 +427,9 @@ impl Observer for () {
 
 /// Runs the problem to its end in its scene's precision.
 pub fn run(problem: &Problem, name: &str, observer: &mut dyn Observer) -> Result<RunOutput> {
-    match problem.solver.precision.as_str() {
-        "f32" => run_typed::<f32>(problem, name, observer),
-        _ => run_typed::<f64>(problem, name, observer),
+    match problem.solver.precision {
+        Precision::F32 => run_typed::<f32>(problem, name, observer),
+        Precision::F64 => run_typed::<f64>(problem, name, observer),
     }
 }
 
@@ -484,7 +485,7 @@ pub fn run_typed<T: Real>(
     let report = RunReport {
         scene: name.to_string(),
         precision: T::NAME.to_string(),
-        integration: problem.solver.integration.clone(),
+        integration: problem.solver.integration.name().to_string(),
         steps,
         dt_s: dt,
         dt_critical_s: dt_crit,

@@ -14,7 +14,7 @@ use pe_firmware::physics::{PhysicsError, Real};
 use crate::geom::norm;
 use crate::mesh::Mesh;
 use crate::problem::{NodeKind, Path1, Problem};
-use crate::scene::Scene;
+use crate::scene::{builders, GravitySpec, LoadSpec, Scene, SolverSpec};
 use crate::solver::{self, Model};
 
 mod material;
@@ -126,7 +126,9 @@ impl Case {
 // ---------------------------------------------------------------------------------------
 // Helpers
 
-/// A box scene clamped at x = 0 (unless `clamp` is false), neo-Hookean, ρ = 1000.
+/// A box scene clamped at x = 0 (unless `clamp` is false), neo-Hookean, ρ = 1000
+/// ([`builders::box_cantilever`]), with the case's `[solver]` keys (`solver`) and extra
+/// sections (`extra`: gravity, loads) given as TOML lines.
 fn box_scene(
     size: [f64; 3],
     cells: [usize; 3],
@@ -136,27 +138,23 @@ fn box_scene(
     solver: &str,
     extra: &str,
 ) -> Result<Scene> {
-    let fixed = if clamp {
-        "[[fixed]]\nbox = [[-1e-9, -1.0, -1.0], [1e-9, 1.0, 1.0]]"
-    } else {
-        ""
-    };
-    Scene::from_toml(&format!(
-        r#"
-[mesh]
-generate = {{ kind = "box", size = [{}, {}, {}], cells = [{}, {}, {}] }}
-[material]
-law = "neo-hookean"
-youngs_modulus = {e}
-poisson_ratio = {nu}
-density = 1000.0
-{fixed}
-{extra}
-[solver]
-{solver}
-"#,
-        size[0], size[1], size[2], cells[0], cells[1], cells[2]
-    ))
+    #[derive(serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct CaseSettings {
+        #[serde(default)]
+        load: Vec<LoadSpec>,
+        #[serde(default)]
+        gravity: Option<GravitySpec>,
+        #[serde(default)]
+        solver: SolverSpec,
+    }
+    let s: CaseSettings = toml::from_str(&format!("{extra}\n[solver]\n{solver}"))
+        .map_err(|e| anyhow!("stability case settings: {e}"))?;
+    let mut scene = builders::box_cantilever(size, cells, e, nu, clamp);
+    scene.load = s.load;
+    scene.gravity = s.gravity;
+    scene.solver = s.solver;
+    Ok(scene)
 }
 
 fn problem(scene: &Scene) -> Result<Problem> {

@@ -23,6 +23,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
+use pe_firmware::image::{Integration, Precision};
 use serde::Serialize;
 
 use crate::geom::norm;
@@ -47,8 +48,10 @@ pub struct Config {
     /// Which factor this row varies from the baseline ("baseline", "precision×integration",
     /// "hourglass", "dt_safety", "level", "mass_scaling", "reference").
     pub varied: String,
-    pub precision: String,
-    pub integration: String,
+    #[serde(serialize_with = "crate::scene::settings::precision_text::serialize")]
+    pub precision: Precision,
+    #[serde(serialize_with = "crate::scene::settings::integration_text::serialize")]
+    pub integration: Integration,
     pub hourglass: f64,
     pub dt_safety: f64,
     pub level: String,
@@ -72,7 +75,7 @@ impl Config {
         // The hourglass coefficient does nothing under full integration.
         self.precision == o.precision
             && self.integration == o.integration
-            && (self.integration == "full" || self.hourglass == o.hourglass)
+            && (self.integration == Integration::Full || self.hourglass == o.hourglass)
             && self.dt_safety == o.dt_safety
             && self.level == o.level
             && self.mass_scaling == o.mass_scaling
@@ -83,8 +86,10 @@ impl Config {
 #[derive(Clone, Debug, Serialize)]
 pub struct Row {
     pub varied: String,
-    pub precision: String,
-    pub integration: String,
+    #[serde(serialize_with = "crate::scene::settings::precision_text::serialize")]
+    pub precision: Precision,
+    #[serde(serialize_with = "crate::scene::settings::integration_text::serialize")]
+    pub integration: Integration,
     pub hourglass: f64,
     pub dt_safety: f64,
     pub level: String,
@@ -170,8 +175,8 @@ pub fn grid(base: &Scene, levels: &Levels, base_level: &str) -> Vec<Config> {
     let finest = names.last().cloned().unwrap_or_else(|| base_level.into());
     let b = Config {
         varied: "baseline".into(),
-        precision: s.precision.clone(),
-        integration: s.integration.clone(),
+        precision: s.precision,
+        integration: s.integration,
         hourglass: s.hourglass,
         dt_safety: s.dt_safety,
         level: base_level.into(),
@@ -179,8 +184,8 @@ pub fn grid(base: &Scene, levels: &Levels, base_level: &str) -> Vec<Config> {
     };
     let mut out: Vec<Config> = vec![Config {
         varied: "reference".into(),
-        precision: "f64".into(),
-        integration: "full".into(),
+        precision: Precision::F64,
+        integration: Integration::Full,
         hourglass: s.hourglass,
         dt_safety: 0.5,
         level: finest,
@@ -192,17 +197,17 @@ pub fn grid(base: &Scene, levels: &Levels, base_level: &str) -> Vec<Config> {
         }
     };
     push(b.clone());
-    for p in ["f64", "f32"] {
-        for i in ["reduced", "full"] {
+    for p in [Precision::F64, Precision::F32] {
+        for i in [Integration::Reduced, Integration::Full] {
             push(Config {
                 varied: "precision×integration".into(),
-                precision: p.into(),
-                integration: i.into(),
+                precision: p,
+                integration: i,
                 ..b.clone()
             });
         }
     }
-    if b.integration == "reduced" {
+    if b.integration == Integration::Reduced {
         for h in [0.05, 0.1, 0.2] {
             push(Config {
                 varied: "hourglass".into(),
@@ -276,8 +281,8 @@ struct Done {
 
 fn run_one(base: &Scene, dir: &Path, levels: &Levels, c: &Config, name: &str) -> Result<Done> {
     let mut sc = scene_at(base, levels, &c.level)?;
-    sc.solver.precision = c.precision.clone();
-    sc.solver.integration = c.integration.clone();
+    sc.solver.precision = c.precision;
+    sc.solver.integration = c.integration;
     sc.solver.hourglass = c.hourglass;
     sc.solver.dt_safety = c.dt_safety;
     sc.solver.mass_scaling = c.mass_scaling;
@@ -295,8 +300,8 @@ fn run_one(base: &Scene, dir: &Path, levels: &Levels, c: &Config, name: &str) ->
         .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
     let row = Row {
         varied: c.varied.clone(),
-        precision: c.precision.clone(),
-        integration: c.integration.clone(),
+        precision: c.precision,
+        integration: c.integration,
         hourglass: c.hourglass,
         dt_safety: c.dt_safety,
         level: c.level.clone(),
@@ -310,18 +315,7 @@ fn run_one(base: &Scene, dir: &Path, levels: &Levels, c: &Config, name: &str) ->
         host_ns_per_element_step: r.wall_s * 1e9 / (r.elements as f64 * r.steps as f64),
         real_time_factor: r.real_time_factor,
         board_instructions_per_element_step: {
-            use pe_firmware::image::{Integration, Precision};
-            let p = if r.precision == "f32" {
-                Precision::F32
-            } else {
-                Precision::F64
-            };
-            let i = if r.integration == "full" {
-                Integration::Full
-            } else {
-                Integration::Reduced
-            };
-            let c = pe_firmware::profile::measured_cost(p, i);
+            let c = pe_firmware::profile::measured_cost(c.precision, c.integration);
             let step_s = c.step_instructions(r.elements, r.nodes)
                 / pe_firmware::profile::PE_BOARD.clock_hz as f64;
             format!("{} (board RTF {:.3})", c.step_per_element, r.dt_s / step_s)

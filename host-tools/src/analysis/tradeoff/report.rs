@@ -72,8 +72,8 @@ pub fn to_csv(rows: &[Row]) -> Result<String> {
 pub fn full_reduced(rows: &[Row]) -> Vec<(String, f64, f64, f64)> {
     let base = rows.iter().find(|r| r.varied == "baseline");
     let mut v = Vec::new();
-    for p in ["f64", "f32"] {
-        let find = |i: &str| {
+    for p in [Precision::F64, Precision::F32] {
+        let find = |i: Integration| {
             rows.iter().find(|r| {
                 r.precision == p
                     && r.integration == i
@@ -81,11 +81,11 @@ pub fn full_reduced(rows: &[Row]) -> Vec<(String, f64, f64, f64)> {
                         r.level == b.level
                             && r.dt_safety == b.dt_safety
                             && r.mass_scaling == b.mass_scaling
-                            && (i == "full" || r.hourglass == b.hourglass)
+                            && (i == Integration::Full || r.hourglass == b.hourglass)
                     })
             })
         };
-        if let (Some(f), Some(red)) = (find("full"), find("reduced")) {
+        if let (Some(f), Some(red)) = (find(Integration::Full), find(Integration::Reduced)) {
             v.push((
                 p.to_string(),
                 f.host_ns_per_element_step / red.host_ns_per_element_step,
@@ -110,7 +110,7 @@ pub fn to_markdown(rows: &[Row], name: &str) -> String {
     s.push_str("| varied | prec. | integr. | hg | safety | level | mass sc. | elements | steps | wall s | ns/elem-step | RTF | board instr/elem-step | u max err | u RMS err | QoI err | energy err | Pareto |\n");
     s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for r in rows {
-        let hg = if r.integration == "full" {
+        let hg = if r.integration == Integration::Full {
             "–".to_string()
         } else {
             format!("{}", r.hourglass)
