@@ -10,9 +10,10 @@ use board_sim::{run, SimOptions};
 use clap::{Parser, Subcommand};
 use host_tools::output::write_nodes_csv;
 use host_tools::problem::Problem;
+use host_tools::scene::builtin::builtin_scene;
 use host_tools::scene::Scene;
-use host_tools::scene_mesh::builtin_scene;
-use host_tools::vtk_out::VtkSeriesWriter;
+
+mod graphics;
 
 #[derive(Parser)]
 #[command(
@@ -204,23 +205,11 @@ fn builtin(
         ..Default::default()
     };
     let (sim, pr) = execute(&images, args)?;
-    // What a user of the trainer wants to know: what the probe did to the tube.
-    let region_max = |region: i32| {
-        pr.mesh
-            .cells
-            .iter()
-            .zip(&pr.mesh.cell_regions)
-            .filter(|(_, r)| **r == region)
-            .flat_map(|(c, _)| c.iter().map(|&n| n as usize))
-            .map(|n| {
-                let u = sim.displacements[n];
-                (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()
-            })
-            .fold(0.0, f64::max)
-    };
-    let tube_max = region_max(host_tools::builtin::REGION_RIGHT_OVIDUCT);
-    // The ovary moves only through the tube-ovary contact pair.
-    let ovary_max = region_max(host_tools::ovary::REGION_RIGHT_OVARY);
+    // What a user of the trainer wants to know: what the probe did to the tube (and, through
+    // their contact pair, the tube to the ovary).
+    let moved = host_tools::scene::builtin::builtin_summary(&pr.mesh, &sim.displacements);
+    let tube_max = moved.right_tube_max_displacement_m;
+    let ovary_max = moved.right_ovary_max_displacement_m;
     let sim_s = sim.steps as f64 * sim.manifest.dt_s;
     let f = sim.tool_force.last().copied().unwrap_or([0.0; 3]);
     println!("summary:");
@@ -349,11 +338,8 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
     );
     let profile =
         pe_firmware::profile::profile(&manifest.profile).unwrap_or(pe_firmware::profile::PE_BOARD);
-    let precision = if manifest.precision == "f32" {
-        pe_firmware::image::Precision::F32
-    } else {
-        pe_firmware::image::Precision::F64
-    };
+    let precision = host_tools::scene::settings::precision_from_name(&manifest.precision)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", dir.join("manifest.json").display()))?;
     let mut timing = SimTiming::for_precision(&profile, precision);
     if let Some(b) = link_bandwidth {
         timing.link_bytes_per_s = b;
@@ -372,26 +358,19 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
     }
     let frames = problem
         .as_ref()
-        .map(|pr| surface_frames(pr, &out))
+        .map(|pr| graphics::surface_frames(pr, &out))
         .unwrap_or_default();
     if let (Some(d), Some(pr)) = (&vtk, &problem) {
         if graphics_stream {
             // What the graphics engine received.
-            write_surface_series(d, pr, &frames)?;
+            graphics::write_surface_series(d, pr, &frames)?;
         } else {
-            std::fs::create_dir_all(d)?;
-            let mut w = VtkSeriesWriter::new(d, &pr.mesh)?;
-            w.write_frame(0.0, &vec![[0.0; 3]; pr.mesh.nodes.len()])?;
-            for (s, u) in &out.frames {
-                w.write_frame(*s as f64 * manifest.dt_s, u)?;
-            }
-            w.write_frame(sim_s, &out.displacements)?;
-            w.finish()?;
+            graphics::write_volume_series(d, pr, &out, manifest.dt_s)?;
         }
     }
     if let (Some(p), Some(pr)) = (&png, &problem) {
         if let Some(last) = frames.last() {
-            render_frame(p, pr, last, &out)?;
+            graphics::render_frame(p, pr, last, &out)?;
         }
     }
     if let Some(p) = &tool_force {
@@ -447,135 +426,6 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
     }
     let problem = problem.ok_or_else(|| anyhow::anyhow!("no scene"))?;
     Ok((out, problem))
-}
-
-/// A frame the graphics engine assembled: time and displacement of every mesh node it
-/// received (others zero), or None if some surface node is missing.
-struct SurfaceFrame {
-    time_s: f64,
-    u: Vec<[f64; 3]>,
-}
-
-fn surface_frames(pr: &Problem, out: &board_sim::SimOutput) -> Vec<SurfaceFrame> {
-    let surface = host_tools::compile::surface_node_mask(pr);
-    let needed = surface.iter().filter(|s| **s).count();
-    out.graphics
-        .iter()
-        .filter(|f| f.nodes.len() == needed)
-        .map(|f| {
-            let mut u = vec![[0.0; 3]; pr.mesh.nodes.len()];
-            for (n, d) in &f.nodes {
-                if let Some(x) = u.get_mut(*n as usize) {
-                    *x = d.map(|v| v as f64);
-                }
-            }
-            SurfaceFrame {
-                time_s: f.steps.0 as f64 * out.dt_s,
-                u,
-            }
-        })
-        .collect()
-}
-
-fn write_surface_series(d: &std::path::Path, pr: &Problem, frames: &[SurfaceFrame]) -> Result<()> {
-    std::fs::create_dir_all(d)?;
-    let (local, quads) = surface_numbering(pr);
-    let reference: Vec<[f64; 3]> = local.iter().map(|&g| pr.mesh.nodes[g as usize]).collect();
-    let groups = surface_groups(pr);
-    let mut w = host_tools::vtk_out::SurfaceSeriesWriter::new(d, reference, quads, groups)?;
-    for f in frames {
-        let u: Vec<[f64; 3]> = local.iter().map(|&g| f.u[g as usize]).collect();
-        w.write_frame(f.time_s, &u)?;
-    }
-    w.finish()?;
-    Ok(())
-}
-
-/// Surface nodes (mesh indices, ascending) and the boundary quads in that numbering.
-fn surface_numbering(pr: &Problem) -> (Vec<u32>, Vec<[u32; 4]>) {
-    let mask = host_tools::compile::surface_node_mask(pr);
-    let local: Vec<u32> = (0..mask.len() as u32)
-        .filter(|&n| mask[n as usize])
-        .collect();
-    let index: std::collections::HashMap<u32, u32> = local
-        .iter()
-        .enumerate()
-        .map(|(i, &g)| (g, i as u32))
-        .collect();
-    let quads = pr
-        .surface_faces
-        .iter()
-        .map(|q| q.map(|n| index[&n]))
-        .collect();
-    (local, quads)
-}
-
-/// Region group of each boundary quad (its cell's region, as a small index).
-fn surface_groups(pr: &Problem) -> Vec<u8> {
-    pr.surface_face_cells
-        .iter()
-        .map(|c| pr.mesh.cell_regions[*c as usize].clamp(0, 255) as u8)
-        .collect()
-}
-
-fn render_frame(
-    p: &std::path::Path,
-    pr: &Problem,
-    f: &SurfaceFrame,
-    out: &board_sim::SimOutput,
-) -> Result<()> {
-    use host_tools::render::{render_surface_png, CapsuleOverlay, SurfaceImage, View};
-    let positions: Vec<[f64; 3]> = pr
-        .mesh
-        .nodes
-        .iter()
-        .zip(&f.u)
-        .map(|(x, u)| core::array::from_fn(|i| x[i] + u[i]))
-        .collect();
-    let values: Vec<f64> =
-        f.u.iter()
-            .map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt())
-            .collect();
-    let tools: Vec<CapsuleOverlay> = pr
-        .contact
-        .as_ref()
-        .map(|c| {
-            c.tools
-                .iter()
-                .map(|t| {
-                    let cap = t.capsule.translated(pr.paths[t.path as usize].at(f.time_s));
-                    CapsuleOverlay {
-                        a: cap.a,
-                        b: cap.b,
-                        radius_m: cap.radius_m,
-                    }
-                })
-                .collect()
-        })
-        .unwrap_or_default();
-    let title = format!(
-        "t = {:.3} s: the graphics stream from {} boards",
-        f.time_s,
-        out.boards.len()
-    );
-    render_surface_png(
-        p,
-        &SurfaceImage {
-            positions: &positions,
-            quads: &pr.surface_faces,
-            quad_groups: &surface_groups(pr),
-            node_values: &values,
-            value_label: "displacement (mm)",
-            value_scale: 1e3,
-            tools: &tools,
-            title: &title,
-            view: View {
-                azimuth_deg: -60.0,
-                elevation_deg: 30.0,
-            },
-            size_px: (1200, 900),
-        },
-    )
 }
 
 struct GlobalSummary {

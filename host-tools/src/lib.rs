@@ -4,20 +4,12 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 // Index loops mirror the tensor formulas in the doc comments.
 #![allow(clippy::needless_range_loop)]
-pub mod bench;
-pub mod builtin;
+pub mod analysis;
 pub mod compile;
-pub mod contact;
 pub mod firmware;
+pub mod geom;
 pub mod mesh;
-pub mod mesh_io;
 pub mod output;
-pub mod ovary;
 pub mod problem;
-pub mod render;
 pub mod scene;
-pub mod scene_mesh;
 pub mod solver;
-pub mod stability;
-pub mod tradeoff;
-pub mod vtk_out;

@@ -1,4 +1,4 @@
-//! Properties of the procedurally generated built-in anatomy (`host_tools::builtin`).
+//! Properties of the procedurally generated built-in anatomy (`host_tools::mesh::builtin`).
 //!
 //! Geometry checks here are computed independently of the generator (own volume split, own
 //! corner Jacobians, own reader for the reference mesh), so they test the mesh, not the
@@ -7,7 +7,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::sync::OnceLock;
 
-use host_tools::builtin::{generate, Anatomy, Level};
+use host_tools::mesh::builtin::{generate, Anatomy, Level};
 use host_tools::mesh::Mesh;
 
 type V3 = [f64; 3];
@@ -184,7 +184,7 @@ fn cells_positive_and_well_shaped() {
         );
         assert!(min_sj >= 0.2, "{level}: min scaled Jacobian {min_sj}");
         assert!(min_edge >= 0.15e-3, "{level}: min edge {min_edge} m");
-        let lib = host_tools::builtin::min_scaled_jacobian(m);
+        let lib = m.min_scaled_jacobian();
         assert!(
             (lib - min_sj).abs() < 1e-12,
             "library {lib} vs test {min_sj}"

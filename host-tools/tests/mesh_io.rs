@@ -7,9 +7,9 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+use host_tools::mesh::io::{generate_box, load_mesh};
 use host_tools::mesh::{Mesh, MeshError};
-use host_tools::mesh_io::{generate_box, load_mesh};
-use host_tools::vtk_out::{PointField, VtkSeriesWriter};
+use host_tools::output::vtk::{PointField, VtkSeriesWriter};
 
 // ---------------------------------------------------------------------------------------
 // helpers
@@ -945,7 +945,7 @@ fn msh_binary_matches_ascii() {
 fn error_truncated_binary_msh() {
     let bytes = msh_binary(&generate_box([1.0; 3], [2, 2, 2]), false);
     let cut = &bytes[..bytes.len() - 30];
-    let e = host_tools::mesh_io::parse_msh(Path::new("cut_binary.msh"), cut).unwrap_err();
+    let e = host_tools::mesh::io::parse_msh(Path::new("cut_binary.msh"), cut).unwrap_err();
     let e = e.to_string();
     assert!(e.contains("cut_binary.msh") && e.contains("at byte"), "{e}");
     assert!(e.contains("element 8") && e.contains("end of file"), "{e}");

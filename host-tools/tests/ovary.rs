@@ -1,4 +1,4 @@
-//! The right ovary added under the right tube (`host_tools::ovary`).
+//! The right ovary added under the right tube (`host_tools::mesh::ovary`).
 //!
 //! Volumes and Jacobians are computed here independently of the generator (own 6-tet split,
 //! own corner Jacobians), so the tests check the mesh, not the generator's helpers.
@@ -7,8 +7,8 @@ use std::collections::HashMap;
 use std::f64::consts::PI;
 use std::sync::OnceLock;
 
-use host_tools::builtin::{generate, Anatomy, Level, REGION_RIGHT_OVIDUCT};
-use host_tools::ovary::{
+use host_tools::mesh::builtin::{generate, Anatomy, Level, REGION_RIGHT_OVIDUCT};
+use host_tools::mesh::ovary::{
     add_right_ovary, OvarySite, OVARY_GAP_M, OVARY_SEMI_AXES_M, REGION_RIGHT_OVARY,
 };
 

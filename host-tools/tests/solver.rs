@@ -218,7 +218,7 @@ fn nearly_incompressible_runs_stable_without_locking() {
 /// run amplify it by far less than 1e3).
 #[test]
 fn f32_and_f64_agree_on_a_short_run() {
-    let mut sc = host_tools::scene_mesh::builtin_scene("coarse").unwrap();
+    let mut sc = host_tools::scene::builtin::builtin_scene("coarse").unwrap();
     sc.solver.steps = Some(1200);
     let p = problem(&sc);
     let a = solver::run_typed::<f64>(&p, "f64", &mut ())

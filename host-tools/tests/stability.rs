@@ -1,12 +1,12 @@
 //! The stability suite at the extremes (issue "speed/accuracy trade and stability").
 //!
-//! Each case lives in `host_tools::stability`, where its expected outcome, its measured
+//! Each case lives in `host_tools::analysis::stability`, where its expected outcome, its measured
 //! figures and every bound with its reason are written down; `pe stability` prints the same
 //! cases as a report. A test here runs one case and asserts that every check held.
 //! The 1e7-step run is `#[ignore]` (about 90 s): `cargo test --release -p host-tools --test
 //! stability -- --ignored` or `pe stability --long`.
 
-use host_tools::stability;
+use host_tools::analysis::stability;
 
 /// ν = 0.49: stable, step follows the bulk wave speed, no locking, energy conserved.
 #[test]

@@ -2,8 +2,8 @@
 
 use std::path::PathBuf;
 
+use host_tools::analysis::tradeoff::{self, Interpolator, Options};
 use host_tools::scene::Scene;
-use host_tools::tradeoff::{self, Interpolator, Options};
 
 /// A damped cantilever under gravity, settled by the end (damping 30/s ≈ critical for its
 /// first bending mode, ω₁ ≈ 14 rad/s, over 1 s): the errors are then mostly spatial.
@@ -40,7 +40,7 @@ fn temp_dir(name: &str) -> PathBuf {
 /// a point far outside is refused rather than extrapolated.
 #[test]
 fn interpolation_is_exact_for_linear_fields_on_a_distorted_mesh() {
-    let mesh = host_tools::stability::skewed_mesh();
+    let mesh = host_tools::analysis::stability::skewed_mesh();
     let lin = |x: [f64; 3]| {
         [
             0.3 * x[0] - 0.1 * x[2],

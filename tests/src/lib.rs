@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use host_tools::compile::compile_to_dir;
 use host_tools::compile::partition::Machine;
 use host_tools::problem::Problem;
+use host_tools::scene::builtin::builtin_scene;
 use host_tools::scene::Scene;
-use host_tools::scene_mesh::builtin_scene;
 use pe_firmware::profile::PE_BOARD;
 
 /// `../shared/meshes` beside the checkout (tests read the organ meshes from there).

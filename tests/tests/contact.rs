@@ -215,7 +215,7 @@ fn the_bounding_box_interval_never_misses_a_surface_at_the_speed_bound() {
 /// pair's forces sum to zero to round-off (1e-12 of their magnitudes).
 #[test]
 fn builtin_scene_probe_tube_and_ovary_on_64_boards_equal_serial() {
-    let mut sc = host_tools::scene_mesh::builtin_scene("coarse").unwrap();
+    let mut sc = host_tools::scene::builtin::builtin_scene("coarse").unwrap();
     sc.solver.steps = None;
     let p = host_tools::problem::Problem::from_scene(&sc, std::path::Path::new(".")).unwrap();
     let serial = solver::run(&p, "serial", &mut ()).unwrap();

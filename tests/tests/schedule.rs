@@ -241,7 +241,7 @@ fn real_mesh_partitions_are_balanced() {
         "sofaenv_gallbladder_hex2k.msh",
         "uterus_scaffold_hex20k.msh",
     ] {
-        let mesh = host_tools::mesh_io::load_mesh(&dir.join(f)).unwrap();
+        let mesh = host_tools::mesh::io::load_mesh(&dir.join(f)).unwrap();
         let part = partition(&mesh, Machine::parse("4x4x4").unwrap()).unwrap();
         let mut count = vec![0usize; 64];
         for b in part {

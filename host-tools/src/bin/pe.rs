@@ -6,8 +6,9 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use host_tools::output;
 use host_tools::problem::Problem;
+use host_tools::scene::builtin::builtin_scene;
+use host_tools::scene::settings::{IntegrationArg, PrecisionArg};
 use host_tools::scene::Scene;
-use host_tools::scene_mesh::builtin_scene;
 use host_tools::solver::{self, Observer};
 
 #[derive(Parser)]
@@ -68,10 +69,10 @@ enum Command {
         steps: Option<u64>,
         /// Override the scene's precision (f32 | f64).
         #[arg(long)]
-        precision: Option<String>,
+        precision: Option<PrecisionArg>,
         /// Override the scene's integration (reduced | full).
         #[arg(long)]
-        integration: Option<String>,
+        integration: Option<IntegrationArg>,
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
@@ -96,13 +97,13 @@ enum Command {
         output: PathBuf,
         /// Override the scene's precision (f32 | f64).
         #[arg(long)]
-        precision: Option<String>,
+        precision: Option<PrecisionArg>,
         /// Override the scene's step count.
         #[arg(long)]
         steps: Option<u64>,
         /// Override the scene's integration (reduced | full).
         #[arg(long)]
-        integration: Option<String>,
+        integration: Option<IntegrationArg>,
     },
     /// Flashable artefacts per board of a compiled schedule: the firmware ELF with the
     /// board's position, the schedule blob, and OUT/manifest.json with the commands that
@@ -204,10 +205,10 @@ fn main() -> Result<()> {
                 sc.solver.steps = Some(n);
             }
             if let Some(p) = precision {
-                sc.solver.precision = p;
+                sc.solver.precision = p.into();
             }
             if let Some(i) = integration {
-                sc.solver.integration = i;
+                sc.solver.integration = i.into();
             }
             let problem =
                 Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
@@ -286,10 +287,10 @@ fn main() -> Result<()> {
         } => {
             let (mut sc, dir, name) = scene.load()?;
             if let Some(p) = precision {
-                sc.solver.precision = p;
+                sc.solver.precision = p.into();
             }
             if let Some(i) = integration {
-                sc.solver.integration = i;
+                sc.solver.integration = i.into();
             }
             if let Some(n) = steps {
                 sc.solver.steps = Some(n);
@@ -380,21 +381,23 @@ fn main() -> Result<()> {
                 host_tools::compile::inspect(&dir, [c[0], c[1], c[2]])?
             );
         }
-        Command::Bench { elements, steps } => host_tools::bench::run_cli(elements, steps)?,
+        Command::Bench { elements, steps } => {
+            host_tools::analysis::bench::run_cli(elements, steps)?
+        }
         Command::Tradeoff {
             scene,
             output,
             fine,
         } => {
             let (sc, dir, name) = scene.load()?;
-            let opts = host_tools::tradeoff::Options {
+            let opts = host_tools::analysis::tradeoff::Options {
                 fine,
                 level: scene.builtin.then(|| scene.level.clone()),
             };
-            host_tools::tradeoff::run_cli(&sc, &dir, &name, &opts, &output)?
+            host_tools::analysis::tradeoff::run_cli(&sc, &dir, &name, &opts, &output)?
         }
         Command::Stability { output, long, only } => {
-            host_tools::stability::run_cli(output.as_deref(), long, only.as_deref())?
+            host_tools::analysis::stability::run_cli(output.as_deref(), long, only.as_deref())?
         }
     }
     Ok(())

@@ -11,7 +11,7 @@ use pe_firmware::physics::{CentralDifference, MaterialLaw, ReferenceHex};
 use pe_firmware::runtime::Capacities;
 
 use super::plan::Plan;
-use crate::contact::ContactRun;
+use crate::problem::contact::ContactRun;
 use crate::problem::{NodeKind, Problem};
 
 /// A compiled image with its figures.
@@ -312,17 +312,6 @@ pub fn contact_tables(
     Ok(Some((run, boards)))
 }
 
-/// Mesh nodes on the boundary (what the graphics engine draws).
-pub fn surface_node_mask(problem: &Problem) -> Vec<bool> {
-    let mut m = vec![false; problem.mesh.nodes.len()];
-    for q in &problem.surface_faces {
-        for &n in q {
-            m[n as usize] = true;
-        }
-    }
-    m
-}
-
 /// The graphics stream's timing for step `dt`.
 pub fn graphics_params(problem: &Problem, dt: f64) -> GraphicsParams {
     let interval =
@@ -343,13 +332,13 @@ pub fn compile_images(problem: &Problem, plan: &Plan) -> Result<Vec<BoardImage>>
     let shared = Shared {
         dt_s: dt,
         contact: contact_tables(problem, plan, dt)?,
-        on_surface: surface_node_mask(problem),
+        on_surface: problem.surface_node_mask(),
         graphics: graphics_params(problem, dt),
     };
     let hourglass = problem.solver.hourglass;
     let modulus = |m: u16| problem.laws[m as usize].hourglass_modulus();
-    let full = problem.solver.integration == "full";
-    let f32 = problem.solver.precision == "f32";
+    let full = problem.solver.integration == Integration::Full;
+    let f32 = problem.solver.precision == Precision::F32;
     (0..plan.boards.len())
         .map(|b| match (f32, full) {
             (true, true) => write_image(problem, plan, &shared, b, |r, n, m| r.full::<f32>(n, m)),

@@ -58,8 +58,8 @@ pub fn compile_to_dir(
         scene_source: scene_source.to_string(),
         machine: machine.dims,
         profile: profile.name.to_string(),
-        precision: problem.solver.precision.clone(),
-        integration: problem.solver.integration.clone(),
+        precision: problem.solver.precision.name().to_string(),
+        integration: problem.solver.integration.name().to_string(),
         dt_s: dt,
         steps: problem.steps(dt),
         boards: images

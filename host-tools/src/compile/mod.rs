@@ -35,8 +35,7 @@ mod report;
 pub use decode::{decode_image, DecodedImage, DecodedRound};
 pub use fit::{check_fit, fit_problems};
 pub use image::{
-    compile_images, contact_tables, graphics_params, image_file_name, surface_node_mask,
-    write_images, BoardImage,
+    compile_images, contact_tables, graphics_params, image_file_name, write_images, BoardImage,
 };
 pub use inspect::inspect;
 pub use manifest::{compile_to_dir, read_manifest, Manifest, ManifestBoard};

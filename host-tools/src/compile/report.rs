@@ -7,7 +7,7 @@ use pe_firmware::profile::BoardProfile;
 use serde::Serialize;
 
 use super::image::BoardImage;
-use super::image::{contact_tables, graphics_params, image_file_name, surface_node_mask};
+use super::image::{contact_tables, graphics_params, image_file_name};
 use super::plan::Plan;
 use crate::problem::Problem;
 
@@ -206,7 +206,7 @@ pub fn report(
     profile: &BoardProfile,
 ) -> Result<CompileReport> {
     let (dt, _) = problem.time_step()?;
-    let w = if problem.solver.precision == "f32" {
+    let w = if problem.solver.precision == Precision::F32 {
         4
     } else {
         8
@@ -251,12 +251,12 @@ pub fn report(
     let bytes_total: usize = link_bytes.iter().sum();
     let rate = 1.0 / dt;
     let cost = pe_firmware::profile::measured_cost(
-        if problem.solver.precision == "f32" {
+        if problem.solver.precision == Precision::F32 {
             Precision::F32
         } else {
             Precision::F64
         },
-        if problem.solver.integration == "full" {
+        if problem.solver.integration == Integration::Full {
             Integration::Full
         } else {
             Integration::Reduced
@@ -307,7 +307,7 @@ pub fn report(
         })
         .collect();
     let gp = graphics_params(problem, dt);
-    let mask = surface_node_mask(problem);
+    let mask = problem.surface_node_mask();
     let surface_nodes = mask.iter().filter(|m| **m).count();
     let packets_per_frame: usize = plan
         .boards
@@ -352,8 +352,8 @@ pub fn report(
         machine: plan.machine.to_string(),
         rounds: plan.rounds,
         profile: profile.name.to_string(),
-        precision: problem.solver.precision.clone(),
-        integration: problem.solver.integration.clone(),
+        precision: problem.solver.precision.name().to_string(),
+        integration: problem.solver.integration.name().to_string(),
         dt_s: dt,
         steps_per_s: rate,
         elements: problem.mesh.cells.len(),

@@ -40,8 +40,15 @@ pub enum Precision {
     F64,
 }
 
+/// Element kind of the image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Integration {
+    Reduced,
+    Full,
+}
+
 impl Precision {
-    /// The name scenes and reports use ("f32", "f64").
+    /// The name scenes, manifests and reports use: "f32" | "f64".
     pub const fn name(self) -> &'static str {
         match self {
             Precision::F32 => "f32",
@@ -50,20 +57,25 @@ impl Precision {
     }
 }
 
-/// Element kind of the image.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub enum Integration {
-    Reduced,
-    Full,
-}
-
 impl Integration {
-    /// The name scenes and reports use ("reduced", "full").
+    /// The name scenes, manifests and reports use: "reduced" | "full".
     pub const fn name(self) -> &'static str {
         match self {
             Integration::Reduced => "reduced",
             Integration::Full => "full",
         }
+    }
+}
+
+impl core::fmt::Display for Precision {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl core::fmt::Display for Integration {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
     }
 }
 

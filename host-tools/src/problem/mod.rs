@@ -1,6 +1,10 @@
 //! A scene resolved against its mesh: per-cell materials, node sets, constraints and loads,
 //! all in `f64`. This is what the serial solver and the schedule compiler start from.
 
+pub mod contact;
+pub mod elements;
+pub mod frequency;
+
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -8,7 +12,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use pe_firmware::physics::{LameParameters, MaterialLaw, ReferenceHex, Volumetric};
 
 use crate::mesh::Mesh;
-use crate::scene::{MaterialSpec, RegionRef, Scene, Selector, SolverSpec};
+use crate::scene::{Law, MaterialSpec, RegionRef, Scene, Selector, SolverSpec};
 
 /// A piecewise-linear function of time through `(t, value)` points, held constant outside.
 #[derive(Clone, Debug, PartialEq)]
@@ -65,7 +69,7 @@ pub struct Problem {
     /// True (gravitational) lumped mass per node, kg.
     pub mass: Vec<f64>,
     /// Tools and contact pairs (None: the scene has no contact).
-    pub contact: Option<crate::contact::ContactSetup>,
+    pub contact: Option<crate::problem::contact::ContactSetup>,
     /// Mesh boundary faces (outward), the surface the graphics engine draws, and the cell
     /// each belongs to.
     pub surface_faces: Vec<[u32; 4]>,
@@ -100,15 +104,15 @@ fn law_from_spec(m: &MaterialSpec, what: &str) -> Result<MaterialLaw<f64>> {
     if !(m.density > 0.0 && m.density.is_finite()) {
         bail!("{what}: `density` must be positive, got {}", m.density);
     }
-    match m.law.as_str() {
-        "neo-hookean" | "neo-hookean-decoupled" => {
+    match m.law {
+        Law::NeoHookean | Law::NeoHookeanDecoupled => {
             let e = positive(need(m.youngs_modulus, "youngs_modulus")?, "youngs_modulus")?;
             let nu = need(m.poisson_ratio, "poisson_ratio")?;
             if !(-1.0 < nu && nu < 0.5) {
                 bail!("{what}: `poisson_ratio` must lie in (-1, 0.5), got {nu}");
             }
             let l = LameParameters::from_young_poisson(e, nu);
-            Ok(if m.law == "neo-hookean" {
+            Ok(if m.law == Law::NeoHookean {
                 MaterialLaw::NeoHookean(l)
             } else {
                 MaterialLaw::NeoHookeanDecoupled {
@@ -117,7 +121,7 @@ fn law_from_spec(m: &MaterialSpec, what: &str) -> Result<MaterialLaw<f64>> {
                 }
             })
         }
-        "mooney-rivlin" => {
+        Law::MooneyRivlin => {
             let c10 = need(m.c10, "c10")?;
             let c01 = need(m.c01, "c01")?;
             if !(c10 + c01 > 0.0) {
@@ -136,9 +140,6 @@ fn law_from_spec(m: &MaterialSpec, what: &str) -> Result<MaterialLaw<f64>> {
                 volumetric,
             })
         }
-        other => bail!(
-            "{what}: unknown law \"{other}\" (neo-hookean | neo-hookean-decoupled | mooney-rivlin)"
-        ),
     }
 }
 
@@ -339,10 +340,10 @@ impl Problem {
             (paths.len() - 1) as u32
         };
         let (surface_faces, surface_face_cells): (Vec<[u32; 4]>, Vec<u32>) =
-            crate::contact::boundary_faces_with_cells(&mesh)
+            crate::problem::contact::boundary_faces_with_cells(&mesh)
                 .into_iter()
                 .unzip();
-        let contact = crate::contact::resolve(
+        let contact = crate::problem::contact::resolve(
             scene,
             &mesh,
             &surface_faces,
@@ -356,18 +357,6 @@ impl Problem {
         if !(s.graphics_interval > 0.0) || s.graphics_spread_steps == 0 {
             bail!(
                 "[solver] graphics_interval must be positive and graphics_spread_steps at least 1"
-            );
-        }
-        if !matches!(s.precision.as_str(), "f32" | "f64") {
-            bail!(
-                "[solver] precision = \"{}\": expected \"f32\" or \"f64\"",
-                s.precision
-            );
-        }
-        if !matches!(s.integration.as_str(), "reduced" | "full") {
-            bail!(
-                "[solver] integration = \"{}\": expected \"reduced\" or \"full\"",
-                s.integration
             );
         }
         if !(s.mass_scaling >= 1.0) {
@@ -415,10 +404,21 @@ impl Problem {
         })
     }
 
+    /// True for the nodes on the mesh's boundary (the surface the graphics engine draws).
+    pub fn surface_node_mask(&self) -> Vec<bool> {
+        let mut m = vec![false; self.mesh.nodes.len()];
+        for q in &self.surface_faces {
+            for &n in q {
+                m[n as usize] = true;
+            }
+        }
+        m
+    }
+
     /// Reads the scene's mesh (file, generated box or built-in anatomy) and resolves it.
     pub fn from_scene(scene: &Scene, scene_dir: &Path) -> Result<Problem> {
-        let (mesh, sets) =
-            crate::scene_mesh::load(&scene.mesh, scene_dir).context("loading the scene's mesh")?;
+        let (mesh, sets) = crate::scene::mesh_source::load(&scene.mesh, scene_dir)
+            .context("loading the scene's mesh")?;
         Problem::new(scene, mesh, sets)
     }
 
@@ -452,8 +452,19 @@ impl Problem {
             return Ok(*c);
         }
         let (estimate, cell) = self.element_dt_estimate();
-        let model = crate::solver::Model::<f64>::new(self, estimate);
-        let omega = model.max_frequency(200)?;
+        // At rest, in f64, from the deterministic start vector: the solver's
+        // `Model::<f64>::max_frequency(200)` without building the model.
+        let elements = elements::Elements::<f64>::build(self);
+        let laws: Vec<MaterialLaw<f64>> = self.laws.iter().map(|l| l.cast::<f64>()).collect();
+        let u = vec![[0.0; 3]; self.mesh.nodes.len()];
+        let state = frequency::Linearised {
+            problem: self,
+            elements: &elements,
+            laws: &laws,
+            u: &u,
+        };
+        let mut v = frequency::start_vector(self);
+        let omega = frequency::max_frequency_from(&state, &mut v, 200)?;
         let power = if omega > 0.0 {
             2.0 / omega
         } else {

@@ -107,6 +107,7 @@ use std::f64::consts::{FRAC_PI_4, PI};
 use std::fmt;
 use std::str::FromStr;
 
+use crate::geom::{add, cross, dot, lerp, scale, sub, unit, V3};
 use crate::mesh::Mesh;
 
 /// Physical group tag of the body of the uterus.
@@ -285,37 +286,6 @@ const TUBE_R_IN: f64 = 0.875;
 const TUBE_FLARE: f64 = 14.0;
 /// Width of the body-surface patch a tube grows from.
 const TUBE_PATCH: f64 = 12.0;
-
-type V3 = [f64; 3];
-
-fn add(a: V3, b: V3) -> V3 {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn scale(a: V3, s: f64) -> V3 {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn norm(a: V3) -> f64 {
-    dot(a, a).sqrt()
-}
-fn unit(a: V3) -> V3 {
-    scale(a, 1.0 / norm(a))
-}
-fn lerp(a: V3, b: V3, t: f64) -> V3 {
-    add(a, scale(sub(b, a), t))
-}
 
 /// The midline: straight along +x, a circular bend towards −z, straight to the end.
 struct Midline {
@@ -838,41 +808,4 @@ pub fn generate(level: Level) -> Anatomy {
             tube_radius_m: TUBE_R_OUT * mm,
         },
     }
-}
-
-/// Corner neighbours (edge directions ξ, η, ζ) of each hexahedron corner in Gmsh/VTK order.
-const CORNER_EDGES: [[usize; 3]; 8] = [
-    [1, 3, 4],
-    [2, 0, 5],
-    [3, 1, 6],
-    [0, 2, 7],
-    [7, 5, 0],
-    [4, 6, 1],
-    [5, 7, 2],
-    [6, 4, 3],
-];
-
-/// Smallest scaled Jacobian of a hexahedron over its 8 corners (1 for a cube, ≤ 0 if
-/// inverted or degenerate).
-pub fn scaled_jacobian(x: &[[f64; 3]; 8]) -> f64 {
-    CORNER_EDGES
-        .iter()
-        .enumerate()
-        .map(|(c, e)| {
-            let v: [V3; 3] = core::array::from_fn(|k| sub(x[e[k]], x[c]));
-            let l = norm(v[0]) * norm(v[1]) * norm(v[2]);
-            if l > 0.0 {
-                dot(cross(v[0], v[1]), v[2]) / l
-            } else {
-                0.0
-            }
-        })
-        .fold(f64::INFINITY, f64::min)
-}
-
-/// Smallest scaled Jacobian over all cells of a mesh (+∞ for an empty mesh).
-pub fn min_scaled_jacobian(mesh: &Mesh) -> f64 {
-    (0..mesh.cells.len())
-        .map(|c| scaled_jacobian(&mesh.cell_coords(c)))
-        .fold(f64::INFINITY, f64::min)
 }

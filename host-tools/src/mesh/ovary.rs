@@ -51,7 +51,8 @@
 //! The ovary's lower part (nodes below `centre.z − c/2`) is meant to be held fixed: the
 //! ovary hangs from its ligaments and does not drop away when pressed from above.
 
-use crate::builtin::{Anatomy, Level, REGION_RIGHT_OVIDUCT};
+use crate::geom::{add, cross, dot, lerp, norm, scale, sub, V3};
+use crate::mesh::builtin::{Anatomy, Level, REGION_RIGHT_OVIDUCT};
 
 /// Region (physical group) tag of the right ovary.
 pub const REGION_RIGHT_OVARY: i32 = 6;
@@ -118,34 +119,6 @@ fn params(level: Level) -> Params {
             core_round: 0.75,
         },
     }
-}
-
-type V3 = [f64; 3];
-
-fn add(a: V3, b: V3) -> V3 {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn scale(a: V3, s: f64) -> V3 {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn norm(a: V3) -> f64 {
-    dot(a, a).sqrt()
-}
-fn lerp(a: V3, b: V3, t: f64) -> V3 {
-    add(a, scale(sub(b, a), t))
 }
 
 /// The standard cube-to-ball map: [−1, 1]³ onto the unit ball, cube faces onto the sphere.

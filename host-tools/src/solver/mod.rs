@@ -4,83 +4,17 @@
 use std::time::Instant;
 
 use anyhow::{anyhow, Result};
+use pe_firmware::image::Precision;
 use pe_firmware::physics::contact::{
     build_candidates, check_travel, evaluate_pairs, evaluate_tools, Candidate, ContactModel,
     ContactStats,
 };
-use pe_firmware::physics::explicit::{accumulate_internal_forces, stored_energy};
-use pe_firmware::physics::{
-    CentralDifference, HexElement, HexFull, HexReduced, MaterialLaw, PhysicsError, Real,
-};
+use pe_firmware::physics::{CentralDifference, MaterialLaw, PhysicsError, Real};
 use serde::Serialize;
 
+use crate::problem::elements::Elements;
+use crate::problem::frequency;
 use crate::problem::{NodeKind, Problem};
-
-/// Elements of one integration kind.
-pub enum Elements<T> {
-    Reduced(Vec<HexReduced<T>>),
-    Full(Vec<HexFull<T>>),
-}
-
-impl<T: Real> Elements<T> {
-    pub fn build(p: &Problem) -> Self {
-        let cells = p.mesh.cells.iter().zip(&p.reference).zip(&p.cell_material);
-        if p.solver.integration == "full" {
-            Elements::Full(cells.map(|((c, r), m)| r.full(*c, *m)).collect())
-        } else {
-            Elements::Reduced(
-                cells
-                    .map(|((c, r), m)| {
-                        let modulus = p.laws[*m as usize].hourglass_modulus();
-                        r.reduced(*c, *m, modulus, p.solver.hourglass)
-                    })
-                    .collect(),
-            )
-        }
-    }
-
-    pub fn len(&self) -> usize {
-        match self {
-            Elements::Reduced(v) => v.len(),
-            Elements::Full(v) => v.len(),
-        }
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
-    pub fn internal_forces(
-        &self,
-        laws: &[MaterialLaw<T>],
-        u: &[[T; 3]],
-        f: &mut [[T; 3]],
-    ) -> Result<(), PhysicsError> {
-        match self {
-            Elements::Reduced(v) => accumulate_internal_forces(v, 0, laws, u, f),
-            Elements::Full(v) => accumulate_internal_forces(v, 0, laws, u, f),
-        }
-    }
-
-    pub fn stored_energy(
-        &self,
-        laws: &[MaterialLaw<T>],
-        u: &[[T; 3]],
-    ) -> Result<f64, PhysicsError> {
-        match self {
-            Elements::Reduced(v) => stored_energy(v, laws, u),
-            Elements::Full(v) => stored_energy(v, laws, u),
-        }
-    }
-
-    /// Nodes of element `e`.
-    pub fn nodes(&self, e: usize) -> [u32; 8] {
-        match self {
-            Elements::Reduced(v) => *v[e].nodes(),
-            Elements::Full(v) => *v[e].nodes(),
-        }
-    }
-}
 
 /// Serial explicit model in scalar type `T`.
 pub struct Model<'p, T> {
@@ -115,7 +49,7 @@ pub struct Model<'p, T> {
 
 /// The serial solver's contact state: the tables, the search and the forces of the last step.
 pub struct ContactState {
-    pub run: crate::contact::ContactRun,
+    pub run: crate::problem::contact::ContactRun,
     pub candidates: Vec<Candidate>,
     /// Contact-node positions at the last check.
     pub at_check: Vec<[f64; 3]>,
@@ -493,9 +427,9 @@ impl Observer for () {
 
 /// Runs the problem to its end in its scene's precision.
 pub fn run(problem: &Problem, name: &str, observer: &mut dyn Observer) -> Result<RunOutput> {
-    match problem.solver.precision.as_str() {
-        "f32" => run_typed::<f32>(problem, name, observer),
-        _ => run_typed::<f64>(problem, name, observer),
+    match problem.solver.precision {
+        Precision::F32 => run_typed::<f32>(problem, name, observer),
+        Precision::F64 => run_typed::<f64>(problem, name, observer),
     }
 }
 
@@ -551,7 +485,7 @@ pub fn run_typed<T: Real>(
     let report = RunReport {
         scene: name.to_string(),
         precision: T::NAME.to_string(),
-        integration: problem.solver.integration.clone(),
+        integration: problem.solver.integration.name().to_string(),
         steps,
         dt_s: dt,
         dt_critical_s: dt_crit,
@@ -718,9 +652,7 @@ impl DtMonitor {
 
 impl<'p, T: Real> Model<'p, T> {
     /// Highest angular frequency `ω_max` (rad/s) of the free nodes, linearised about the
-    /// current state, by power iteration on `M⁻¹K` (`K v` by a central difference of the
-    /// internal forces). The stable central-difference step is `2/ω_max` (undamped).
-    /// Costs about two force evaluations per iteration.
+    /// current state (see [`frequency::max_frequency_from`]).
     pub fn max_frequency(&self, iterations: usize) -> Result<f64> {
         let mut v = self.start_vector();
         self.max_frequency_from(&mut v, iterations)
@@ -728,103 +660,19 @@ impl<'p, T: Real> Model<'p, T> {
 
     /// Deterministic start vector of the power iteration, every free component excited.
     pub fn start_vector(&self) -> Vec<[f64; 3]> {
-        self.problem
-            .node_kind
-            .iter()
-            .enumerate()
-            .map(|(k, kind)| {
-                core::array::from_fn(|i| {
-                    if *kind == crate::problem::NodeKind::Free {
-                        (((k * 3 + i) as f64) * 0.7548776662).fract() - 0.5
-                    } else {
-                        0.0
-                    }
-                })
-            })
-            .collect()
+        frequency::start_vector(self.problem)
     }
 
     /// [`Model::max_frequency`] from the start vector `v` (warm start: the dominant mode of
     /// an earlier call); leaves the last iterate in `v` for the next call.
     pub fn max_frequency_from(&self, v: &mut Vec<[f64; 3]>, iterations: usize) -> Result<f64> {
-        let n = self.u.len();
-        let free: Vec<bool> = self
-            .problem
-            .node_kind
-            .iter()
-            .map(|k| *k == crate::problem::NodeKind::Free)
-            .collect();
-        let m: Vec<f64> = self
-            .problem
-            .mass
-            .iter()
-            .map(|m| m * self.problem.solver.mass_scaling)
-            .collect();
-        if v.len() != n {
-            *v = self.start_vector();
-        }
-        let scale = self
-            .problem
-            .reference
-            .iter()
-            .map(|r| r.characteristic_length)
-            .fold(f64::INFINITY, f64::min);
-        // The finite-difference probe must stand well above the scalar's resolution of the
-        // displacements: 1e-7 of the smallest element in f64, 1e-3 in f32 (ε_f32 ≈ 6e-8).
-        let low_precision = T::from_f64(1.0 + 1e-10).to_f64() == 1.0;
-        let eps = if low_precision { 1e-3 } else { 1e-7 } * scale;
-        let mut lambda = 0.0;
-        let mut fp = vec![[T::ZERO; 3]; n];
-        let mut fm = vec![[T::ZERO; 3]; n];
-        for _ in 0..iterations {
-            let norm = v
-                .iter()
-                .zip(&m)
-                .map(|(a, mm)| mm * (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]))
-                .sum::<f64>()
-                .sqrt();
-            if !(norm > 0.0) {
-                // No free node (or a lost vector): no mode to limit the step.
-                return Ok(0.0);
-            }
-            v.iter_mut()
-                .for_each(|a| a.iter_mut().for_each(|x| *x /= norm));
-            let up: Vec<[T; 3]> = self
-                .u
-                .iter()
-                .zip(v.iter())
-                .map(|(u, d)| core::array::from_fn(|i| T::from_f64(u[i].to_f64() + eps * d[i])))
-                .collect();
-            let um: Vec<[T; 3]> = self
-                .u
-                .iter()
-                .zip(v.iter())
-                .map(|(u, d)| core::array::from_fn(|i| T::from_f64(u[i].to_f64() - eps * d[i])))
-                .collect();
-            fp.iter_mut().for_each(|f| *f = [T::ZERO; 3]);
-            fm.iter_mut().for_each(|f| *f = [T::ZERO; 3]);
-            self.elements
-                .internal_forces(&self.laws, &up, &mut fp)
-                .map_err(|e| anyhow!("{e}"))?;
-            self.elements
-                .internal_forces(&self.laws, &um, &mut fm)
-                .map_err(|e| anyhow!("{e}"))?;
-            let mut vkv = 0.0;
-            let mut w = vec![[0.0; 3]; n];
-            for k in 0..n {
-                if !free[k] {
-                    continue;
-                }
-                for i in 0..3 {
-                    let kv = (fp[k][i].to_f64() - fm[k][i].to_f64()) / (2.0 * eps);
-                    vkv += v[k][i] * kv;
-                    w[k][i] = kv / m[k];
-                }
-            }
-            lambda = vkv; // v is M-normalised: Rayleigh quotient
-            *v = w;
-        }
-        Ok(lambda.max(0.0).sqrt())
+        let state = frequency::Linearised {
+            problem: self.problem,
+            elements: &self.elements,
+            laws: &self.laws,
+            u: &self.u,
+        };
+        frequency::max_frequency_from(&state, v, iterations)
     }
 }
 

@@ -1,6 +1,10 @@
 //! Hexahedral volume meshes on the host: the common in-memory form every importer and
 //! generator produces.
 
+pub mod builtin;
+pub mod io;
+pub mod ovary;
+
 use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
 
@@ -101,19 +105,6 @@ pub const HEX_FACES: [[usize; 4]; 6] = [
     [1, 2, 6, 5], // right (+xi)
     [2, 3, 7, 6], // back (+eta)
     [3, 0, 4, 7], // left (-xi)
-];
-
-/// For each hexahedron corner, its three edge neighbours in right-handed order
-/// (the corner's local xi, eta, zeta directions), as used by the scaled Jacobian.
-const HEX_CORNER_NEIGHBOURS: [[usize; 3]; 8] = [
-    [1, 3, 4],
-    [2, 0, 5],
-    [3, 1, 6],
-    [0, 2, 7],
-    [7, 5, 0],
-    [4, 6, 1],
-    [5, 7, 2],
-    [6, 4, 3],
 ];
 
 /// A linear hexahedral mesh in metres.
@@ -298,16 +289,7 @@ impl Mesh {
     /// `det[e1 e2 e3] / (|e1| |e2| |e3|)` with `e` the corner's three edges. 1 for a cube,
     /// <= 0 for an inverted or degenerate corner.
     pub fn scaled_jacobian(&self, cell: usize) -> f64 {
-        let x = self.cell_coords(cell);
-        let mut min = f64::INFINITY;
-        for (a, nb) in HEX_CORNER_NEIGHBOURS.iter().enumerate() {
-            let e = nb.map(|b| sub(x[b], x[a]));
-            let det = dot(e[0], cross(e[1], e[2]));
-            let len = norm(e[0]) * norm(e[1]) * norm(e[2]);
-            let sj = if len > 0.0 { det / len } else { 0.0 };
-            min = min.min(sj);
-        }
-        min
+        crate::geom::scaled_jacobian(&self.cell_coords(cell))
     }
 
     /// Minimum [`Mesh::scaled_jacobian`] over all cells (`+inf` for a mesh without cells).
@@ -317,24 +299,4 @@ impl Mesh {
             .map(|c| self.scaled_jacobian(c))
             .fold(f64::INFINITY, f64::min)
     }
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
 }

@@ -1,9 +1,17 @@
 //! Scene files (TOML, SI units): mesh, materials, boundary conditions, loads and solver
 //! settings. Every key is documented in the README; unknown keys are errors.
 
+pub mod builders;
+pub mod builtin;
+pub mod mesh_source;
+pub mod settings;
+
 use std::path::{Path, PathBuf};
 
+pub use pe_firmware::image::{Integration, Precision};
 use serde::{Deserialize, Serialize};
+
+pub use settings::Law;
 
 /// A whole scene as read from a file (or built in code for the built-in scene).
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -163,7 +171,7 @@ pub struct MaterialSpec {
     /// Physical group this material applies to; omitted: every cell not otherwise covered.
     pub region: Option<RegionRef>,
     /// "neo-hookean" | "neo-hookean-decoupled" | "mooney-rivlin"
-    pub law: String,
+    pub law: Law,
     pub youngs_modulus: Option<f64>,
     pub poisson_ratio: Option<f64>,
     pub c10: Option<f64>,
@@ -254,9 +262,11 @@ pub struct GravitySpec {
 #[serde(deny_unknown_fields, default)]
 pub struct SolverSpec {
     /// "f64" | "f32"
-    pub precision: String,
+    #[serde(with = "settings::precision_text")]
+    pub precision: Precision,
     /// "reduced" | "full"
-    pub integration: String,
+    #[serde(with = "settings::integration_text")]
+    pub integration: Integration,
     /// Hourglass coefficient κ_hg (reduced integration only).
     pub hourglass: f64,
     /// Mass-proportional damping α (1/s).
@@ -296,8 +306,8 @@ pub struct SolverSpec {
 impl Default for SolverSpec {
     fn default() -> Self {
         SolverSpec {
-            precision: "f64".into(),
-            integration: "reduced".into(),
+            precision: Precision::F64,
+            integration: Integration::Reduced,
             hourglass: 0.1,
             damping: 0.0,
             dt_safety: 0.9,
@@ -318,16 +328,16 @@ impl Default for SolverSpec {
 }
 
 fn one_or_many<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<MaterialSpec>, D::Error> {
-    #[derive(Deserialize)]
-    #[serde(untagged)]
-    enum OneOrMany {
-        One(Box<MaterialSpec>),
-        Many(Vec<MaterialSpec>),
+    // Through a `toml::Value` rather than an untagged enum, so that an error inside a
+    // material (an unknown law, say) reaches the user instead of "no variant matched".
+    use serde::de::Error;
+    let value = toml::Value::deserialize(d)?;
+    match value {
+        toml::Value::Array(_) => Vec::<MaterialSpec>::deserialize(value).map_err(D::Error::custom),
+        _ => MaterialSpec::deserialize(value)
+            .map(|m| vec![m])
+            .map_err(D::Error::custom),
     }
-    Ok(match OneOrMany::deserialize(d)? {
-        OneOrMany::One(m) => vec![*m],
-        OneOrMany::Many(v) => v,
-    })
 }
 
 impl Scene {

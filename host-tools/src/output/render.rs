@@ -1,5 +1,5 @@
 //! PNG snapshots of a deformed organ surface, drawn with `plotters` (no system fonts:
-//! DejaVu Sans is registered as "sans-serif", see [`crate::tradeoff`]).
+//! DejaVu Sans is registered as "sans-serif", see [`crate::output::font`]).
 //!
 //! Orthographic projection along the view direction (world z is "up" on the image), the
 //! surface fitted to the image with a margin, quads painted far to near by mean depth, each
@@ -13,6 +13,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
+use crate::geom::{cross, dot, sub};
 use anyhow::{anyhow, bail, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -116,22 +117,6 @@ fn colormap(t: f64) -> [f64; 3] {
 fn rgb(c: [f64; 3], factor: f64) -> RGBColor {
     let ch = |x: f64| (x * factor).round().clamp(0.0, 255.0) as u8;
     RGBColor(ch(c[0]), ch(c[1]), ch(c[2]))
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 fn finite3(p: &[f64; 3]) -> bool {
@@ -721,7 +706,7 @@ pub fn render_surface_png(path: &Path, img: &SurfaceImage<'_>) -> Result<()> {
         );
     }
     let prep = prepare(img).map_err(|m| anyhow!("rendering {}: {m}", path.display()))?;
-    crate::tradeoff::register_font();
+    crate::output::font::register_font();
     let err = |e: &dyn std::fmt::Display| anyhow!("rendering {}: {e}", path.display());
     let root = BitMapBackend::new(path, img.size_px).into_drawing_area();
     draw(&root, img, &prep).map_err(|e| err(&e))?;
@@ -787,7 +772,7 @@ mod tests {
     /// The RGB pixels `render_surface_png` would write, drawn into memory.
     fn render_rgb(img: &SurfaceImage<'_>) -> (Vec<u8>, Prepared) {
         let prep = prepare(img).unwrap();
-        crate::tradeoff::register_font();
+        crate::output::font::register_font();
         let (w, h) = img.size_px;
         let mut buf = vec![0u8; 3 * (w * h) as usize];
         {

@@ -1,12 +1,16 @@
 //! Run outputs shared by `pe solve` and board-sim: the nodes CSV and ParaView frames.
 
+pub mod font;
+pub mod render;
+pub mod vtk;
+
 use std::io::Write;
 use std::path::Path;
 
 use anyhow::{Context, Result};
 
 use crate::mesh::Mesh;
-use crate::vtk_out::VtkSeriesWriter;
+use crate::output::vtk::VtkSeriesWriter;
 
 /// `node,x,y,z,ux,uy,uz`: every mesh node once, in mesh node order (node = its tag).
 /// Values are written with 17 significant digits so the CSV round-trips f64 exactly.

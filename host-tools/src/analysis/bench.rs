@@ -6,11 +6,13 @@ use std::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 use std::time::Instant;
 
 use anyhow::Result;
+use pe_firmware::image::{Integration, Precision};
 use pe_firmware::physics::{HexElement, Real};
 
+use crate::problem::elements::Elements;
 use crate::problem::Problem;
-use crate::scene::Scene;
-use crate::solver::{Elements, Model};
+use crate::scene::{builders, Scene};
+use crate::solver::Model;
 
 thread_local! {
     static FLOPS: Cell<[u64; 4]> = const { Cell::new([0; 4]) };
@@ -123,35 +125,24 @@ impl Real for Counted {
 }
 
 /// A box scene of about `elements` cells, clamped at x = 0, under gravity.
-pub fn bench_scene(elements: usize, integration: &str, precision: &str) -> Result<Scene> {
+pub fn bench_scene(
+    elements: usize,
+    integration: Integration,
+    precision: Precision,
+) -> Result<Scene> {
     let n = ((elements as f64 / 4.0).cbrt()).round().max(1.0) as usize;
-    let text = format!(
-        r#"
-[mesh]
-generate = {{ kind = "box", size = [0.1, 0.025, 0.025], cells = [{}, {n}, {n}] }}
-[material]
-law = "neo-hookean"
-youngs_modulus = 3.0e3
-poisson_ratio = 0.45
-density = 1000.0
-[[fixed]]
-box = [[-1e-9, -1.0, -1.0], [1e-9, 1.0, 1.0]]
-[gravity]
-acceleration = [0.0, 0.0, -9.81]
-[solver]
-precision = "{precision}"
-integration = "{integration}"
-damping = 20.0
-"#,
-        4 * n
-    );
-    Scene::from_toml(&text)
+    let mut scene = builders::box_cantilever([0.1, 0.025, 0.025], [4 * n, n, n], 3.0e3, 0.45, true);
+    scene.gravity = Some(builders::gravity_down());
+    scene.solver.precision = precision;
+    scene.solver.integration = integration;
+    scene.solver.damping = 20.0;
+    Ok(scene)
 }
 
 /// Flops of one element's internal-force evaluation (the element kernel of one step) at a
 /// generic deformed state, and of one node update.
-pub fn element_step_flops(integration: &str) -> Result<(FlopCount, FlopCount)> {
-    let scene = bench_scene(32, integration, "f64")?;
+pub fn element_step_flops(integration: Integration) -> Result<(FlopCount, FlopCount)> {
+    let scene = bench_scene(32, integration, Precision::F64)?;
     let p = Problem::from_scene(&scene, std::path::Path::new("."))?;
     let elements = Elements::<Counted>::build(&p);
     let law = p.laws[0].cast::<Counted>();
@@ -174,8 +165,8 @@ pub fn element_step_flops(integration: &str) -> Result<(FlopCount, FlopCount)> {
 pub fn ns_per_element_step(
     elements: usize,
     steps: u64,
-    integration: &str,
-    precision: &str,
+    integration: Integration,
+    precision: Precision,
 ) -> Result<(usize, f64)> {
     let scene = bench_scene(elements, integration, precision)?;
     let p = Problem::from_scene(&scene, std::path::Path::new("."))?;
@@ -191,7 +182,7 @@ pub fn ns_per_element_step(
         }
         Ok(t.elapsed().as_secs_f64())
     }
-    let secs = if precision == "f32" {
+    let secs = if precision == Precision::F32 {
         time::<f32>(&p, dt, steps)?
     } else {
         time::<f64>(&p, dt, steps)?
@@ -206,14 +197,14 @@ pub fn run_cli(elements: usize, steps: u64) -> Result<()> {
         "{:<10} {:<6} {:>9} {:>14}",
         "integr.", "prec.", "elements", "ns/elem-step"
     );
-    for integ in ["reduced", "full"] {
-        for prec in ["f64", "f32"] {
+    for integ in [Integration::Reduced, Integration::Full] {
+        for prec in [Precision::F64, Precision::F32] {
             let (n, ns) = ns_per_element_step(elements, steps, integ, prec)?;
             println!("{integ:<10} {prec:<6} {n:>9} {ns:>14.1}");
         }
     }
     println!("\nfloating-point operations of one element's internal force (neo-Hookean):");
-    for integ in ["reduced", "full"] {
+    for integ in [Integration::Reduced, Integration::Full] {
         let (e, node) = element_step_flops(integ)?;
         println!(
             "{integ:<8} element: {} (add {}, mul {}, div {}, sqrt/ln/cbrt {}); node update: {}",

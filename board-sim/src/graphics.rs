@@ -1,0 +1,159 @@
+//! The host-side graphics engine of board-sim: assembles the surface frames the boards send
+//! over the global network, writes them as a ParaView series and draws the last one.
+
+use std::path::Path;
+
+use anyhow::Result;
+use host_tools::output::vtk::{SurfaceSeriesWriter, VtkSeriesWriter};
+use host_tools::problem::Problem;
+
+/// A frame the graphics engine assembled: time and displacement of every mesh node it
+/// received (others zero), or None if some surface node is missing.
+pub struct SurfaceFrame {
+    pub time_s: f64,
+    pub u: Vec<[f64; 3]>,
+}
+
+/// The frames of a run the graphics engine could assemble (every surface node present).
+pub fn surface_frames(pr: &Problem, out: &board_sim::SimOutput) -> Vec<SurfaceFrame> {
+    let surface = pr.surface_node_mask();
+    let needed = surface.iter().filter(|s| **s).count();
+    out.graphics
+        .iter()
+        .filter(|f| f.nodes.len() == needed)
+        .map(|f| {
+            let mut u = vec![[0.0; 3]; pr.mesh.nodes.len()];
+            for (n, d) in &f.nodes {
+                if let Some(x) = u.get_mut(*n as usize) {
+                    *x = d.map(|v| v as f64);
+                }
+            }
+            SurfaceFrame {
+                time_s: f.steps.0 as f64 * out.dt_s,
+                u,
+            }
+        })
+        .collect()
+}
+
+/// The assembled surface frames as a ParaView series in `d`.
+pub fn write_surface_series(d: &Path, pr: &Problem, frames: &[SurfaceFrame]) -> Result<()> {
+    std::fs::create_dir_all(d)?;
+    let (local, quads) = surface_numbering(pr);
+    let reference: Vec<[f64; 3]> = local.iter().map(|&g| pr.mesh.nodes[g as usize]).collect();
+    let groups = surface_groups(pr);
+    let mut w = SurfaceSeriesWriter::new(d, reference, quads, groups)?;
+    for f in frames {
+        let u: Vec<[f64; 3]> = local.iter().map(|&g| f.u[g as usize]).collect();
+        w.write_frame(f.time_s, &u)?;
+    }
+    w.finish()?;
+    Ok(())
+}
+
+/// Surface nodes (mesh indices, ascending) and the boundary quads in that numbering.
+fn surface_numbering(pr: &Problem) -> (Vec<u32>, Vec<[u32; 4]>) {
+    let mask = pr.surface_node_mask();
+    let local: Vec<u32> = (0..mask.len() as u32)
+        .filter(|&n| mask[n as usize])
+        .collect();
+    let index: std::collections::HashMap<u32, u32> = local
+        .iter()
+        .enumerate()
+        .map(|(i, &g)| (g, i as u32))
+        .collect();
+    let quads = pr
+        .surface_faces
+        .iter()
+        .map(|q| q.map(|n| index[&n]))
+        .collect();
+    (local, quads)
+}
+
+/// Region group of each boundary quad (its cell's region, as a small index).
+fn surface_groups(pr: &Problem) -> Vec<u8> {
+    pr.surface_face_cells
+        .iter()
+        .map(|c| pr.mesh.cell_regions[*c as usize].clamp(0, 255) as u8)
+        .collect()
+}
+
+/// PNG of surface frame `f` with the tools at their positions at its time.
+pub fn render_frame(
+    p: &Path,
+    pr: &Problem,
+    f: &SurfaceFrame,
+    out: &board_sim::SimOutput,
+) -> Result<()> {
+    use host_tools::output::render::{render_surface_png, CapsuleOverlay, SurfaceImage, View};
+    let positions: Vec<[f64; 3]> = pr
+        .mesh
+        .nodes
+        .iter()
+        .zip(&f.u)
+        .map(|(x, u)| core::array::from_fn(|i| x[i] + u[i]))
+        .collect();
+    let values: Vec<f64> =
+        f.u.iter()
+            .map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt())
+            .collect();
+    let tools: Vec<CapsuleOverlay> = pr
+        .contact
+        .as_ref()
+        .map(|c| {
+            c.tools
+                .iter()
+                .map(|t| {
+                    let cap = t.capsule.translated(pr.paths[t.path as usize].at(f.time_s));
+                    CapsuleOverlay {
+                        a: cap.a,
+                        b: cap.b,
+                        radius_m: cap.radius_m,
+                    }
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let title = format!(
+        "t = {:.3} s: the graphics stream from {} boards",
+        f.time_s,
+        out.boards.len()
+    );
+    render_surface_png(
+        p,
+        &SurfaceImage {
+            positions: &positions,
+            quads: &pr.surface_faces,
+            quad_groups: &surface_groups(pr),
+            node_values: &values,
+            value_label: "displacement (mm)",
+            value_scale: 1e3,
+            tools: &tools,
+            title: &title,
+            view: View {
+                azimuth_deg: -60.0,
+                elevation_deg: 30.0,
+            },
+            size_px: (1200, 900),
+        },
+    )
+}
+
+/// Without a graphics stream: the whole mesh every `frame_every` steps (the frames board-sim
+/// kept), from rest to the final state, as a ParaView series in `d`.
+pub fn write_volume_series(
+    d: &Path,
+    pr: &Problem,
+    out: &board_sim::SimOutput,
+    dt_s: f64,
+) -> Result<()> {
+    std::fs::create_dir_all(d)?;
+    let mut w = VtkSeriesWriter::new(d, &pr.mesh)?;
+    w.write_frame(0.0, &vec![[0.0; 3]; pr.mesh.nodes.len()])?;
+    for (s, u) in &out.frames {
+        w.write_frame(*s as f64 * dt_s, u)?;
+    }
+    w.write_frame(out.steps as f64 * dt_s, &out.displacements)?;
+    w.finish()?;
+    Ok(())
+}

@@ -1,0 +1,138 @@
+//! Turns a scene's `[mesh]` into a mesh plus the named node sets it provides (a file, a
+//! generated box, blocks, or the built-in anatomy with its node sets).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Result};
+
+use crate::mesh::builtin::{self, Level};
+use crate::mesh::Mesh;
+use crate::scene::builtin::PROBE_TIP_RADIUS_M;
+use crate::scene::*;
+
+pub fn load(spec: &MeshSpec, scene_dir: &Path) -> Result<(Mesh, BTreeMap<String, Vec<u32>>)> {
+    let given = [
+        spec.file.is_some(),
+        spec.generate.is_some(),
+        spec.builtin.is_some(),
+        !spec.blocks.is_empty(),
+    ];
+    if given.iter().filter(|g| **g).count() != 1 {
+        bail!("[mesh] needs exactly one of `file`, `generate`, `builtin`, `blocks`");
+    }
+    if !spec.blocks.is_empty() {
+        let mut mesh = Mesh {
+            source: "[[mesh.blocks]]".into(),
+            ..Mesh::default()
+        };
+        for (k, b) in spec.blocks.iter().enumerate() {
+            if b.cells.contains(&0) || b.size.iter().any(|&s| !(s > 0.0)) {
+                bail!(
+                    "[[mesh.blocks]] {k} ({:?}): size and cells must be positive",
+                    b.name
+                );
+            }
+            let part = crate::mesh::io::generate_box(b.size, b.cells);
+            let base = mesh.nodes.len() as u32;
+            let region = k as i32 + 1;
+            mesh.nodes.extend(
+                part.nodes
+                    .iter()
+                    .map(|p| core::array::from_fn(|i| p[i] + b.origin[i])),
+            );
+            mesh.cells
+                .extend(part.cells.iter().map(|c| c.map(|n| n + base)));
+            mesh.cell_regions
+                .extend(std::iter::repeat_n(region, part.cells.len()));
+            mesh.region_names.insert(region, b.name.clone());
+        }
+        mesh.node_tags = (1..=mesh.nodes.len() as u64).collect();
+        return Ok((mesh, BTreeMap::new()));
+    }
+    if let Some(f) = &spec.file {
+        let path = scene_dir.join(f);
+        return Ok((crate::mesh::io::load_mesh(&path)?, BTreeMap::new()));
+    }
+    if let Some(g) = &spec.generate {
+        if g.kind != "box" {
+            bail!(
+                "[mesh] generate.kind = \"{}\": only \"box\" is known",
+                g.kind
+            );
+        }
+        if g.cells.contains(&0) || g.size.iter().any(|&s| !(s > 0.0)) {
+            bail!("[mesh] generate: size and cells must be positive");
+        }
+        return Ok((
+            crate::mesh::io::generate_box(g.size, g.cells),
+            BTreeMap::new(),
+        ));
+    }
+    let name = spec.builtin.as_deref().unwrap_or_default();
+    if name != "uterus" && name != "uterus_ovary" {
+        bail!("[mesh] builtin = \"{name}\": the built-in meshes are \"uterus\" (uterus and both tubes) and \"uterus_ovary\" (plus the right ovary under the right tube)");
+    }
+    let level: Level = spec
+        .level
+        .as_deref()
+        .unwrap_or("medium")
+        .parse()
+        .map_err(|e| anyhow!("[mesh] level: {e}"))?;
+    let mut a = builtin::generate(level);
+    let mut sets = BTreeMap::new();
+    if name == "uterus_ovary" {
+        let site = crate::mesh::ovary::add_right_ovary(&mut a, level);
+        sets.insert("right_ovary_base".to_string(), site.fixed_nodes);
+    }
+    sets.insert("cervix".to_string(), a.cervix_nodes.clone());
+    sets.insert("probe".to_string(), probe_nodes(&a));
+    for (region, name) in [
+        (builtin::REGION_LEFT_OVIDUCT, "left_tube_end"),
+        (builtin::REGION_RIGHT_OVIDUCT, "right_tube_end"),
+    ] {
+        sets.insert(name.to_string(), tube_end_nodes(&a.mesh, region));
+    }
+    Ok((a.mesh, sets))
+}
+
+/// Nodes of the last cross-section of a tube (the one farthest from the body along y).
+fn tube_end_nodes(mesh: &Mesh, region: i32) -> Vec<u32> {
+    let mut nodes: Vec<u32> = mesh
+        .cells
+        .iter()
+        .zip(&mesh.cell_regions)
+        .filter(|(_, r)| **r == region)
+        .flat_map(|(c, _)| c.iter().copied())
+        .collect();
+    nodes.sort_unstable();
+    nodes.dedup();
+    let far = nodes
+        .iter()
+        .map(|&n| mesh.nodes[n as usize][1].abs())
+        .fold(0.0, f64::max);
+    nodes.retain(|&n| mesh.nodes[n as usize][1].abs() > far - 1e-4);
+    nodes
+}
+
+/// The tube's nodes under the probe tip: every node of the tube's cross-section within the
+/// tip radius of the tube axis point below the contact point (until contact exists, the
+/// probe is a prescribed displacement of these nodes, so the whole section moves with it).
+fn probe_nodes(a: &builtin::Anatomy) -> Vec<u32> {
+    let p = &a.probe;
+    let c: [f64; 3] =
+        core::array::from_fn(|i| p.contact_point[i] + p.tube_radius_m * p.push_direction[i]);
+    let mut r = PROBE_TIP_RADIUS_M;
+    loop {
+        let v: Vec<u32> = (0..a.mesh.nodes.len() as u32)
+            .filter(|&n| {
+                let p = a.mesh.nodes[n as usize];
+                (0..3).map(|i| (p[i] - c[i]).powi(2)).sum::<f64>() <= r * r
+            })
+            .collect();
+        if !v.is_empty() {
+            return v;
+        }
+        r *= 1.5;
+    }
+}

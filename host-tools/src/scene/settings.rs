@@ -1,0 +1,161 @@
+//! The scene's typed choices: the solver's precision and integration (the firmware's own
+//! enums, spelled "f64" | "f32" and "reduced" | "full" in scene files, manifests and
+//! reports) and the material law, each with its TOML spelling, and their command-line forms.
+
+use pe_firmware::image::{Integration, Precision};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+/// One of a closed set of names: parsed from and written as its text.
+trait Named: Sized + Copy + 'static {
+    /// What the value is ("precision", "law", ...), for error messages.
+    const WHAT: &'static str;
+    const ALL: &'static [Self];
+    fn name(self) -> &'static str;
+
+    fn from_name(text: &str) -> Result<Self, String> {
+        Self::ALL
+            .iter()
+            .copied()
+            .find(|v| v.name() == text)
+            .ok_or_else(|| {
+                let allowed: Vec<String> = Self::ALL
+                    .iter()
+                    .map(|v| format!("\"{}\"", v.name()))
+                    .collect();
+                format!(
+                    "unknown {} \"{text}\": expected {}",
+                    Self::WHAT,
+                    allowed.join(" | ")
+                )
+            })
+    }
+}
+
+impl Named for Precision {
+    const WHAT: &'static str = "precision";
+    const ALL: &'static [Self] = &[Precision::F64, Precision::F32];
+    fn name(self) -> &'static str {
+        Precision::name(self)
+    }
+}
+
+impl Named for Integration {
+    const WHAT: &'static str = "integration";
+    const ALL: &'static [Self] = &[Integration::Reduced, Integration::Full];
+    fn name(self) -> &'static str {
+        Integration::name(self)
+    }
+}
+
+fn serialize_named<S: Serializer, T: Named>(v: &T, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(v.name())
+}
+
+fn deserialize_named<'de, D: Deserializer<'de>, T: Named>(d: D) -> Result<T, D::Error> {
+    let text = String::deserialize(d)?;
+    T::from_name(&text).map_err(serde::de::Error::custom)
+}
+
+/// Precision parsed from its name ("f32" | "f64"), e.g. a manifest's.
+pub fn precision_from_name(text: &str) -> Result<Precision, String> {
+    Precision::from_name(text)
+}
+
+/// `#[serde(with = "precision_text")]`: a [`Precision`] as "f64" | "f32".
+pub mod precision_text {
+    use super::*;
+    pub fn serialize<S: Serializer>(v: &Precision, s: S) -> Result<S::Ok, S::Error> {
+        serialize_named(v, s)
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Precision, D::Error> {
+        deserialize_named(d)
+    }
+}
+
+/// `#[serde(with = "integration_text")]`: an [`Integration`] as "reduced" | "full".
+pub mod integration_text {
+    use super::*;
+    pub fn serialize<S: Serializer>(v: &Integration, s: S) -> Result<S::Ok, S::Error> {
+        serialize_named(v, s)
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Integration, D::Error> {
+        deserialize_named(d)
+    }
+}
+
+/// The hyperelastic law of a `[material]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Law {
+    NeoHookean,
+    NeoHookeanDecoupled,
+    MooneyRivlin,
+}
+
+impl Named for Law {
+    const WHAT: &'static str = "law";
+    const ALL: &'static [Self] = &[Law::NeoHookean, Law::NeoHookeanDecoupled, Law::MooneyRivlin];
+    fn name(self) -> &'static str {
+        Law::name(self)
+    }
+}
+
+impl Law {
+    /// The scene file's spelling.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Law::NeoHookean => "neo-hookean",
+            Law::NeoHookeanDecoupled => "neo-hookean-decoupled",
+            Law::MooneyRivlin => "mooney-rivlin",
+        }
+    }
+}
+
+impl std::fmt::Display for Law {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl Serialize for Law {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        serialize_named(self, s)
+    }
+}
+
+impl<'de> Deserialize<'de> for Law {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Law, D::Error> {
+        deserialize_named(d)
+    }
+}
+
+/// `--precision f32|f64` on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum PrecisionArg {
+    F32,
+    F64,
+}
+
+impl From<PrecisionArg> for Precision {
+    fn from(p: PrecisionArg) -> Precision {
+        match p {
+            PrecisionArg::F32 => Precision::F32,
+            PrecisionArg::F64 => Precision::F64,
+        }
+    }
+}
+
+/// `--integration reduced|full` on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum IntegrationArg {
+    Reduced,
+    Full,
+}
+
+impl From<IntegrationArg> for Integration {
+    fn from(i: IntegrationArg) -> Integration {
+        match i {
+            IntegrationArg::Reduced => Integration::Reduced,
+            IntegrationArg::Full => Integration::Full,
+        }
+    }
+}
