@@ -9,6 +9,7 @@ use pe_firmware::physics::contact::{
     build_candidates, check_travel, evaluate_pairs, evaluate_tools, Candidate, ContactModel,
     ContactStats,
 };
+use pe_firmware::physics::explicit::{update_node, NodeMove};
 use pe_firmware::physics::{CentralDifference, MaterialLaw, PhysicsError, Real};
 use serde::Serialize;
 
@@ -279,55 +280,37 @@ impl<'p, T: Real> Model<'p, T> {
             .map_err(|error| StepError { step, error })?;
         self.external_forces(t)
             .map_err(|error| StepError { step, error })?;
-        let inv2dt = 1.0 / (2.0 * self.dt_s);
+        let inv_2dt = 1.0 / (2.0 * self.dt_s);
         let limit = self.problem.solver.speed_limit;
         let ms = self.problem.solver.mass_scaling;
         let mut ke = 0.0;
         let mut rp = [0.0; 3];
         let mut rf = [0.0; 3];
         for n in 0..self.u.len() {
-            let next = match self.problem.node_kind[n] {
-                NodeKind::Free => {
-                    let r: [T; 3] = core::array::from_fn(|i| self.f_ext[n][i] - self.f_int[n][i]);
-                    let next = self
-                        .cd
-                        .advance(&self.u[n], &self.u_prev[n], self.gain[n], &r);
-                    if !next.iter().all(|v| v.is_finite()) {
-                        return Err(StepError {
-                            step,
-                            error: PhysicsError::NonFinite { node: n as u32 },
-                        });
-                    }
-                    next
-                }
-                NodeKind::Fixed => {
-                    for i in 0..3 {
-                        rf[i] += (self.f_int[n][i] - self.f_ext[n][i]).to_f64();
-                    }
-                    [T::ZERO; 3]
-                }
-                NodeKind::Prescribed(k) => {
-                    for i in 0..3 {
-                        rp[i] += (self.f_int[n][i] - self.f_ext[n][i]).to_f64();
-                    }
-                    self.problem.paths[k as usize].at(t_next).map(T::from_f64)
+            let (f_ext, f_int) = (self.f_ext[n], self.f_int[n]);
+            let reaction = |r: &mut [f64; 3]| {
+                for i in 0..3 {
+                    r[i] += (f_int[i] - f_ext[i]).to_f64();
                 }
             };
-            let v: [f64; 3] =
-                core::array::from_fn(|i| (next[i] - self.u_prev[n][i]).to_f64() * inv2dt);
-            let v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-            if v2 > limit * limit {
-                return Err(StepError {
-                    step,
-                    error: PhysicsError::SpeedLimit {
-                        node: n as u32,
-                        speed_m_per_s: v2.sqrt(),
-                    },
-                });
-            }
+            let mv = match self.problem.node_kind[n] {
+                NodeKind::Free => NodeMove::Free {
+                    gain: self.gain[n],
+                    residual: core::array::from_fn(|i| f_ext[i] - f_int[i]),
+                },
+                NodeKind::Fixed => {
+                    reaction(&mut rf);
+                    NodeMove::Held([T::ZERO; 3])
+                }
+                NodeKind::Prescribed(k) => {
+                    reaction(&mut rp);
+                    NodeMove::Held(self.problem.paths[k as usize].at(t_next).map(T::from_f64))
+                }
+            };
+            let (u, u_prev) = (&mut self.u[n], &mut self.u_prev[n]);
+            let v2 = update_node(&self.cd, u, u_prev, mv, inv_2dt, limit, n as u32)
+                .map_err(|error| StepError { step, error })?;
             ke += 0.5 * self.problem.mass[n] * ms * v2;
-            self.u_prev[n] = self.u[n];
-            self.u[n] = next;
         }
         self.kinetic_energy = ke;
         self.reaction_prescribed = rp;
