@@ -14,7 +14,9 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, bail, Context, Result};
 use host_tools::compile::{image_file_name, read_manifest, Manifest};
 use link_proto::Links;
-use pe_firmware::image::{ElementRecord, ImageError, ImageReader, Integration, Precision};
+use pe_firmware::image::{
+    ElementRecord, ImageError, ImageHeader, ImageReader, Integration, Precision,
+};
 use pe_firmware::physics::{HexFull, HexReduced};
 use pe_firmware::runtime::{
     Capacities, Fault, GlobalStats, LinkStats, Runtime, RuntimeConfig, Shelf, StorageBuf, WireReal,
@@ -397,14 +399,9 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
     }
 }
 
-/// Runs the compiled machine in `dir`. `on_progress(step, total)` is called from the
-/// collector thread.
-pub fn run(
-    dir: &Path,
-    opts: &SimOptions,
-    on_progress: &mut dyn FnMut(u64, u64),
-) -> Result<SimOutput> {
-    let manifest = read_manifest(dir)?;
+/// Reads every board's image named in the manifest, in board-index order, checking each
+/// against its position; returns them with the first header.
+fn read_images(dir: &Path, manifest: &Manifest) -> Result<(Vec<Vec<u8>>, ImageHeader)> {
     let dims = manifest.machine;
     let count = dims.iter().product::<usize>();
     if manifest.boards.len() != count {
@@ -429,6 +426,79 @@ pub fn run(
         images[i] = bytes;
     }
     let header = header.ok_or_else(|| anyhow!("{}: no boards", dir.display()))?;
+    Ok((images, header))
+}
+
+/// What the collector gathers from the board threads.
+struct Collected {
+    steps: u64,
+    n_nodes: usize,
+    displacements: Vec<[f64; 3]>,
+    /// Frames being assembled: step → (nodes received, displacements).
+    pending: std::collections::BTreeMap<u64, (usize, Vec<[f64; 3]>)>,
+    frames: Vec<(u64, Vec<[f64; 3]>)>,
+    results: Vec<Option<BoardResult>>,
+    reaction_prescribed: [f64; 3],
+    reaction_fixed: [f64; 3],
+    kinetic_energy: f64,
+    faults: Vec<Fault>,
+}
+
+impl Collected {
+    fn file(&mut self, report: Report) {
+        match report {
+            Report::Frame { step, nodes } => {
+                let n_nodes = self.n_nodes;
+                let e = self
+                    .pending
+                    .entry(step)
+                    .or_insert_with(|| (0, vec![[0.0; 3]; n_nodes]));
+                for (g, u) in nodes {
+                    if let Some(d) = e.1.get_mut(g as usize) {
+                        *d = u;
+                        e.0 += 1;
+                    }
+                }
+                if e.0 == n_nodes {
+                    if let Some((_, v)) = self.pending.remove(&step) {
+                        if step == self.steps {
+                            self.displacements = v;
+                        } else {
+                            self.frames.push((step, v));
+                        }
+                    }
+                }
+            }
+            Report::Done {
+                board,
+                result,
+                reaction_prescribed,
+                reaction_fixed,
+                kinetic_energy,
+            } => {
+                for i in 0..3 {
+                    self.reaction_prescribed[i] += reaction_prescribed[i];
+                    self.reaction_fixed[i] += reaction_fixed[i];
+                }
+                self.kinetic_energy += kinetic_energy;
+                self.results[board] = Some(result);
+            }
+            Report::Failed(f) => self.faults.push(f),
+        }
+    }
+}
+
+/// Runs the compiled machine in `dir`. `on_progress(step, total)` is called from the
+/// collector thread.
+pub fn run(
+    dir: &Path,
+    opts: &SimOptions,
+    on_progress: &mut dyn FnMut(u64, u64),
+) -> Result<SimOutput> {
+    let manifest = read_manifest(dir)?;
+    let (images, header) = read_images(dir, &manifest)?;
+    let dims = manifest.machine;
+    let count = images.len();
     let steps = opts
         .steps
         .unwrap_or(header.params.steps)
@@ -498,15 +568,8 @@ pub fn run(
             .stack_size(16 << 20)
             .spawn(move || {
                 let mut env = ThreadEnv::new(bell);
-                if let Err(f) = dispatch(
-                    ctxs,
-                    sizing,
-                    &mut ls,
-                    &mut env,
-                    &out,
-                    header.precision,
-                    header.integration,
-                ) {
+                let (p, i) = (header.precision, header.integration);
+                if let Err(f) = dispatch(ctxs, sizing, &mut ls, &mut env, &out, p, i) {
                     stop2.store(true, Ordering::Relaxed);
                     let _ = out.send(Report::Failed(f));
                 }
@@ -515,50 +578,21 @@ pub fn run(
         handles.push(h);
     }
     drop(tx);
-    let mut displacements = vec![[0.0; 3]; n_nodes];
-    let mut pending: std::collections::BTreeMap<u64, (usize, Vec<[f64; 3]>)> = Default::default();
-    let mut frames = Vec::new();
-    let mut results: Vec<Option<BoardResult>> = vec![None; count];
-    let (mut rp, mut rf, mut ke) = ([0.0; 3], [0.0; 3], 0.0);
-    let mut faults = Vec::new();
-    let owned_total = n_nodes;
+    let mut c = Collected {
+        steps,
+        n_nodes,
+        displacements: vec![[0.0; 3]; n_nodes],
+        pending: Default::default(),
+        frames: Vec::new(),
+        results: vec![None; count],
+        reaction_prescribed: [0.0; 3],
+        reaction_fixed: [0.0; 3],
+        kinetic_energy: 0.0,
+        faults: Vec::new(),
+    };
     loop {
         match rx.recv_timeout(Duration::from_millis(100)) {
-            Ok(Report::Frame { step, nodes }) => {
-                let e = pending
-                    .entry(step)
-                    .or_insert_with(|| (0, vec![[0.0; 3]; n_nodes]));
-                for (g, u) in nodes {
-                    if let Some(d) = e.1.get_mut(g as usize) {
-                        *d = u;
-                        e.0 += 1;
-                    }
-                }
-                if e.0 == owned_total {
-                    if let Some((_, v)) = pending.remove(&step) {
-                        if step == steps {
-                            displacements = v;
-                        } else {
-                            frames.push((step, v));
-                        }
-                    }
-                }
-            }
-            Ok(Report::Done {
-                board,
-                result,
-                reaction_prescribed,
-                reaction_fixed,
-                kinetic_energy,
-            }) => {
-                for i in 0..3 {
-                    rp[i] += reaction_prescribed[i];
-                    rf[i] += reaction_fixed[i];
-                }
-                ke += kinetic_energy;
-                results[board] = Some(result);
-            }
-            Ok(Report::Failed(f)) => faults.push(f),
+            Ok(report) => c.file(report),
             Err(mpsc::RecvTimeoutError::Timeout) => {}
             Err(mpsc::RecvTimeoutError::Disconnected) => break,
         }
@@ -569,7 +603,8 @@ pub fn run(
     }
     let wall_s = start.elapsed().as_secs_f64();
     let injected = injected.lock().map(|v| v.clone()).unwrap_or_default();
-    if !faults.is_empty() {
+    if !c.faults.is_empty() {
+        let mut faults = c.faults;
         // Root cause first: the earliest step; a timeout is a consequence of a neighbour's fault.
         faults.sort_by_key(|f: &Fault| {
             (
@@ -580,11 +615,12 @@ pub fn run(
         });
         return Err(SimFault { faults, injected }.into());
     }
-    let boards = results
+    let boards = c
+        .results
         .into_iter()
         .collect::<Option<Vec<_>>>()
         .ok_or_else(|| anyhow!("a board ended without a report"))?;
-    frames.sort_by_key(|f| f.0);
+    c.frames.sort_by_key(|f| f.0);
     let tools = header.counts.tools as usize;
     let (graphics, tool_force) = collect_sinks(&net, steps, tools)?;
     Ok(SimOutput {
@@ -595,12 +631,12 @@ pub fn run(
         manifest,
         steps,
         wall_s,
-        displacements,
-        frames,
+        displacements: c.displacements,
+        frames: c.frames,
         boards,
-        reaction_prescribed: rp,
-        reaction_fixed: rf,
-        kinetic_energy: ke,
+        reaction_prescribed: c.reaction_prescribed,
+        reaction_fixed: c.reaction_fixed,
+        kinetic_energy: c.kinetic_energy,
         injected,
     })
 }

@@ -105,8 +105,20 @@ struct RunArgs {
     /// boards runs one thread per board).
     #[arg(long)]
     workers: Option<usize>,
+    /// Storage per board: `exact` (what each image needs) or `board` (what the firmware of
+    /// the manifest's profile holds: an image the board would refuse is refused here).
+    #[arg(long, value_enum, default_value_t = Storage::Exact)]
+    storage: Storage,
     #[arg(long)]
     quiet: bool,
+}
+
+/// `--storage`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+enum Storage {
+    #[default]
+    Exact,
+    Board,
 }
 
 fn main() -> Result<()> {
@@ -254,12 +266,26 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
         link_bandwidth,
         link_latency_s,
         workers,
+        storage,
         quiet,
     } = a;
     let manifest = host_tools::compile::read_manifest(dir)?;
+    let storage = match storage {
+        Storage::Exact => board_sim::StorageSizing::Exact,
+        Storage::Board => board_sim::StorageSizing::Board(
+            pe_firmware::profile::profile(&manifest.profile).with_context(|| {
+                format!(
+                    "{}: unknown board profile {:?} in manifest.json",
+                    dir.display(),
+                    manifest.profile
+                )
+            })?,
+        ),
+    };
     let mut opts = SimOptions {
         link_timeout: Duration::from_secs_f64(link_timeout_s),
         workers,
+        storage,
         ..Default::default()
     };
     if let Some(f) = &faults {

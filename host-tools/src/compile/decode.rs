@@ -2,9 +2,9 @@
 //! ([`pe_firmware::image::read_image`]), for `pe inspect`, board-sim's timing model and
 //! tests. Scalars are widened to `f64`.
 
+use super::tables::ImageTables;
 use pe_firmware::image::*;
-use pe_firmware::physics::{HexFull, HexReduced, MaterialLaw};
-use pe_firmware::runtime::Capacities;
+use pe_firmware::physics::{HexFull, HexReduced};
 
 /// One decoded exchange round (local node indices).
 #[derive(Clone, Debug, Default)]
@@ -32,66 +32,22 @@ pub struct DecodedImage {
     pub graphics_nodes: Vec<u16>,
 }
 
-/// `n` zero records (what the loader overwrites).
-fn zeros<R: Clone + serde::de::DeserializeOwned>(n: usize) -> Result<Vec<R>, ImageError> {
-    let z = zero_record::<R>().ok_or(ImageError::Malformed {
-        record: "zero record",
-    })?;
-    Ok(vec![z; n])
-}
-
 fn decode_typed<T: ImageReal, E: ElementRecord<T>>(
     bytes: &[u8],
     expected_board: Option<[u8; 3]>,
     c: &Counts,
 ) -> Result<DecodedImage, ImageError> {
-    let caps = Capacities::exact(c);
-    let (nc, lists) = (caps.contact_nodes, c.exchange_lists());
-    let mut laws = zeros::<MaterialLaw<T>>(caps.materials)?;
-    let mut elements = zeros::<E>(caps.elements)?;
-    let mut nodes = zeros::<NodeRecord<T>>(caps.nodes)?;
-    let mut list = zeros::<ExchangeList>(lists)?;
-    let mut sends = zeros::<u16>(c.sends as usize)?;
-    let mut recvs = zeros::<RecvEntry>(c.recvs as usize)?;
-    let mut path_points = zeros::<PathPoint>(caps.path_points)?;
-    let mut loads = zeros::<LoadRecord>(caps.loads)?;
-    let mut contact_nodes = zeros::<ContactNode>(nc)?;
-    let mut places = zeros::<ContactNodePlace>(nc)?;
-    let mut contact_faces = zeros::<ContactFace>(caps.contact_faces)?;
-    let mut pairs = zeros::<ContactPair>(c.pairs as usize)?;
-    let mut tools = zeros::<Tool>(c.tools as usize)?;
-    let mut contact_boards = zeros::<u8>(c.contact_boards as usize)?;
-    let mut graphics_nodes = zeros::<u16>(caps.graphics_nodes)?;
-    let header = read_image(
-        bytes,
-        expected_board,
-        &mut ImageParts {
-            laws: &mut laws,
-            elements: &mut elements,
-            nodes: &mut nodes,
-            lists: &mut list,
-            sends: &mut sends,
-            recvs: &mut recvs,
-            path_points: &mut path_points,
-            loads: &mut loads,
-            contact_nodes: &mut contact_nodes,
-            contact_places: &mut places,
-            contact_faces: &mut contact_faces,
-            pairs: &mut pairs,
-            tools: &mut tools,
-            contact_boards: &mut contact_boards,
-            graphics_nodes: &mut graphics_nodes,
-        },
-    )?;
+    let mut t = ImageTables::<T, E>::zeroed(c)?;
+    let header = read_image(bytes, expected_board, &mut t.parts())?;
     let mut rounds: [Vec<DecodedRound>; 3] = Default::default();
     let (mut s, mut r, mut k) = (0usize, 0usize, 0usize);
     for (a, &n) in c.rounds.iter().enumerate() {
         for _ in 0..n {
             let mut round = DecodedRound::default();
             for f in 0..2 {
-                let l = list[k];
-                round.send[f] = sends[s..s + l.sends as usize].to_vec();
-                round.recv[f] = recvs[r..r + l.recvs as usize].to_vec();
+                let l = t.lists[k];
+                round.send[f] = t.sends[s..s + l.sends as usize].to_vec();
+                round.recv[f] = t.recvs[r..r + l.recvs as usize].to_vec();
                 (s, r, k) = (s + l.sends as usize, r + l.recvs as usize, k + 1);
             }
             rounds[a].push(round);
@@ -99,8 +55,9 @@ fn decode_typed<T: ImageReal, E: ElementRecord<T>>(
     }
     Ok(DecodedImage {
         header,
-        element_nodes: elements.iter().map(|e| *e.nodes()).collect(),
-        nodes: nodes
+        element_nodes: t.elements.iter().map(|e| *e.nodes()).collect(),
+        nodes: t
+            .nodes
             .iter()
             .map(|n| NodeRecord {
                 global: n.global,
@@ -112,14 +69,14 @@ fn decode_typed<T: ImageReal, E: ElementRecord<T>>(
             })
             .collect(),
         rounds,
-        path_points,
-        loads,
-        contact_nodes: contact_nodes.into_iter().zip(places).collect(),
-        contact_faces,
-        pairs,
-        tools,
-        contact_boards,
-        graphics_nodes,
+        path_points: t.path_points,
+        loads: t.loads,
+        contact_nodes: t.contact_nodes.into_iter().zip(t.places).collect(),
+        contact_faces: t.faces,
+        pairs: t.pairs,
+        tools: t.tools,
+        contact_boards: t.contact_boards,
+        graphics_nodes: t.graphics_nodes,
     })
 }
 

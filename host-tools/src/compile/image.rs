@@ -7,10 +7,11 @@ use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
 use pe_firmware::image::*;
-use pe_firmware::physics::{CentralDifference, MaterialLaw, ReferenceHex};
+use pe_firmware::physics::{CentralDifference, ReferenceHex};
 use pe_firmware::runtime::Capacities;
 
-use super::plan::Plan;
+use super::plan::{BoardPlan, Plan};
+use super::tables::ImageTables;
 use crate::problem::contact::ContactRun;
 use crate::problem::{NodeKind, Problem};
 
@@ -66,6 +67,23 @@ struct Shared {
     graphics: GraphicsParams,
 }
 
+/// Local numbering of one board: global node → local index.
+struct Local<'a> {
+    map: BTreeMap<u32, u16>,
+    board: &'a BoardPlan,
+}
+
+impl Local<'_> {
+    fn of(&self, n: u32) -> Result<u16> {
+        self.map.get(&n).copied().ok_or_else(|| {
+            anyhow!(
+                "internal: node {n} missing on board {:?}",
+                self.board.coords
+            )
+        })
+    }
+}
+
 fn write_image<T: ImageReal, E: ElementRecord<T>>(
     problem: &Problem,
     plan: &Plan,
@@ -74,8 +92,6 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
     element: impl Fn(&ReferenceHex, [u32; 8], u16) -> E,
 ) -> Result<BoardImage> {
     let bp = &plan.boards[b];
-    let dt = shared.dt_s;
-    let cd = CentralDifference::<T>::new(dt, problem.solver.damping);
     if bp.nodes.len() > u16::MAX as usize {
         bail!(
             "board {:?} holds {} nodes, more than an image can index",
@@ -83,47 +99,85 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
             bp.nodes.len()
         );
     }
-    let local: BTreeMap<u32, u16> = bp
-        .nodes
-        .iter()
-        .enumerate()
-        .map(|(i, &n)| (n, i as u16))
-        .collect();
-    let lid = |n: u32| -> Result<u16> {
-        local
-            .get(&n)
-            .copied()
-            .ok_or_else(|| anyhow!("internal: node {n} missing on board {:?}", bp.coords))
+    let local = Local {
+        map: bp
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(i, &n)| (n, i as u16))
+            .collect(),
+        board: bp,
     };
-    let (mut points, load_ramp) = path_table(problem);
-    let mut loads: Vec<LoadRecord> = problem
-        .loads
-        .iter()
-        .zip(&load_ramp)
-        .filter(|(l, _)| plan.node_owner[l.node as usize] as usize == b)
-        .map(|(l, r)| {
-            Ok(LoadRecord {
-                node: lid(l.node)?,
-                force: l.force,
-                ramp: *r,
-            })
-        })
-        .collect::<Result<_>>()?;
-    let mut laws: Vec<MaterialLaw<T>> = problem.laws.iter().map(|l| l.cast::<T>()).collect();
-    let mut elements: Vec<E> = bp
+    let mut t = ImageTables::<T, E>::zeroed(&Counts::default()).map_err(|e| anyhow!("{e}"))?;
+    t.laws = problem.laws.iter().map(|l| l.cast::<T>()).collect();
+    t.elements = bp
         .elements
         .iter()
         .map(|&e| {
-            let nodes = problem.mesh.cells[e as usize].map(|n| local[&n] as u32);
-            element(
+            let nodes = problem.mesh.cells[e as usize].map(|n| local.map[&n] as u32);
+            let (r, m) = (
                 &problem.reference[e as usize],
-                nodes,
                 problem.cell_material[e as usize],
-            )
+            );
+            element(r, nodes, m)
         })
         .collect();
-    let mut nodes: Vec<NodeRecord<T>> = bp
+    t.nodes = node_records(problem, bp, shared.dt_s);
+    exchange_tables(bp, &local, &mut t)?;
+    load_tables(problem, plan, b, &local, &mut t)?;
+    contact_tables_of_board(shared, plan, b, &local, &mut t);
+    t.graphics_nodes = bp
         .nodes
+        .iter()
+        .enumerate()
+        .filter(|(k, &n)| bp.owner[*k] && shared.on_surface[n as usize])
+        .map(|(k, _)| k as u16)
+        .collect();
+    let dt = shared.dt_s;
+    let header = ImageHeader {
+        version: FORMAT_VERSION,
+        board: bp.coords.map(|c| c as u8),
+        machine: plan.machine.dims.map(|c| c as u8),
+        precision: T::PRECISION,
+        integration: E::INTEGRATION,
+        counts: t.counts(
+            bp.batch_ends.map(|e| e as u32),
+            core::array::from_fn(|f| bp.exchange[f].len() as u16),
+            plan.rounds.map(|r| r as u8),
+        ),
+        params: SceneParams {
+            dt_s: dt,
+            damping_per_s: problem.solver.damping,
+            steps: problem.steps(dt),
+            speed_limit_m_per_s: problem.solver.speed_limit,
+            mass_scaling: problem.solver.mass_scaling,
+            hourglass: problem.solver.hourglass,
+        },
+        scene_elements: problem.mesh.cells.len() as u32,
+        scene_nodes: problem.mesh.nodes.len() as u32,
+        contact: shared
+            .contact
+            .as_ref()
+            .map(|(r, _)| r.params)
+            .unwrap_or_default(),
+        graphics: shared.graphics,
+    };
+    let mut buf = vec![0u8; image_bytes_bound::<T, E>(&header.counts)];
+    let len = pe_firmware::image::write_image(&mut buf, &header, &mut t.parts())
+        .map_err(|e| anyhow!("board {:?}: {e}", bp.coords))?;
+    buf.truncate(len);
+    Ok(BoardImage {
+        coords: bp.coords,
+        header,
+        bytes: buf,
+        ram_bytes: storage_bytes::<T, E>(&header.counts),
+    })
+}
+
+/// The board's nodes: central-difference gain, motion, owner, gravity (owner only), stage.
+fn node_records<T: ImageReal>(problem: &Problem, bp: &BoardPlan, dt: f64) -> Vec<NodeRecord<T>> {
+    let cd = CentralDifference::<T>::new(dt, problem.solver.damping);
+    bp.nodes
         .iter()
         .enumerate()
         .map(|(k, &n)| {
@@ -146,118 +200,82 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
                 stage: bp.ext_stage[k],
             }
         })
-        .collect();
-    let (mut lists, mut sends, mut recvs) = (Vec::new(), Vec::new(), Vec::new());
+        .collect()
+}
+
+/// The exchange rounds as lists (axis, round, face) over flat send and receive sections.
+fn exchange_tables<T, E>(bp: &BoardPlan, local: &Local, t: &mut ImageTables<T, E>) -> Result<()> {
     for round in bp.rounds.iter().flatten() {
         for f in 0..2 {
-            lists.push(ExchangeList {
+            t.lists.push(ExchangeList {
                 sends: round.send[f].len() as u16,
                 recvs: round.recv[f].len() as u16,
             });
             for &n in &round.send[f] {
-                sends.push(lid(n)?);
+                t.sends.push(local.of(n)?);
             }
             for &(n, combine) in &round.recv[f] {
-                recvs.push(RecvEntry {
-                    node: lid(n)?,
+                t.recvs.push(RecvEntry {
+                    node: local.of(n)?,
                     combine,
                 });
             }
         }
     }
-    let (mut contact_nodes, mut faces, mut pairs, mut tools, mut contact_boards) =
-        match &shared.contact {
-            Some((run, boards)) => (
-                run.nodes.clone(),
-                run.faces.clone(),
-                run.pairs.clone(),
-                run.tools.clone(),
-                boards.clone(),
-            ),
-            None => Default::default(),
-        };
-    let mut places: Vec<ContactNodePlace> = contact_nodes
+    Ok(())
+}
+
+/// The path table (every board has all paths) and the loads of the nodes board `b` owns.
+fn load_tables<T, E>(
+    problem: &Problem,
+    plan: &Plan,
+    b: usize,
+    local: &Local,
+    t: &mut ImageTables<T, E>,
+) -> Result<()> {
+    let (points, load_ramp) = path_table(problem);
+    t.path_points = points;
+    t.loads = problem
+        .loads
+        .iter()
+        .zip(&load_ramp)
+        .filter(|(l, _)| plan.node_owner[l.node as usize] as usize == b)
+        .map(|(l, r)| {
+            Ok(LoadRecord {
+                node: local.of(l.node)?,
+                force: l.force,
+                ramp: *r,
+            })
+        })
+        .collect::<Result<_>>()?;
+    Ok(())
+}
+
+/// The contact tables (the same on every board) and where each contact node lives on
+/// board `b`.
+fn contact_tables_of_board<T, E>(
+    shared: &Shared,
+    plan: &Plan,
+    b: usize,
+    local: &Local,
+    t: &mut ImageTables<T, E>,
+) {
+    let Some((run, boards)) = &shared.contact else {
+        return;
+    };
+    t.contact_nodes = run.nodes.clone();
+    t.faces = run.faces.clone();
+    t.pairs = run.pairs.clone();
+    t.tools = run.tools.clone();
+    t.contact_boards = boards.clone();
+    t.places = run
+        .nodes
         .iter()
         .map(|n| ContactNodePlace {
-            local: local.get(&n.global).copied(),
+            local: local.map.get(&n.global).copied(),
             owned: plan.node_owner[n.global as usize] as usize == b,
         })
         .collect();
-    let mut graphics_nodes: Vec<u16> = bp
-        .nodes
-        .iter()
-        .enumerate()
-        .filter(|(k, &n)| bp.owner[*k] && shared.on_surface[n as usize])
-        .map(|(k, _)| k as u16)
-        .collect();
-    let header = ImageHeader {
-        version: FORMAT_VERSION,
-        board: bp.coords.map(|c| c as u8),
-        machine: plan.machine.dims.map(|c| c as u8),
-        precision: T::PRECISION,
-        integration: E::INTEGRATION,
-        counts: Counts {
-            materials: laws.len() as u16,
-            elements: elements.len() as u32,
-            batch_ends: bp.batch_ends.map(|e| e as u32),
-            nodes: nodes.len() as u32,
-            exchange: core::array::from_fn(|f| bp.exchange[f].len() as u16),
-            rounds: plan.rounds.map(|r| r as u8),
-            sends: sends.len() as u32,
-            recvs: recvs.len() as u32,
-            path_points: points.len() as u16,
-            loads: loads.len() as u16,
-            contact_nodes: contact_nodes.len() as u32,
-            contact_faces: faces.len() as u32,
-            pairs: pairs.len() as u8,
-            tools: tools.len() as u8,
-            contact_boards: contact_boards.len() as u8,
-            graphics_nodes: graphics_nodes.len() as u16,
-        },
-        params: SceneParams {
-            dt_s: dt,
-            damping_per_s: problem.solver.damping,
-            steps: problem.steps(dt),
-            speed_limit_m_per_s: problem.solver.speed_limit,
-            mass_scaling: problem.solver.mass_scaling,
-            hourglass: problem.solver.hourglass,
-        },
-        scene_elements: problem.mesh.cells.len() as u32,
-        scene_nodes: problem.mesh.nodes.len() as u32,
-        contact: shared
-            .contact
-            .as_ref()
-            .map(|(r, _)| r.params)
-            .unwrap_or_default(),
-        graphics: shared.graphics,
-    };
-    let mut parts = ImageParts {
-        laws: &mut laws,
-        elements: &mut elements,
-        nodes: &mut nodes,
-        lists: &mut lists,
-        sends: &mut sends,
-        recvs: &mut recvs,
-        path_points: &mut points,
-        loads: &mut loads,
-        contact_nodes: &mut contact_nodes,
-        contact_places: &mut places,
-        contact_faces: &mut faces,
-        pairs: &mut pairs,
-        tools: &mut tools,
-        contact_boards: &mut contact_boards,
-        graphics_nodes: &mut graphics_nodes,
-    };
-    let mut buf = vec![0u8; image_bytes_bound::<T, E>(&header.counts)];
-    let len = pe_firmware::image::write_image(&mut buf, &header, &mut parts)
-        .map_err(|e| anyhow!("board {:?}: {e}", bp.coords))?;
-    buf.truncate(len);
-    Ok(BoardImage {
-        coords: bp.coords,
-        header,
-        bytes: buf,
-        ram_bytes: storage_bytes::<T, E>(&header.counts),
-    })
 }
 
 /// An upper bound of an image's length: every record at most its in-memory size plus

@@ -31,6 +31,7 @@ mod manifest;
 pub mod partition;
 mod plan;
 mod report;
+mod tables;
 
 pub use decode::{decode_image, DecodedImage, DecodedRound};
 pub use fit::{check_fit, fit_problems};
@@ -43,3 +44,4 @@ pub use plan::{line_rounds, plan, BoardPlan, Plan, RoundPlan, FACE_NAMES};
 pub use report::{
     report, summary, BoardSummary, Capacity, CompileReport, ContactCompileReport, GraphicsReport,
 };
+pub use tables::ImageTables;

@@ -100,34 +100,12 @@ pub fn line_rounds(m: usize) -> usize {
     }
 }
 
+/// The whole machine's schedule for `problem` on `machine`.
 pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
     let mesh = &problem.mesh;
     let element_board = partition(mesh, machine)?;
-    let around = node_elements(mesh);
-    let nb = machine.count();
-    let mut node_box = Vec::with_capacity(mesh.nodes.len());
-    let mut rounds = [0usize; 3];
-    let mut node_owner = vec![0u32; mesh.nodes.len()];
-    for (n, els) in around.iter().enumerate() {
-        if els.is_empty() {
-            bail!(
-                "node {} of mesh {} belongs to no cell",
-                mesh.node_tags[n],
-                mesh.source
-            );
-        }
-        let (lo, hi) = node_board_range(machine, &element_board, els);
-        for a in 0..3 {
-            rounds[a] = rounds[a].max(line_rounds(hi[a] - lo[a]));
-        }
-        node_owner[n] = els
-            .iter()
-            .map(|&e| element_board[e as usize])
-            .min()
-            .unwrap_or(0);
-        node_box.push((lo, hi));
-    }
-    let mut boards: Vec<BoardPlan> = (0..nb)
+    let (node_box, node_owner, rounds) = node_boxes(problem, machine, &element_board)?;
+    let mut boards: Vec<BoardPlan> = (0..machine.count())
         .map(|b| BoardPlan {
             coords: machine.coords(b),
             elements: Vec::new(),
@@ -143,98 +121,21 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
         .map(line_transfers)
         .collect();
     for (n, &(lo, hi)) in node_box.iter().enumerate() {
-        let n32 = n as u32;
-        for z in lo[2]..=hi[2] {
-            for y in lo[1]..=hi[1] {
-                for x in lo[0]..=hi[0] {
-                    let b = machine.index([x, y, z]);
-                    boards[b].nodes.push(n32);
-                    boards[b].owner.push(b as u32 == node_owner[n]);
-                }
-            }
-        }
-        for a in 0..3 {
-            let m = hi[a] - lo[a];
-            if m == 0 {
-                continue;
-            }
-            // Every line of the box along axis a runs the same tree.
-            let (o1, o2) = ((a + 1) % 3, (a + 2) % 3);
-            for p in lo[o1]..=hi[o1] {
-                for q in lo[o2]..=hi[o2] {
-                    let at = |t: usize| {
-                        let mut c = [0; 3];
-                        c[a] = lo[a] + t;
-                        c[o1] = p;
-                        c[o2] = q;
-                        machine.index(c)
-                    };
-                    for tr in &trees[m] {
-                        // face index within the axis: 0 = +axis, 1 = −axis
-                        let (send_face, recv_face) = if tr.to > tr.from { (0, 1) } else { (1, 0) };
-                        boards[at(tr.from)].rounds[a][tr.round].send[send_face].push(n32);
-                        boards[at(tr.to)].rounds[a][tr.round].recv[recv_face]
-                            .push((n32, tr.combine));
-                    }
-                }
-            }
-        }
+        place_node(
+            machine,
+            &mut boards,
+            &trees,
+            n as u32,
+            node_owner[n],
+            lo,
+            hi,
+        );
     }
     for (e, &b) in element_board.iter().enumerate() {
         boards[b as usize].elements.push(e as u32);
     }
     for bp in &mut boards {
-        for a in 0..3 {
-            for f in 0..2 {
-                let mut all: Vec<u32> = bp.rounds[a]
-                    .iter()
-                    .flat_map(|r| {
-                        r.send[f]
-                            .iter()
-                            .copied()
-                            .chain(r.recv[f].iter().map(|x| x.0))
-                    })
-                    .collect();
-                all.sort_unstable();
-                all.dedup();
-                bp.exchange[2 * a + f] = all;
-            }
-        }
-        let axis_nodes: [std::collections::HashSet<u32>; 3] = core::array::from_fn(|a| {
-            bp.exchange[2 * a]
-                .iter()
-                .chain(&bp.exchange[2 * a + 1])
-                .copied()
-                .collect()
-        });
-        let stage_of_element = |e: u32| {
-            let cell = &mesh.cells[e as usize];
-            (0..3)
-                .find(|&a| cell.iter().any(|n| axis_nodes[a].contains(n)))
-                .unwrap_or(3)
-        };
-        let mut staged: Vec<(usize, u32)> = bp
-            .elements
-            .iter()
-            .map(|&e| (stage_of_element(e), e))
-            .collect();
-        staged.sort();
-        for s in 0..4 {
-            bp.batch_ends[s] = staged.iter().filter(|(st, _)| *st <= s).count();
-        }
-        bp.elements = staged.into_iter().map(|(_, e)| e).collect();
-        bp.ext_stage = bp
-            .nodes
-            .iter()
-            .zip(&bp.owner)
-            .map(|(n, own)| {
-                if !own {
-                    STAGE_NOT_OWNED
-                } else {
-                    (0..3).find(|&a| axis_nodes[a].contains(n)).unwrap_or(3) as u8
-                }
-            })
-            .collect();
+        order_board(problem, bp);
     }
     Ok(Plan {
         machine,
@@ -243,4 +144,143 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
         rounds,
         boards,
     })
+}
+
+/// A node's box of boards (low, high corner).
+type BoardBox = ([usize; 3], [usize; 3]);
+
+/// Per node: the box of boards whose elements touch it and its owner (the lowest such
+/// board); the rounds each axis needs.
+fn node_boxes(
+    problem: &Problem,
+    machine: Machine,
+    element_board: &[u32],
+) -> Result<(Vec<BoardBox>, Vec<u32>, [usize; 3])> {
+    let mesh = &problem.mesh;
+    let around = node_elements(mesh);
+    let mut node_box = Vec::with_capacity(mesh.nodes.len());
+    let mut rounds = [0usize; 3];
+    let mut node_owner = vec![0u32; mesh.nodes.len()];
+    for (n, els) in around.iter().enumerate() {
+        if els.is_empty() {
+            bail!(
+                "node {} of mesh {} belongs to no cell",
+                mesh.node_tags[n],
+                mesh.source
+            );
+        }
+        let (lo, hi) = node_board_range(machine, element_board, els);
+        for a in 0..3 {
+            rounds[a] = rounds[a].max(line_rounds(hi[a] - lo[a]));
+        }
+        node_owner[n] = els
+            .iter()
+            .map(|&e| element_board[e as usize])
+            .min()
+            .unwrap_or(0);
+        node_box.push((lo, hi));
+    }
+    Ok((node_box, node_owner, rounds))
+}
+
+/// Puts node `n` on every board of its box and its summation tree into the rounds: every
+/// line of the box along an axis runs the same tree.
+fn place_node(
+    machine: Machine,
+    boards: &mut [BoardPlan],
+    trees: &[Vec<Transfer>],
+    n: u32,
+    owner: u32,
+    lo: [usize; 3],
+    hi: [usize; 3],
+) {
+    for z in lo[2]..=hi[2] {
+        for y in lo[1]..=hi[1] {
+            for x in lo[0]..=hi[0] {
+                let b = machine.index([x, y, z]);
+                boards[b].nodes.push(n);
+                boards[b].owner.push(b as u32 == owner);
+            }
+        }
+    }
+    for a in 0..3 {
+        let m = hi[a] - lo[a];
+        if m == 0 {
+            continue;
+        }
+        let (o1, o2) = ((a + 1) % 3, (a + 2) % 3);
+        for p in lo[o1]..=hi[o1] {
+            for q in lo[o2]..=hi[o2] {
+                let at = |t: usize| {
+                    let mut c = [0; 3];
+                    c[a] = lo[a] + t;
+                    c[o1] = p;
+                    c[o2] = q;
+                    machine.index(c)
+                };
+                for tr in &trees[m] {
+                    // face index within the axis: 0 = +axis, 1 = −axis
+                    let (send_face, recv_face) = if tr.to > tr.from { (0, 1) } else { (1, 0) };
+                    boards[at(tr.from)].rounds[a][tr.round].send[send_face].push(n);
+                    boards[at(tr.to)].rounds[a][tr.round].recv[recv_face].push((n, tr.combine));
+                }
+            }
+        }
+    }
+}
+
+/// A board's exchanged nodes per face, its elements in batches (x, y, z border, inner) and
+/// the stage at which each owned node's external force is added.
+fn order_board(problem: &Problem, bp: &mut BoardPlan) {
+    for a in 0..3 {
+        for f in 0..2 {
+            let mut all: Vec<u32> = bp.rounds[a]
+                .iter()
+                .flat_map(|r| {
+                    r.send[f]
+                        .iter()
+                        .copied()
+                        .chain(r.recv[f].iter().map(|x| x.0))
+                })
+                .collect();
+            all.sort_unstable();
+            all.dedup();
+            bp.exchange[2 * a + f] = all;
+        }
+    }
+    let axis_nodes: [std::collections::HashSet<u32>; 3] = core::array::from_fn(|a| {
+        bp.exchange[2 * a]
+            .iter()
+            .chain(&bp.exchange[2 * a + 1])
+            .copied()
+            .collect()
+    });
+    let stage_of_element = |e: u32| {
+        let cell = &problem.mesh.cells[e as usize];
+        (0..3)
+            .find(|&a| cell.iter().any(|n| axis_nodes[a].contains(n)))
+            .unwrap_or(3)
+    };
+    let mut staged: Vec<(usize, u32)> = bp
+        .elements
+        .iter()
+        .map(|&e| (stage_of_element(e), e))
+        .collect();
+    staged.sort();
+    for s in 0..4 {
+        bp.batch_ends[s] = staged.iter().filter(|(st, _)| *st <= s).count();
+    }
+    bp.elements = staged.into_iter().map(|(_, e)| e).collect();
+    bp.ext_stage = bp
+        .nodes
+        .iter()
+        .zip(&bp.owner)
+        .map(|(n, own)| {
+            if !own {
+                STAGE_NOT_OWNED
+            } else {
+                (0..3).find(|&a| axis_nodes[a].contains(n)).unwrap_or(3) as u8
+            }
+        })
+        .collect();
 }

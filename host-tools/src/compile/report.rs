@@ -206,148 +206,16 @@ pub fn report(
     profile: &BoardProfile,
 ) -> Result<CompileReport> {
     let (dt, _) = problem.time_step()?;
-    let w = if problem.solver.precision == Precision::F32 {
-        4
-    } else {
-        8
-    };
     let epb: Vec<usize> = plan.boards.iter().map(|b| b.elements.len()).collect();
     let npb: Vec<usize> = plan.boards.iter().map(|b| b.nodes.len()).collect();
     let mean = epb.iter().sum::<usize>() as f64 / epb.len() as f64;
-    // Values sent per link direction per step, over all rounds (one frame per round).
-    let per_link: Vec<usize> = plan
-        .boards
-        .iter()
-        .flat_map(|b| {
-            (0..6).map(move |f| {
-                b.rounds[f / 2]
-                    .iter()
-                    .map(|r| r.send[f % 2].len())
-                    .sum::<usize>()
-            })
-        })
-        .collect();
-    let frames_per_link: Vec<usize> = plan
-        .boards
-        .iter()
-        .flat_map(|b| {
-            (0..6).map(move |f| {
-                b.rounds[f / 2]
-                    .iter()
-                    .filter(|r| !r.send[f % 2].is_empty())
-                    .count()
-            })
-        })
-        .collect();
-    let vectors: usize = per_link.iter().sum();
-    let link_max = per_link.iter().copied().max().unwrap_or(0);
-    let overhead = link_proto::FRAME_HEADER_LEN + link_proto::CRC_LEN;
-    let link_bytes: Vec<usize> = per_link
-        .iter()
-        .zip(&frames_per_link)
-        .map(|(&n, &f)| 3 * w * n + f * overhead)
-        .collect();
-    let frame_bytes_max = link_bytes.iter().copied().max().unwrap_or(0);
-    let bytes_total: usize = link_bytes.iter().sum();
+    let links = LinkTraffic::of(plan, problem.solver.precision);
     let rate = 1.0 / dt;
-    let cost = pe_firmware::profile::measured_cost(
-        if problem.solver.precision == Precision::F32 {
-            Precision::F32
-        } else {
-            Precision::F64
-        },
-        if problem.solver.integration == Integration::Full {
-            Integration::Full
-        } else {
-            Integration::Reduced
-        },
-    );
-    let busiest = plan
-        .boards
-        .iter()
-        .map(|b| cost.step_instructions(b.elements.len(), b.nodes.len()))
-        .fold(0.0f64, f64::max);
-    let npe = plan
-        .boards
-        .iter()
-        .max_by_key(|b| b.elements.len())
-        .map(|b| b.nodes.len() as f64 / b.elements.len().max(1) as f64)
-        .unwrap_or(2.0);
-    let at_10k = cost.elements_per_board(profile, 1e4, npe);
-    let capacity = Capacity {
-        clock_hz: profile.clock_hz,
-        instructions_per_element_step: cost.per_element_step,
-        instructions_per_node_update: cost.per_node_update,
-        step_instructions_max: busiest,
-        step_compute_s_max: busiest / profile.clock_hz as f64,
-        compute_keeps_real_time: busiest / profile.clock_hz as f64 <= dt,
-        elements_per_board_at_scene_rate: cost.elements_per_board(profile, rate, npe),
-        elements_per_board_at_10_khz: at_10k,
-        boards_needed_at_10_khz: (problem.mesh.cells.len() as f64 / at_10k).ceil() as usize,
-    };
-    let boards = plan
-        .boards
-        .iter()
-        .zip(images)
-        .map(|(b, im)| BoardSummary {
-            board: b.coords,
-            file: image_file_name(b.coords),
-            elements: b.elements.len(),
-            batches: [
-                b.batch_ends[0],
-                b.batch_ends[1] - b.batch_ends[0],
-                b.batch_ends[2] - b.batch_ends[1],
-                b.batch_ends[3] - b.batch_ends[2],
-            ],
-            nodes: b.nodes.len(),
-            owned_nodes: b.owner.iter().filter(|o| **o).count(),
-            exchange: core::array::from_fn(|f| b.exchange[f].len()),
-            image_bytes: im.bytes.len(),
-            ram_bytes: im.ram_bytes,
-        })
-        .collect();
-    let gp = graphics_params(problem, dt);
-    let mask = problem.surface_node_mask();
-    let surface_nodes = mask.iter().filter(|m| **m).count();
-    let packets_per_frame: usize = plan
-        .boards
-        .iter()
-        .map(|b| {
-            let n = b
-                .nodes
-                .iter()
-                .zip(&b.owner)
-                .filter(|(n, o)| **o && mask[**n as usize])
-                .count();
-            // One packet per spread step (more if a slice overflows a packet).
-            (0..gp.spread_steps as usize)
-                .map(|j| {
-                    let len =
-                        (j + 1) * n / gp.spread_steps as usize - j * n / gp.spread_steps as usize;
-                    len.div_ceil(link_proto::payload::SURFACE_NODES_PER_PACKET_MAX)
-                        .max(1)
-                })
-                .sum::<usize>()
-        })
-        .sum();
-    let overhead = link_proto::PACKET_HEADER_LEN
-        + link_proto::CRC_LEN
-        + link_proto::payload::SURFACE_HEADER_LEN;
-    let bytes_per_frame =
-        packets_per_frame * overhead + surface_nodes * link_proto::payload::SURFACE_ENTRY_LEN;
-    let graphics = GraphicsReport {
-        interval_steps: gp.interval_steps,
-        spread_steps: gp.spread_steps,
-        surface_nodes,
-        packets_per_frame,
-        bytes_per_frame,
-        bytes_per_s: bytes_per_frame as f64 / (gp.interval_steps as f64 * dt),
-        seed_bytes_per_s: 18e6,
-    };
-    let contact = contact_report(problem, plan, dt, rate)?;
+    let frame_bytes_max = links.bytes.iter().copied().max().unwrap_or(0);
+    let bytes_total: usize = links.bytes.iter().sum();
     Ok(CompileReport {
-        graphics,
-        contact,
+        graphics: graphics_report(problem, plan, dt),
+        contact: contact_report(problem, plan, dt, rate)?,
         scene: scene.to_string(),
         machine: plan.machine.to_string(),
         rounds: plan.rounds,
@@ -369,8 +237,8 @@ pub fn report(
                 .max()
                 .unwrap_or(0)
         }),
-        force_vectors_per_step: vectors,
-        force_vectors_per_link_max: link_max,
+        force_vectors_per_step: links.vectors.iter().sum(),
+        force_vectors_per_link_max: links.vectors.iter().copied().max().unwrap_or(0),
         bytes_per_step_per_link_max: frame_bytes_max,
         bytes_per_step_total: bytes_total,
         bandwidth_total_bytes_per_s: bytes_total as f64 * rate,
@@ -379,9 +247,132 @@ pub fn report(
         link_utilisation_max: frame_bytes_max as f64 * rate / profile.link_bytes_per_s as f64,
         image_bytes_max: images.iter().map(|i| i.bytes.len()).max().unwrap_or(0),
         ram_bytes_max: images.iter().map(|i| i.ram_bytes).max().unwrap_or(0),
-        capacity,
-        boards,
+        capacity: capacity_report(problem, plan, profile, dt),
+        boards: board_summaries(plan, images),
     })
+}
+
+/// Force vectors and bytes sent per step on every link direction (board, face), over all
+/// rounds (one frame per round).
+struct LinkTraffic {
+    vectors: Vec<usize>,
+    bytes: Vec<usize>,
+}
+
+impl LinkTraffic {
+    fn of(plan: &Plan, precision: Precision) -> LinkTraffic {
+        let w = if precision == Precision::F32 { 4 } else { 8 };
+        let overhead = link_proto::FRAME_HEADER_LEN + link_proto::CRC_LEN;
+        let mut t = LinkTraffic {
+            vectors: Vec::new(),
+            bytes: Vec::new(),
+        };
+        for b in &plan.boards {
+            for f in 0..6 {
+                let rounds = &b.rounds[f / 2];
+                let n: usize = rounds.iter().map(|r| r.send[f % 2].len()).sum();
+                let frames = rounds.iter().filter(|r| !r.send[f % 2].is_empty()).count();
+                t.vectors.push(n);
+                t.bytes.push(3 * w * n + frames * overhead);
+            }
+        }
+        t
+    }
+}
+
+/// The busiest board's compute per step from the measured firmware cost, and the boards a
+/// 10 kHz step would need.
+fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f64) -> Capacity {
+    let cost =
+        pe_firmware::profile::measured_cost(problem.solver.precision, problem.solver.integration);
+    let busiest = plan
+        .boards
+        .iter()
+        .map(|b| cost.step_instructions(b.elements.len(), b.nodes.len()))
+        .fold(0.0f64, f64::max);
+    let npe = plan
+        .boards
+        .iter()
+        .max_by_key(|b| b.elements.len())
+        .map(|b| b.nodes.len() as f64 / b.elements.len().max(1) as f64)
+        .unwrap_or(2.0);
+    let at_10k = cost.elements_per_board(profile, 1e4, npe);
+    Capacity {
+        clock_hz: profile.clock_hz,
+        instructions_per_element_step: cost.per_element_step,
+        instructions_per_node_update: cost.per_node_update,
+        step_instructions_max: busiest,
+        step_compute_s_max: busiest / profile.clock_hz as f64,
+        compute_keeps_real_time: busiest / profile.clock_hz as f64 <= dt,
+        elements_per_board_at_scene_rate: cost.elements_per_board(profile, 1.0 / dt, npe),
+        elements_per_board_at_10_khz: at_10k,
+        boards_needed_at_10_khz: (problem.mesh.cells.len() as f64 / at_10k).ceil() as usize,
+    }
+}
+
+fn board_summaries(plan: &Plan, images: &[BoardImage]) -> Vec<BoardSummary> {
+    plan.boards
+        .iter()
+        .zip(images)
+        .map(|(b, im)| BoardSummary {
+            board: b.coords,
+            file: image_file_name(b.coords),
+            elements: b.elements.len(),
+            batches: [
+                b.batch_ends[0],
+                b.batch_ends[1] - b.batch_ends[0],
+                b.batch_ends[2] - b.batch_ends[1],
+                b.batch_ends[3] - b.batch_ends[2],
+            ],
+            nodes: b.nodes.len(),
+            owned_nodes: b.owner.iter().filter(|o| **o).count(),
+            exchange: core::array::from_fn(|f| b.exchange[f].len()),
+            image_bytes: im.bytes.len(),
+            ram_bytes: im.ram_bytes,
+        })
+        .collect()
+}
+
+/// The graphics stream's packets and bytes per frame and its rate.
+fn graphics_report(problem: &Problem, plan: &Plan, dt: f64) -> GraphicsReport {
+    let gp = graphics_params(problem, dt);
+    let mask = problem.surface_node_mask();
+    let surface_nodes = mask.iter().filter(|m| **m).count();
+    let spread = gp.spread_steps as usize;
+    let packets_per_frame: usize = plan
+        .boards
+        .iter()
+        .map(|b| {
+            let n = b
+                .nodes
+                .iter()
+                .zip(&b.owner)
+                .filter(|(n, o)| **o && mask[**n as usize])
+                .count();
+            // One packet per spread step (more if a slice overflows a packet).
+            (0..spread)
+                .map(|j| {
+                    let len = (j + 1) * n / spread - j * n / spread;
+                    len.div_ceil(link_proto::payload::SURFACE_NODES_PER_PACKET_MAX)
+                        .max(1)
+                })
+                .sum::<usize>()
+        })
+        .sum();
+    let overhead = link_proto::PACKET_HEADER_LEN
+        + link_proto::CRC_LEN
+        + link_proto::payload::SURFACE_HEADER_LEN;
+    let bytes_per_frame =
+        packets_per_frame * overhead + surface_nodes * link_proto::payload::SURFACE_ENTRY_LEN;
+    GraphicsReport {
+        interval_steps: gp.interval_steps,
+        spread_steps: gp.spread_steps,
+        surface_nodes,
+        packets_per_frame,
+        bytes_per_frame,
+        bytes_per_s: bytes_per_frame as f64 / (gp.interval_steps as f64 * dt),
+        seed_bytes_per_s: 18e6,
+    }
 }
 
 /// The readable summary printed by `pe compile`.

@@ -80,7 +80,7 @@ impl core::fmt::Display for Integration {
 }
 
 /// Record counts (and the capacities they must fit).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Counts {
     pub materials: u16,
     pub elements: u32,
