@@ -3,7 +3,9 @@
 //! three, naming the same table and figures: `pe compile`'s fit check, board-sim with
 //! board-sized storage, and the firmware's own storage type (`pe-board`'s `BoardStorage`
 //! for that profile: fixed-capacity vectors sized by `Capacities::for_board`) loading the
-//! image with the firmware's loader.
+//! image with the firmware's loader. Elements are checked on the PE board in f64 full
+//! (280 elements: on the emulated board the node table binds first). The exchange tables
+//! (4096 entries) are not reachable: a board's 1024 nodes bound its exchange lists first.
 
 use board_sim::{load_check, StorageSizing};
 use host_tools::compile::partition::Machine;
@@ -11,60 +13,73 @@ use host_tools::compile::{compile_images, fit_problems, plan};
 use host_tools::problem::Problem;
 use host_tools::scene::Scene;
 use pe_firmware::image::ImageError;
-use pe_firmware::physics::HexReduced;
-use pe_firmware::profile::QEMU_MPS2_AN500;
+use pe_firmware::physics::{HexFull, HexReduced};
+use pe_firmware::profile::{BoardProfile, PE_BOARD, QEMU_MPS2_AN500};
 use pe_firmware::runtime::{Capacities, Heapless, Runtime, RuntimeConfig, StorageBuf};
 
-const CAP: Capacities = Capacities::for_board::<f64, HexReduced<f64>>(&QEMU_MPS2_AN500);
-
-/// The firmware's storage for the emulation profile, f64 reduced (as `pe-board/src/config.rs`
-/// builds it with features `qemu`).
-type FirmwareStorage = StorageBuf<
-    Heapless,
-    f64,
-    HexReduced<f64>,
-    { CAP.materials },
-    { CAP.elements },
-    { CAP.nodes },
-    { CAP.exchange },
-    { CAP.path_points },
-    { CAP.loads },
-    { CAP.contact_nodes },
-    { CAP.contact_faces },
-    { CAP.contact_candidates },
-    { CAP.contact_sends },
->;
-
-/// The firmware's verdict: its loader on its storage (on a thread with room for the
-/// fixed-capacity storage, 4 MiB of vectors).
-fn firmware_verdict(image: Vec<u8>) -> Result<(), ImageError> {
-    std::thread::Builder::new()
-        .stack_size(256 << 20)
-        .spawn(move || {
-            let mut buf = Box::new(FirmwareStorage::empty());
-            let st = buf
-                .fill(&CAP)
-                .expect("the firmware's storage fills to its capacity");
-            Runtime::<f64, HexReduced<f64>>::load(&image, [0; 3], st, RuntimeConfig::default())
-                .map(|_| ())
-        })
-        .expect("thread")
-        .join()
-        .expect("no panic")
+/// The firmware's storage type for a profile and variant (as `pe-board/src/config.rs`
+/// builds it), and its verdict on an image: its loader on that storage, on a thread with
+/// room for the fixed-capacity vectors (megabytes).
+macro_rules! firmware {
+    ($verdict:ident, $cap:ident, $profile:expr, $t:ty, $e:ty) => {
+        const $cap: Capacities = Capacities::for_board::<$t, $e>(&$profile);
+        fn $verdict(image: Vec<u8>) -> Result<(), ImageError> {
+            type FirmwareStorage = StorageBuf<
+                Heapless,
+                $t,
+                $e,
+                { $cap.materials },
+                { $cap.elements },
+                { $cap.nodes },
+                { $cap.exchange },
+                { $cap.path_points },
+                { $cap.loads },
+                { $cap.contact_nodes },
+                { $cap.contact_faces },
+                { $cap.contact_candidates },
+                { $cap.contact_sends },
+            >;
+            std::thread::Builder::new()
+                .stack_size(256 << 20)
+                .spawn(move || {
+                    let mut buf = Box::new(FirmwareStorage::empty());
+                    let st = buf
+                        .fill(&$cap)
+                        .expect("the firmware's storage fills to its capacity");
+                    Runtime::<$t, $e>::load(&image, [0; 3], st, RuntimeConfig::default())
+                        .map(|_| ())
+                })
+                .expect("thread")
+                .join()
+                .expect("no panic")
+        }
+    };
 }
+
+firmware!(qemu_f64_reduced, CAP, QEMU_MPS2_AN500, f64, HexReduced<f64>);
+firmware!(board_f64_full, CAP_FULL, PE_BOARD, f64, HexFull<f64>);
 
 /// A box of `cells` on one board, clamped at z = 0, with extra scene tables.
 fn scene(cells: [usize; 3], extra: &str) -> Problem {
+    let mesh = format!(
+        "generate = {{ kind = \"box\", size = [0.03, 0.15, 0.15], cells = [{}, {}, {}] }}",
+        cells[0], cells[1], cells[2]
+    );
+    scene_with(&mesh, MATERIAL, extra)
+}
+
+/// One soft material for the whole mesh.
+const MATERIAL: &str =
+    "[material]\nlaw = \"neo-hookean\"\nyoungs_modulus = 3.0e3\npoisson_ratio = 0.45\ndensity = 1000.0\n";
+
+/// A scene of `mesh` (the `[mesh]` table's keys) with the `material` tables.
+fn scene_with(mesh: &str, material: &str, extra: &str) -> Problem {
     let text = format!(
         r#"
 [mesh]
-generate = {{ kind = "box", size = [0.03, 0.15, 0.15], cells = [{}, {}, {}] }}
+{mesh}
 
-[material]
-law = "neo-hookean"
-youngs_modulus = 3.0e3
-poisson_ratio = 0.45
-density = 1000.0
+{material}
 
 [[fixed]]
 box = [[-1.0, -1.0, -1.0], [1.0, 1.0, 1e-9]]
@@ -72,8 +87,7 @@ box = [[-1.0, -1.0, -1.0], [1.0, 1.0, 1e-9]]
 [solver]
 steps = 2
 {extra}
-"#,
-        cells[0], cells[1], cells[2]
+"#
     );
     let sc = Scene::from_toml(&text).expect("scene parses");
     Problem::from_scene(&sc, std::path::Path::new(".")).expect("scene resolves")
@@ -81,11 +95,15 @@ steps = 2
 
 /// The three verdicts on a scene compiled for one emulated board: each `None` (fits) or
 /// the table, the count and the capacity it names.
-fn verdicts(p: &Problem) -> [Option<(String, u32, u32)>; 3] {
+fn verdicts(
+    p: &Problem,
+    profile: BoardProfile,
+    firmware: fn(Vec<u8>) -> Result<(), ImageError>,
+) -> [Option<(String, u32, u32)>; 3] {
     let plan = plan(p, Machine::parse("1x1x1").unwrap()).unwrap();
     let images = compile_images(p, &plan).unwrap();
     assert_eq!(images.len(), 1);
-    let fit = fit_problems(&images, &QEMU_MPS2_AN500);
+    let fit = fit_problems(&images, &profile);
     let compiler = fit.first().map(|line| {
         // "board (0,0,0): N WHAT exceed the MAX the PROFILE firmware holds, ..."
         let rest = line.split(": ").nth(1).expect("a located line");
@@ -100,15 +118,25 @@ fn verdicts(p: &Problem) -> [Option<(String, u32, u32)>; 3] {
         e => panic!("not a capacity error: {e}"),
     };
     let image = images[0].bytes.clone();
-    let sim = load_check(&image, [0; 3], StorageSizing::Board(QEMU_MPS2_AN500)).err();
-    let firmware = firmware_verdict(image).err();
-    [compiler, sim.map(named), firmware.map(named)]
+    let sim = load_check(&image, [0; 3], StorageSizing::Board(profile)).err();
+    [compiler, sim.map(named), firmware(image).err().map(named)]
 }
 
 fn assert_limit(what: &str, cap: usize, at: &Problem, over: &Problem) {
-    let fits = verdicts(at);
+    assert_limit_on(what, cap, at, over, QEMU_MPS2_AN500, qemu_f64_reduced);
+}
+
+fn assert_limit_on(
+    what: &str,
+    cap: usize,
+    at: &Problem,
+    over: &Problem,
+    profile: BoardProfile,
+    firmware: fn(Vec<u8>) -> Result<(), ImageError>,
+) {
+    let fits = verdicts(at, profile, firmware);
     assert_eq!(fits, [None, None, None], "{what} at the limit {cap}");
-    let refused = verdicts(over);
+    let refused = verdicts(over, profile, firmware);
     let expected = Some((what.to_string(), cap as u32 + 1, cap as u32));
     assert_eq!(
         refused,
@@ -160,4 +188,62 @@ fn the_capacity_table_is_the_same_for_compiler_board_sim_and_firmware() {
         &scene([3, 15, 15], &path(64)),
         &scene([3, 15, 15], &path(65)),
     );
+}
+
+/// `[mesh] blocks` of 10 mm cubes side by side along x, with these cells.
+fn blocks(cells: &[[usize; 3]]) -> String {
+    let list: Vec<String> = cells
+        .iter()
+        .enumerate()
+        .map(|(k, c)| {
+            format!(
+                "{{ name = \"b{k}\", origin = [{}, 0.0, 0.0], size = [0.01, 0.01, 0.01], cells = [{}, {}, {}] }}",
+                0.02 * k as f64,
+                c[0],
+                c[1],
+                c[2]
+            )
+        })
+        .collect();
+    format!("blocks = [{}]", list.join(", "))
+}
+
+#[test]
+fn elements_and_materials_at_their_limits() {
+    // Elements (PE board, f64 full): one block of exactly the capacity (a x b x 1 cells),
+    // then a second block of one cell beside it.
+    const { assert!(CAP_FULL.elements > 100 && CAP_FULL.elements < 400) };
+    let n = CAP_FULL.elements;
+    let a = (1..=n).rev().find(|a| n % a == 0 && a * a <= n).unwrap();
+    let main = [a, n / a, 1];
+    let full = "integration = \"full\"";
+    let at = scene_with(&blocks(&[main]), MATERIAL, full);
+    let over = scene_with(&blocks(&[main, [1, 1, 1]]), MATERIAL, full);
+    assert_eq!((at.mesh.cells.len(), over.mesh.cells.len()), (n, n + 1));
+    assert!(
+        over.mesh.nodes.len() <= 1024,
+        "the node table must not bind first"
+    );
+    assert_limit_on("elements", n, &at, &over, PE_BOARD, board_f64_full);
+
+    // Materials: one block and one material (each of its own stiffness) per region.
+    const { assert!(CAP.materials == 8) };
+    let materials = |k: usize| {
+        let cells = vec![[1, 1, 1]; k];
+        let tables: Vec<String> = (0..k)
+            .map(|m| {
+                format!(
+                    "[[material]]\nregion = \"b{m}\"\nlaw = \"neo-hookean\"\nyoungs_modulus = {}\npoisson_ratio = 0.45\ndensity = 1000.0\n",
+                    3.0e3 + 100.0 * m as f64
+                )
+            })
+            .collect();
+        (blocks(&cells), tables.join("\n"))
+    };
+    let (mesh8, mat8) = materials(CAP.materials);
+    let (mesh9, mat9) = materials(CAP.materials + 1);
+    let at = scene_with(&mesh8, &mat8, "");
+    let over = scene_with(&mesh9, &mat9, "");
+    assert_eq!((at.laws.len(), over.laws.len()), (8, 9));
+    assert_limit("materials", CAP.materials, &at, &over);
 }
