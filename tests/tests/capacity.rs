@@ -214,7 +214,10 @@ fn elements_and_materials_at_their_limits() {
     // then a second block of one cell beside it.
     const { assert!(CAP_FULL.elements > 100 && CAP_FULL.elements < 400) };
     let n = CAP_FULL.elements;
-    let a = (1..=n).rev().find(|a| n % a == 0 && a * a <= n).unwrap();
+    let a = (1..=n)
+        .rev()
+        .find(|a| n.is_multiple_of(*a) && a * a <= n)
+        .unwrap();
     let main = [a, n / a, 1];
     let full = "integration = \"full\"";
     let at = scene_with(&blocks(&[main]), MATERIAL, full);
