@@ -8,6 +8,9 @@ use super::program::{face_of, ROUNDS_PER_AXIS_MAX};
 use super::{Fault, FaultKind, Runtime, WireReal};
 use crate::image::{Combine, ElementRecord, ExchangeList};
 
+/// One list of the step program: (axis, round, face 0 = +axis / 1 = −axis).
+pub(super) type ListId = (u8, u8, u8);
+
 /// Most send/receive lists: two faces per round of every axis.
 pub const LISTS_MAX: usize = 3 * ROUNDS_PER_AXIS_MAX * 2;
 
@@ -59,10 +62,9 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
     pub(super) fn send_face(
         &mut self,
         links: &mut impl Links,
-        axis: usize,
-        round: usize,
-        f: usize,
+        list: ListId,
     ) -> Result<bool, Fault> {
+        let (axis, round, f) = (list.0 as usize, list.1 as usize, list.2 as usize);
         let (s, e) = self.exchange.rounds[axis][round].send[f];
         if s == e {
             return Ok(true);
@@ -101,10 +103,9 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
     pub(super) fn recv_face(
         &mut self,
         links: &mut impl Links,
-        axis: usize,
-        round: usize,
-        f: usize,
+        list: ListId,
     ) -> Result<bool, Fault> {
+        let (axis, round, f) = (list.0 as usize, list.1 as usize, list.2 as usize);
         let (s, e) = self.exchange.rounds[axis][round].recv[f];
         if s == e {
             return Ok(true);

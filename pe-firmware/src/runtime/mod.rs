@@ -251,8 +251,8 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
                     self.external(stage, t);
                     true
                 }
-                Op::Send(a, r, f) => self.send_face(links, a as usize, r as usize, f as usize)?,
-                Op::Recv(a, r, f) => self.recv_face(links, a as usize, r as usize, f as usize)?,
+                Op::Send(a, r, f) => self.send_face(links, (a, r, f))?,
+                Op::Recv(a, r, f) => self.recv_face(links, (a, r, f))?,
                 Op::Update => {
                     self.update(t + self.header.params.dt_s)?;
                     true
