@@ -15,3 +15,7 @@ cargo test --workspace --release
 # The board firmware on an emulated Cortex-M7 (QEMU mps2-an500): bit-identical to `pe solve`
 # and board-sim (f64, f32), faults reported. Installs qemu-system-arm if missing.
 bash scripts/qemu-check.sh
+
+# The firmware's measured cost (QEMU, exact instruction counts) against the table the
+# compiler and board-sim use: fails when pe_firmware::profile::MEASURED_COST is stale.
+bash scripts/board-cost.sh
