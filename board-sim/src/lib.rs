@@ -421,6 +421,18 @@ fn read_images(dir: &Path, manifest: &Manifest) -> Result<(Vec<Vec<u8>>, ImageHe
         let bytes = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
         let r = ImageReader::new(&bytes, Some(b.board.map(|c| c as u8)))
             .map_err(|e| anyhow!("{}: {e}", p.display()))?;
+        // The manifest repeats the step for its readers; the images are what runs.
+        let params = r.header.params;
+        if params.dt_s != manifest.dt_s || params.steps != manifest.steps {
+            bail!(
+                "{}: dt {} s and {} steps, but manifest.json says dt {} s and {} steps: the image is from another compilation",
+                p.display(),
+                params.dt_s,
+                params.steps,
+                manifest.dt_s,
+                manifest.steps
+            );
+        }
         header.get_or_insert(r.header);
         let i = b.board[0] + dims[0] * (b.board[1] + dims[1] * b.board[2]);
         images[i] = bytes;

@@ -12,17 +12,47 @@ fn sim(dir: &std::path::Path, opts: &SimOptions) -> board_sim::SimOutput {
 }
 
 /// One board runs the same additions in the same order as the serial solver: bit for bit.
+/// 1000 steps: the probe has pressed the tube (the fields compared are far from zero).
 #[test]
 fn one_board_equals_serial_bit_for_bit() {
-    let p = builtin_problem("coarse", 200);
+    let p = builtin_problem("coarse", 1000);
     let serial = solver::run(&p, "serial", &mut ()).unwrap().displacements;
     let dir = compile(&p, "builtin:coarse", "1x1x1", "b111");
     let out = sim(&dir, &SimOptions::default());
-    assert_eq!(out.steps, 200);
+    assert_eq!(out.steps, 1000);
+    let u_max = serial.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(
+        u_max > 1e-4,
+        "the probe has moved the tube: max |u| {u_max} m"
+    );
+    assert_eq!(serial.len(), out.displacements.len());
     assert!(serial
         .iter()
         .zip(&out.displacements)
         .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits)));
+}
+
+/// The manifest repeats the images' step; an image set whose step differs from it (an
+/// image from another compilation) is refused before the run, naming the image.
+#[test]
+fn a_manifest_that_disagrees_with_its_images_is_refused() {
+    let p = builtin_problem("coarse", 10);
+    let dir = compile(&p, "builtin:coarse", "1x1x1", "manifest-dt");
+    let path = dir.join("manifest.json");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut m: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let dt = m["dt_s"].as_f64().unwrap();
+    assert!(dt > 0.0);
+    m["dt_s"] = serde_json::json!(dt * 1.5);
+    std::fs::write(&path, m.to_string()).unwrap();
+    let e = run(&dir, &SimOptions::default(), &mut |_, _| {})
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        e.contains("board-0-0-0.bin") && e.contains("another compilation"),
+        "{e}"
+    );
 }
 
 /// 2x2x2 and 4x4x4 (and a non-cubic 4x2x1) on the built-in scene equal the serial run to
