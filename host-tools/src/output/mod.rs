@@ -1,4 +1,5 @@
-//! Run outputs shared by `pe solve` and board-sim: the nodes CSV and ParaView frames.
+//! Run outputs shared by `pe solve` and board-sim: the nodes CSV, ParaView frames and the
+//! progress bar.
 
 pub mod font;
 pub mod render;
@@ -29,6 +30,18 @@ pub fn write_nodes_csv(path: &Path, mesh: &Mesh, u: &[[f64; 3]]) -> Result<()> {
     f.write_all(out.as_bytes())
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
+}
+
+/// The step counter of a long run (`pe solve`, board-sim).
+pub fn progress_bar(total: u64) -> indicatif::ProgressBar {
+    let b = indicatif::ProgressBar::new(total);
+    b.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{bar:40} {pos}/{len} steps  {elapsed} (eta {eta})",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    b
 }
 
 /// Writes a frame every `interval_s` of simulated time (and the last one).
