@@ -311,9 +311,10 @@ fn solve(scene: &SceneArgs, overrides: &Overrides, outputs: SolveOutputs) -> Res
     let (mut sc, dir, name) = scene.load()?;
     overrides.apply(&mut sc);
     let problem = Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
-    let (dt, dt_crit) = problem
-        .time_step()
-        .with_context(|| format!("scene {name}"))?;
+    let (dt, dt_crit) = (
+        problem.time_step.dt_s,
+        problem.time_step.critical.dt_critical_s,
+    );
     let total = problem.steps(dt);
     eprintln!(
         "{name}: {} elements, {} nodes, {} {}, dt = {dt:.3e} s (critical {dt_crit:.3e} s), {total} steps",

@@ -205,7 +205,7 @@ pub fn report(
     images: &[BoardImage],
     profile: &BoardProfile,
 ) -> Result<CompileReport> {
-    let (dt, _) = problem.time_step()?;
+    let dt = problem.time_step.dt_s;
     let w = if problem.solver.precision == Precision::F32 {
         4
     } else {

@@ -74,11 +74,21 @@ pub struct Problem {
     /// each belongs to.
     pub surface_faces: Vec<[u32; 4]>,
     pub surface_face_cells: Vec<u32>,
-    critical: std::sync::OnceLock<CriticalStep>,
+    /// The time step every run and compilation of this problem uses, computed once when
+    /// the problem is built.
+    pub time_step: TimeStep,
+}
+
+/// A problem's time step and the stability limit it was chosen against.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct TimeStep {
+    /// The step the scene asks for (`[solver] dt`, or `dt_safety ×` the critical step).
+    pub dt_s: f64,
+    pub critical: CriticalStep,
 }
 
 /// The stability limit of a problem's time step.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct CriticalStep {
     /// The step the solver treats as critical: min of the two below.
     pub dt_critical_s: f64,
@@ -443,7 +453,7 @@ impl Problem {
             densities,
             cell_material,
         } = materials;
-        Ok(Problem {
+        let mut problem = Problem {
             mesh,
             node_sets,
             laws,
@@ -463,8 +473,10 @@ impl Problem {
             contact,
             surface_faces,
             surface_face_cells,
-            critical: std::sync::OnceLock::new(),
-        })
+            time_step: TimeStep::default(),
+        };
+        problem.time_step = problem.choose_time_step()?;
+        Ok(problem)
     }
 
     /// True for the nodes on the mesh's boundary (the surface the graphics engine draws).
@@ -509,11 +521,8 @@ impl Problem {
     /// mesh (power iteration on `M⁻¹K`, 200 iterations, at rest). On regular hexahedral
     /// meshes `2/ω_max` is 0.86–0.89 of `L_e/c` (measured; a 3D mesh has modes above the
     /// 1D bound `2c/h`), so the seed's formula alone would let a 0.9 safety factor blow up.
-    /// Computed once and cached.
-    pub fn critical_step(&self) -> Result<CriticalStep> {
-        if let Some(c) = self.critical.get() {
-            return Ok(*c);
-        }
+    /// Computed once, when the problem is built (see [`Problem::time_step`]).
+    fn critical_step(&self) -> Result<CriticalStep> {
         let (estimate, cell) = self.element_dt_estimate();
         // At rest, in f64, from the deterministic start vector: the solver's
         // `Model::<f64>::max_frequency(200)` without building the model.
@@ -533,25 +542,26 @@ impl Problem {
         } else {
             f64::INFINITY
         };
-        let c = CriticalStep {
+        Ok(CriticalStep {
             dt_critical_s: estimate.min(power),
             dt_element_estimate_s: estimate,
             dt_power_iteration_s: power,
             limiting_cell: cell,
-        };
-        let _ = self.critical.set(c);
-        Ok(c)
+        })
     }
 
-    /// Critical step and limiting cell (see [`Problem::critical_step`]).
-    pub fn critical_dt(&self) -> Result<(f64, usize)> {
-        let c = self.critical_step()?;
-        Ok((c.dt_critical_s, c.limiting_cell))
+    /// Recomputes [`Problem::time_step`] after the problem was edited by hand (node kinds,
+    /// materials, masses: what the critical step depends on). A problem built from a scene
+    /// needs no call.
+    pub fn update_time_step(&mut self) -> Result<()> {
+        self.time_step = self.choose_time_step()?;
+        Ok(())
     }
 
     /// The time step the scene asks for, refusing one above critical unless forced.
-    pub fn time_step(&self) -> Result<(f64, f64)> {
-        let (dt_crit, cell) = self.critical_dt()?;
+    fn choose_time_step(&self) -> Result<TimeStep> {
+        let critical = self.critical_step()?;
+        let (dt_crit, cell) = (critical.dt_critical_s, critical.limiting_cell);
         let dt = match self.solver.dt {
             Some(dt) => {
                 if !(dt > 0.0) {
@@ -575,7 +585,7 @@ impl Problem {
                 self.solver.dt_safety * dt_crit
             }
         };
-        Ok((dt, dt_crit))
+        Ok(TimeStep { dt_s: dt, critical })
     }
 
     /// Number of steps the scene runs.

@@ -100,7 +100,10 @@ pub fn run_typed<T: Real>(
     name: &str,
     observer: &mut dyn Observer,
 ) -> Result<RunOutput> {
-    let (dt, dt_crit) = problem.time_step()?;
+    let (dt, dt_crit) = (
+        problem.time_step.dt_s,
+        problem.time_step.critical.dt_critical_s,
+    );
     let mut steps = problem.steps(dt);
     let mut model = Model::<T>::new(problem, dt);
     let mut monitor = DtMonitor::new(problem, dt_crit);

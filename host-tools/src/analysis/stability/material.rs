@@ -23,7 +23,7 @@ pub fn poisson(nu: f64) -> Result<Case> {
             // Damping 400/s critically damps the first bending mode (ω₁ ≈ 200 rad/s).
             let tip_of = |nu: f64| -> Result<(f64, f64, u64)> {
                 let p = run(nu, "damping = 400.0")?;
-                let (dt, crit) = p.time_step()?;
+                let (dt, crit) = (p.time_step.dt_s, p.time_step.critical.dt_critical_s);
                 let tip = node_near(&p, [0.1, 0.01, 0.01]);
                 let mut m = Model::<f64>::new(&p, dt);
                 let w = settle(&mut m, 3_000_000, 1e-7, |m| m.u[tip][2])?;
@@ -38,7 +38,7 @@ pub fn poisson(nu: f64) -> Result<Case> {
             // neighbouring ν the ratio of the steps is √(M(ν')/M(ν)) within 3% (the shear
             // share of the top mode is ≤ 2μ/λ).
             let nu_ref = if nu == 0.49 { 0.499 } else { 0.49 };
-            let crit_ref = run(nu_ref, "")?.critical_dt()?.0;
+            let crit_ref = run(nu_ref, "")?.time_step.critical.dt_critical_s;
             let expected = (m_mod(nu_ref) / m_mod(nu)).sqrt();
             let ratio = crit / crit_ref;
             c.lt(
@@ -61,7 +61,7 @@ pub fn poisson(nu: f64) -> Result<Case> {
             // Undamped from rest for 20000 steps at safety 0.9: central differences conserve
             // energy (a shadow of it) to well under 1% of the peak stored energy.
             let p = run(nu, "")?;
-            let (dt, _) = p.time_step()?;
+            let dt = p.time_step.dt_s;
             let mut m = Model::<f64>::new(&p, dt);
             let (lo, hi, smax) = energy_band(&mut m, 20_000, 20, 0)?;
             c.lt(
@@ -114,7 +114,7 @@ pub fn compression_50() -> Result<Case> {
                 prescribe_boundary(&mut p, &[0.0, 0.05], |x, t| {
                     let s = t / 0.05;
                     core::array::from_fn(|i| s * g[i] * (x[i] - 0.005))
-                });
+                })?;
                 Ok(p)
             };
             let lame = pe_firmware::physics::LameParameters::from_young_poisson(e, nu);
@@ -134,7 +134,7 @@ pub fn compression_50() -> Result<Case> {
             let p = mk(
                 "damping = 1000.0\nduration = 0.1\ndt_recheck_interval = 10\nadapt_dt = true",
             )?;
-            let (dt0, crit0) = p.time_step()?;
+            let (dt0, crit0) = (p.time_step.dt_s, p.time_step.critical.dt_critical_s);
             let out = solver::run(&p, "compression, adaptive dt", &mut ())?;
             let r = &out.report;
             c.is(
@@ -255,8 +255,8 @@ pub fn rigid_rotation() -> Result<Case> {
                     let y = rotate(r, axis, theta(t));
                     core::array::from_fn(|i| y[i] - r[i])
                 };
-                prescribe_boundary(&mut p, &times, u_at);
-                let (dt, _) = p.time_step()?;
+                prescribe_boundary(&mut p, &times, u_at)?;
+                let dt = p.time_step.dt_s;
                 let mut m = Model::<f64>::new(&p, dt);
                 let steps = (1.5 / dt).ceil() as u64;
                 let mut peak = 0.0f64;
@@ -347,8 +347,8 @@ duration = 1.5
                 "",
                 "",
             )?)?;
-            let (crit, _) = p.critical_dt()?;
-            let (crit_s, _) = all_stiff.critical_dt()?;
+            let crit = p.time_step.critical.dt_critical_s;
+            let crit_s = all_stiff.time_step.critical.dt_critical_s;
             c.lt(
                 "critical step vs an all-stiff bar, relative",
                 (crit / crit_s - 1.0).abs(),

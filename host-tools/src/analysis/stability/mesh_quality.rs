@@ -29,7 +29,7 @@ fn distorted(name: &str, mesh_of: impl Fn() -> Mesh, expected: &str) -> Result<C
                 let mk = |solver: &str| -> Result<Problem> {
                     let sc = box_scene([1.0; 3], [1; 3], 1e4, 0.45, false, solver, "")?;
                     let mut p = Problem::new(&sc, mesh.clone(), BTreeMap::new())?;
-                    prescribe_boundary(&mut p, &[0.0], |x, _| lin(x));
+                    prescribe_boundary(&mut p, &[0.0], |x, _| lin(x))?;
                     Ok(p)
                 };
                 // Patch test: boundary on the linear field, interior free and damped: the
@@ -38,7 +38,7 @@ fn distorted(name: &str, mesh_of: impl Fn() -> Mesh, expected: &str) -> Result<C
                 let p = mk(&format!(
                     "integration = \"{integration}\"\ndamping = 2000.0"
                 ))?;
-                let (dt, _) = p.time_step()?;
+                let dt = p.time_step.dt_s;
                 let mut m = Model::<f64>::new(&p, dt);
                 let probe = p
                     .node_kind
@@ -67,7 +67,7 @@ fn distorted(name: &str, mesh_of: impl Fn() -> Mesh, expected: &str) -> Result<C
                 let p = mk(&format!(
                     "integration = \"{integration}\"\ndt_safety = 0.99"
                 ))?;
-                let (dt, crit) = p.time_step()?;
+                let (dt, crit) = (p.time_step.dt_s, p.time_step.critical.dt_critical_s);
                 let mut m = Model::<f64>::new(&p, dt);
                 let (_, first, _) = energy_band(&mut m, 2_000, 1, 10)?;
                 let _ = energy_band(&mut m, 16_000, 100, 0)?;
@@ -144,7 +144,7 @@ pub fn sagging_cantilever() -> Result<Case> {
             };
             // 1. Re-checked every 20 steps, adapting dt: completes; how far the step fell.
             let p = mk("dt_recheck_interval = 20\nadapt_dt = true")?;
-            let (dt0, crit0) = p.time_step()?;
+            let (dt0, crit0) = (p.time_step.dt_s, p.time_step.critical.dt_critical_s);
             let adaptive = solver::run(&p, "sagging, adaptive", &mut ())?;
             let r = &adaptive.report;
             let tip = node_near(&p, [0.1, 0.005, 0.005]);

@@ -172,7 +172,11 @@ fn node_near(p: &Problem, x: [f64; 3]) -> usize {
 }
 
 /// Every boundary node follows its own path `u(X, t)`, given at the times `times`.
-fn prescribe_boundary(p: &mut Problem, times: &[f64], u: impl Fn([f64; 3], f64) -> [f64; 3]) {
+fn prescribe_boundary(
+    p: &mut Problem,
+    times: &[f64],
+    u: impl Fn([f64; 3], f64) -> [f64; 3],
+) -> Result<()> {
     for n in p.mesh.boundary_nodes() {
         let x = p.mesh.nodes[n as usize];
         p.node_kind[n as usize] = NodeKind::Prescribed(p.paths.len() as u32);
@@ -180,6 +184,7 @@ fn prescribe_boundary(p: &mut Problem, times: &[f64], u: impl Fn([f64; 3], f64) 
             points: times.iter().map(|&t| (t, u(x, t))).collect(),
         });
     }
+    p.update_time_step()
 }
 
 /// Runs `steps` steps, sampling the energies every `every` steps from step `from` on:
