@@ -4,14 +4,11 @@
 use super::*;
 
 fn dt_scene() -> Result<Scene> {
-    box_scene(
-        [0.05, 0.01, 0.01],
-        [10, 2, 2],
-        1e6,
-        0.45,
-        true,
-        "damping = 0.0",
-        GRAVITY,
+    Ok(
+        box_scene([0.05, 0.01, 0.01], [10, 2, 2], 1e6, 0.45, true, |s| {
+            s.damping = 0.0
+        })
+        .with_gravity(builders::gravity_down()),
     )
 }
 
@@ -105,9 +102,9 @@ pub fn long_run(steps: u64) -> Result<Case> {
                 1e6,
                 0.45,
                 true,
-                "damping = 0.0",
-                GRAVITY,
-            )?;
+                |s| s.damping = 0.0,
+            )
+            .with_gravity(builders::gravity_down());
             let p = problem(&sc)?;
             let dt = p.time_step.dt_s;
             let window = steps / 10;
@@ -173,30 +170,25 @@ pub fn load_cycles(cycles: usize) -> Result<Case> {
         &format!("load_cycles_{cycles}"),
         |c| {
             let period = 0.2;
-            let mut ramp = String::from("[");
-            for k in 0..cycles {
-                let t0 = k as f64 * period;
-                let _ = write!(
-                    ramp,
-                    "[{t0}, 0.0], [{}, 1.0], [{}, 1.0], [{}, 0.0], ",
-                    t0 + 0.05,
-                    t0 + 0.1,
-                    t0 + 0.15
-                );
-            }
-            ramp.push(']');
-            let extra = format!(
-                "[[load]]\nbox = [[0.0999, -1.0, -1.0], [1.0, 1.0, 1.0]]\nforce = [0.0, 0.0, -0.2]\nramp = {ramp}"
+            let ramp: Vec<[f64; 2]> = (0..cycles)
+                .flat_map(|k| {
+                    let t0 = k as f64 * period;
+                    [
+                        [t0, 0.0],
+                        [t0 + 0.05, 1.0],
+                        [t0 + 0.1, 1.0],
+                        [t0 + 0.15, 0.0],
+                    ]
+                })
+                .collect();
+            let sc = box_scene([0.1, 0.02, 0.02], [10, 2, 2], 5e5, 0.45, true, |s| {
+                s.damping = 60.0
+            })
+            .with_load(
+                [[0.0999, -1.0, -1.0], [1.0, 1.0, 1.0]],
+                [0.0, 0.0, -0.2],
+                Some(ramp),
             );
-            let sc = box_scene(
-                [0.1, 0.02, 0.02],
-                [10, 2, 2],
-                5e5,
-                0.45,
-                true,
-                "damping = 60.0",
-                &extra,
-            )?;
             let mut sc = sc;
             // A whole number of steps per cycle (at most 0.9 of critical), so that every
             // cycle samples the same phases.
