@@ -395,18 +395,18 @@ fn write_outputs(
 
 /// step,time_s,tool,fx,fy,fz: the force on each tool every step.
 fn write_tool_force(p: &std::path::Path, out: &board_sim::SimOutput) -> Result<()> {
-    let mut text = String::from("step,time_s,tool,fx,fy,fz\n");
-    for (k, f) in out.tool_force.iter().enumerate() {
+    let rows = out.tool_force.iter().enumerate().map(|(k, f)| {
         let (step, t) = (k / out.tools.max(1), k % out.tools.max(1));
-        text.push_str(&format!(
-            "{step},{:e},{t},{:e},{:e},{:e}\n",
-            step as f64 * out.dt_s,
-            f[0],
-            f[1],
-            f[2]
-        ));
-    }
-    std::fs::write(p, text).with_context(|| format!("writing {}", p.display()))
+        [
+            step.to_string(),
+            format!("{:e}", step as f64 * out.dt_s),
+            t.to_string(),
+            format!("{:e}", f[0]),
+            format!("{:e}", f[1]),
+            format!("{:e}", f[2]),
+        ]
+    });
+    host_tools::output::write_csv(p, &["step", "time_s", "tool", "fx", "fy", "fz"], rows)
 }
 
 /// Figures of a run the report states besides the run's own output.
