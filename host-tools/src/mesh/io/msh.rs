@@ -241,11 +241,7 @@ fn read_entities(r: &mut Reader, volume_region: &mut HashMap<i32, i32>) -> Resul
 
 /// `$Nodes`: coordinates in file order, their tags, and tag -> index.
 fn read_nodes(r: &mut Reader, path: &Path, m: &mut MshContents) -> Result<(), MeshError> {
-    let nblocks = r.count("number of node blocks")?;
-    let total = r.count("number of nodes")?;
-    let total_line = r.item_line();
-    r.size("minimum node tag")?;
-    r.size("maximum node tag")?;
+    let (nblocks, total, total_line) = block_header(r, "node")?;
     m.nodes.reserve(cap(total));
     m.node_tags.reserve(cap(total));
     for _ in 0..nblocks {
@@ -288,24 +284,13 @@ fn read_nodes(r: &mut Reader, path: &Path, m: &mut MshContents) -> Result<(), Me
             return Err(r.err_item("more than 2^32 nodes"));
         }
     }
-    if m.nodes.len() != total {
-        let msg = format!(
-            "$Nodes header announces {total} nodes, blocks hold {}",
-            m.nodes.len()
-        );
-        return Err(r.err(total_line, msg));
-    }
-    r.expect_end("$EndNodes")
+    check_total(r, "Nodes", total, m.nodes.len(), total_line)
 }
 
 /// `$Elements`: the hexahedra with their regions; other element types are skipped and
 /// counted.
 fn read_elements(r: &mut Reader, path: &Path, m: &mut MshContents) -> Result<(), MeshError> {
-    let nblocks = r.count("number of element blocks")?;
-    let total = r.count("number of elements")?;
-    let total_line = r.item_line();
-    r.size("minimum element tag")?;
-    r.size("maximum element tag")?;
+    let (nblocks, total, total_line) = block_header(r, "element")?;
     let mut read = 0usize;
     for _ in 0..nblocks {
         let dim = r.int("element block entity dimension")?;
@@ -344,11 +329,35 @@ fn read_elements(r: &mut Reader, path: &Path, m: &mut MshContents) -> Result<(),
             m.cell_regions.push(region);
         }
     }
-    if read != total {
-        let msg = format!("$Elements header announces {total} elements, blocks hold {read}");
+    check_total(r, "Elements", total, read, total_line)
+}
+
+/// The header of `$Nodes` / `$Elements` (`what`: "node" / "element"): the number of blocks,
+/// the total count (and its line), the tag range (skipped).
+fn block_header(r: &mut Reader, what: &str) -> Result<(usize, usize, Option<usize>), MeshError> {
+    let nblocks = r.count(&format!("number of {what} blocks"))?;
+    let total = r.count(&format!("number of {what}s"))?;
+    let total_line = r.item_line();
+    r.size(&format!("minimum {what} tag"))?;
+    r.size(&format!("maximum {what} tag"))?;
+    Ok((nblocks, total, total_line))
+}
+
+/// The end of section `$NAME` (`Nodes` / `Elements`), after checking that its blocks held
+/// the `total` its header announced.
+fn check_total(
+    r: &mut Reader,
+    name: &str,
+    total: usize,
+    held: usize,
+    total_line: Option<usize>,
+) -> Result<(), MeshError> {
+    if held != total {
+        let what = name.to_lowercase();
+        let msg = format!("${name} header announces {total} {what}, blocks hold {held}");
         return Err(r.err(total_line, msg));
     }
-    r.expect_end("$EndElements")
+    r.expect_end(&format!("$End{name}"))
 }
 
 /// One hexahedron of an element block: its tag and eight distinct known node tags.

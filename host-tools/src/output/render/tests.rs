@@ -1,26 +1,11 @@
 //! Tests of the surface renderer: projection, depth order, input checks, colour bar.
 
 use super::*;
-use crate::mesh::HEX_FACES;
 use std::path::PathBuf;
 
 /// Unit cube corners in VTK hexahedron order and its 6 faces.
 fn cube() -> (Vec<[f64; 3]>, Vec<[u32; 4]>) {
-    let nodes = vec![
-        [0.0, 0.0, 0.0],
-        [1.0, 0.0, 0.0],
-        [1.0, 1.0, 0.0],
-        [0.0, 1.0, 0.0],
-        [0.0, 0.0, 1.0],
-        [1.0, 0.0, 1.0],
-        [1.0, 1.0, 1.0],
-        [0.0, 1.0, 1.0],
-    ];
-    let quads = HEX_FACES
-        .iter()
-        .map(|f| [f[0] as u32, f[1] as u32, f[2] as u32, f[3] as u32])
-        .collect();
-    (nodes, quads)
+    crate::mesh::cube_surface(1.0)
 }
 
 fn temp_dir(tag: &str) -> PathBuf {
