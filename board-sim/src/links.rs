@@ -128,17 +128,7 @@ impl Links for EmuLinks {
 
     fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
         let ch = self.rx[face.index()].as_ref().ok_or(RecvError::NoLink)?;
-        let mut q = ch.queue.lock().map_err(|_| RecvError::NoLink)?;
-        match q.pop_front() {
-            None => Ok(None),
-            Some(f) => {
-                let dst = buf
-                    .get_mut(..f.len())
-                    .ok_or(RecvError::BufferTooSmall { needed: f.len() })?;
-                dst.copy_from_slice(&f);
-                Ok(Some(f.len()))
-            }
-        }
+        pop_into(&ch.queue, buf)
     }
 
     fn try_send_global(&mut self, packet: &[u8]) -> Result<(), SendError> {
@@ -155,17 +145,7 @@ impl Links for EmuLinks {
         let Some(Some(ch)) = net.inboxes.get(self.address as usize) else {
             return Ok(None);
         };
-        let mut q = ch.queue.lock().map_err(|_| RecvError::NoLink)?;
-        match q.pop_front() {
-            None => Ok(None),
-            Some(f) => {
-                let dst = buf
-                    .get_mut(..f.len())
-                    .ok_or(RecvError::BufferTooSmall { needed: f.len() })?;
-                dst.copy_from_slice(&f);
-                Ok(Some(f.len()))
-            }
-        }
+        pop_into(&ch.queue, buf)
     }
 }
 
@@ -449,5 +429,20 @@ impl<L: Links> Links for FaultyLinks<L> {
     }
     fn try_recv_global(&mut self, b: &mut [u8]) -> Result<Option<usize>, RecvError> {
         self.inner.try_recv_global(b)
+    }
+}
+
+/// Takes the oldest frame of `queue` into `buf`: its length, or None when the queue is empty.
+fn pop_into(queue: &Mutex<VecDeque<Vec<u8>>>, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+    let mut q = queue.lock().map_err(|_| RecvError::NoLink)?;
+    match q.pop_front() {
+        None => Ok(None),
+        Some(f) => {
+            let dst = buf
+                .get_mut(..f.len())
+                .ok_or(RecvError::BufferTooSmall { needed: f.len() })?;
+            dst.copy_from_slice(&f);
+            Ok(Some(f.len()))
+        }
     }
 }

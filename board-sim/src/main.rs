@@ -253,72 +253,13 @@ fn builtin(
 
 /// Runs a compiled machine and writes the requested outputs; returns the run and the scene.
 fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, Problem)> {
-    let RunArgs {
-        output_nodes,
-        report,
-        vtk,
-        png,
-        tool_force,
-        steps,
-        duration,
-        faults,
-        link_timeout_s,
-        link_bandwidth,
-        link_latency_s,
-        workers,
-        storage,
-        quiet,
-    } = a;
     let manifest = host_tools::compile::read_manifest(dir)?;
-    let storage = match storage {
-        Storage::Exact => board_sim::StorageSizing::Exact,
-        Storage::Board => board_sim::StorageSizing::Board(
-            pe_firmware::profile::profile(&manifest.profile).with_context(|| {
-                format!(
-                    "{}: unknown board profile {:?} in manifest.json",
-                    dir.display(),
-                    manifest.profile
-                )
-            })?,
-        ),
-    };
-    let mut opts = SimOptions {
-        link_timeout: Duration::from_secs_f64(link_timeout_s),
-        workers,
-        storage,
-        ..Default::default()
-    };
-    if let Some(f) = &faults {
-        let spec = FaultSpec::parse(f)?;
-        eprintln!(
-            "fault injection seed {} (replay with --faults {f})",
-            spec.seed
-        );
-        opts.faults = Some(spec);
-    }
-    opts.steps = match (steps, duration) {
-        (Some(n), _) => Some(n),
-        (None, Some(d)) => Some((d / manifest.dt_s).ceil() as u64),
-        _ => None,
-    };
+    let mut opts = sim_options(&a, &manifest, dir)?;
     let total = opts.steps.unwrap_or(manifest.steps).min(manifest.steps);
     // The mesh, for outputs: from the scene the manifest names.
-    let problem = {
-        let scene = match manifest.scene_source.strip_prefix("builtin:") {
-            Some(level) => builtin_scene(level)?,
-            None => Scene::from_file(std::path::Path::new(&manifest.scene_source))?,
-        };
-        let sdir = std::path::Path::new(&manifest.scene_source)
-            .parent()
-            .map(|p| p.to_path_buf())
-            .unwrap_or_default();
-        Some(
-            Problem::from_scene(&scene, &sdir)
-                .with_context(|| format!("loading scene {} for outputs", manifest.scene_source))?,
-        )
-    };
+    let problem = manifest_problem(&manifest)?;
     let (elements, graphics_stream) = compile_report_facts(dir)?;
-    if vtk.is_some() && !graphics_stream {
+    if a.vtk.is_some() && !graphics_stream {
         opts.frame_every = ((0.04 / manifest.dt_s).round() as u64).max(1);
     }
     eprintln!(
@@ -331,16 +272,7 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
         total,
         manifest.dt_s
     );
-    let bar = (!quiet).then(|| {
-        let b = indicatif::ProgressBar::new(total);
-        b.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{bar:40} {pos}/{len} steps  {elapsed} (eta {eta})",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-        b
-    });
+    let bar = (!a.quiet).then(|| host_tools::output::progress_bar(total));
     let out = run(dir, &opts, &mut |s, _| {
         if let Some(b) = &bar {
             b.set_position(s);
@@ -362,15 +294,92 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
         out.steps, out.boards.len(), out.wall_s, out.steps as f64 / out.wall_s, sim_s / out.wall_s, max.1,
         out.reaction_prescribed[0], out.reaction_prescribed[1], out.reaction_prescribed[2]
     );
+    let modelled = link_model(dir, &manifest, &a)?;
+    write_outputs(&a, &problem, &out, &manifest, graphics_stream)?;
+    let global = global_summary(&out, sim_s);
+    if let Some(g) = &global {
+        println!("{}", g.text);
+    }
+    if let Some(p) = &a.report {
+        let facts = RunFacts {
+            elements,
+            sim_s,
+            max_displacement: max.1,
+        };
+        write_report(p, &manifest, &out, &facts, &modelled, global.as_ref())?;
+    }
+    Ok((out, problem))
+}
+
+/// The simulation options from the command line (steps from `--steps` or `--duration`).
+fn sim_options(
+    a: &RunArgs,
+    manifest: &host_tools::compile::Manifest,
+    dir: &std::path::Path,
+) -> Result<SimOptions> {
+    let storage = match a.storage {
+        Storage::Exact => board_sim::StorageSizing::Exact,
+        Storage::Board => board_sim::StorageSizing::Board(
+            pe_firmware::profile::profile(&manifest.profile).with_context(|| {
+                format!(
+                    "{}: unknown board profile {:?} in manifest.json",
+                    dir.display(),
+                    manifest.profile
+                )
+            })?,
+        ),
+    };
+    let mut opts = SimOptions {
+        link_timeout: Duration::from_secs_f64(a.link_timeout_s),
+        workers: a.workers,
+        storage,
+        ..Default::default()
+    };
+    if let Some(f) = &a.faults {
+        let spec = FaultSpec::parse(f)?;
+        eprintln!(
+            "fault injection seed {} (replay with --faults {f})",
+            spec.seed
+        );
+        opts.faults = Some(spec);
+    }
+    opts.steps = match (a.steps, a.duration) {
+        (Some(n), _) => Some(n),
+        (None, Some(d)) => Some((d / manifest.dt_s).ceil() as u64),
+        _ => None,
+    };
+    Ok(opts)
+}
+
+/// The problem of the scene the manifest names (built-in or a file), for the outputs.
+fn manifest_problem(manifest: &host_tools::compile::Manifest) -> Result<Problem> {
+    let scene = match manifest.scene_source.strip_prefix("builtin:") {
+        Some(level) => builtin_scene(level)?,
+        None => Scene::from_file(std::path::Path::new(&manifest.scene_source))?,
+    };
+    let sdir = std::path::Path::new(&manifest.scene_source)
+        .parent()
+        .map(|p| p.to_path_buf())
+        .unwrap_or_default();
+    Problem::from_scene(&scene, &sdir)
+        .with_context(|| format!("loading scene {} for outputs", manifest.scene_source))
+}
+
+/// The link timing model of the run's images (profile links unless overridden), printed.
+fn link_model(
+    dir: &std::path::Path,
+    manifest: &host_tools::compile::Manifest,
+    a: &RunArgs,
+) -> Result<board_sim::timing::StepTiming> {
     let profile =
         pe_firmware::profile::profile(&manifest.profile).unwrap_or(pe_firmware::profile::PE_BOARD);
     let precision = host_tools::scene::settings::precision_from_name(&manifest.precision)
         .map_err(|e| anyhow::anyhow!("{}: {e}", dir.join("manifest.json").display()))?;
     let mut timing = SimTiming::for_precision(&profile, precision);
-    if let Some(b) = link_bandwidth {
+    if let Some(b) = a.link_bandwidth {
         timing.link_bytes_per_s = b;
     }
-    if let Some(l) = link_latency_s {
+    if let Some(l) = a.link_latency_s {
         timing.link_latency_s = l;
     }
     let modelled = model(dir, manifest.machine, timing)?;
@@ -379,79 +388,108 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
         profile.name, modelled.step_s * 1e6, modelled.compute_s * 1e6, modelled.dt_s * 1e6,
         if modelled.real_time { "keeps real time" } else { "does NOT keep real time" }
     );
-    if let (Some(p), Some(pr)) = (&output_nodes, &problem) {
-        write_nodes_csv(p, &pr.mesh, &out.displacements)?;
+    Ok(modelled)
+}
+
+/// Nodes CSV, ParaView series, PNG of the last frame and tool forces, as asked.
+fn write_outputs(
+    a: &RunArgs,
+    problem: &Problem,
+    out: &board_sim::SimOutput,
+    manifest: &host_tools::compile::Manifest,
+    graphics_stream: bool,
+) -> Result<()> {
+    if let Some(p) = &a.output_nodes {
+        write_nodes_csv(p, &problem.mesh, &out.displacements)?;
     }
-    let frames = problem
-        .as_ref()
-        .map(|pr| graphics::surface_frames(pr, &out))
-        .unwrap_or_default();
-    if let (Some(d), Some(pr)) = (&vtk, &problem) {
+    let frames = graphics::surface_frames(problem, out);
+    if let Some(d) = &a.vtk {
         if graphics_stream {
             // What the graphics engine received.
-            graphics::write_surface_series(d, pr, &frames)?;
+            graphics::write_surface_series(d, problem, &frames)?;
         } else {
-            graphics::write_volume_series(d, pr, &out, manifest.dt_s)?;
+            graphics::write_volume_series(d, problem, out, manifest.dt_s)?;
         }
     }
-    if let (Some(p), Some(pr)) = (&png, &problem) {
+    if let Some(p) = &a.png {
         if let Some(last) = frames.last() {
-            graphics::render_frame(p, pr, last, &out)?;
+            graphics::render_frame(p, problem, last, out)?;
         }
     }
-    if let Some(p) = &tool_force {
-        let mut text = String::from("step,time_s,tool,fx,fy,fz\n");
-        for (k, f) in out.tool_force.iter().enumerate() {
-            let (step, t) = (k / out.tools.max(1), k % out.tools.max(1));
-            text.push_str(&format!(
-                "{step},{:e},{t},{:e},{:e},{:e}\n",
-                step as f64 * out.dt_s,
-                f[0],
-                f[1],
-                f[2]
-            ));
-        }
-        std::fs::write(p, text).with_context(|| format!("writing {}", p.display()))?;
+    if let Some(p) = &a.tool_force {
+        write_tool_force(p, out)?;
     }
-    let global = global_summary(&out, sim_s);
-    if let Some(g) = &global {
-        println!("{}", g.text);
-    }
-    if let Some(p) = report {
-        let links: Vec<serde_json::Value> = out
-            .boards
-            .iter()
-            .map(|b| serde_json::json!({ "board": b.board, "frames_sent": b.frames_sent, "bytes_sent": b.bytes_sent, "wait_s": b.wait_s }))
-            .collect();
-        let rep = serde_json::json!({
-            "scene": manifest.scene,
-            "machine": manifest.machine,
-            "precision": manifest.precision,
-            "integration": manifest.integration,
-            "steps": out.steps,
-            "dt_s": manifest.dt_s,
-            "simulated_s": sim_s,
-            "elements": elements,
-            "nodes": out.displacements.len(),
-            "wall_s": out.wall_s,
-            "element_steps_per_s": elements as f64 * out.steps as f64 / out.wall_s,
-            "real_time_factor": sim_s / out.wall_s,
-            "kinetic_energy_final": out.kinetic_energy,
-            "max_displacement": max.1,
-            "prescribed_reaction_n": out.reaction_prescribed,
-            "fixed_reaction_n": out.reaction_fixed,
-            "wait_s_total": out.boards.iter().map(|b| b.wait_s).sum::<f64>(),
-            "bytes_sent_total": out.boards.iter().map(|b| b.bytes_sent.iter().sum::<u64>()).sum::<u64>(),
-            "boards": links,
-            "link_model": modelled,
-            "faults_injected": out.injected,
-            "global_network": global.as_ref().map(|g| &g.json),
-        });
-        std::fs::write(&p, serde_json::to_string_pretty(&rep)?)
-            .with_context(|| format!("writing {}", p.display()))?;
-    }
-    let problem = problem.ok_or_else(|| anyhow::anyhow!("no scene"))?;
-    Ok((out, problem))
+    Ok(())
+}
+
+/// step,time_s,tool,fx,fy,fz: the force on each tool every step.
+fn write_tool_force(p: &std::path::Path, out: &board_sim::SimOutput) -> Result<()> {
+    let rows = out.tool_force.iter().enumerate().map(|(k, f)| {
+        let (step, t) = (k / out.tools.max(1), k % out.tools.max(1));
+        [
+            step.to_string(),
+            format!("{:e}", step as f64 * out.dt_s),
+            t.to_string(),
+            format!("{:e}", f[0]),
+            format!("{:e}", f[1]),
+            format!("{:e}", f[2]),
+        ]
+    });
+    host_tools::output::write_csv(p, &["step", "time_s", "tool", "fx", "fy", "fz"], rows)
+}
+
+/// Figures of a run the report states besides the run's own output.
+struct RunFacts {
+    elements: usize,
+    sim_s: f64,
+    max_displacement: f64,
+}
+
+/// The run report (JSON): as `pe solve`'s, plus per-link traffic, waiting and the link model.
+fn write_report(
+    p: &std::path::Path,
+    manifest: &host_tools::compile::Manifest,
+    out: &board_sim::SimOutput,
+    facts: &RunFacts,
+    modelled: &board_sim::timing::StepTiming,
+    global: Option<&GlobalSummary>,
+) -> Result<()> {
+    let RunFacts {
+        elements,
+        sim_s,
+        max_displacement,
+    } = *facts;
+    let links: Vec<serde_json::Value> = out
+        .boards
+        .iter()
+        .map(|b| serde_json::json!({ "board": b.board, "frames_sent": b.frames_sent, "bytes_sent": b.bytes_sent, "wait_s": b.wait_s }))
+        .collect();
+    let rep = serde_json::json!({
+        "scene": manifest.scene,
+        "machine": manifest.machine,
+        "precision": manifest.precision,
+        "integration": manifest.integration,
+        "steps": out.steps,
+        "dt_s": manifest.dt_s,
+        "simulated_s": sim_s,
+        "elements": elements,
+        "nodes": out.displacements.len(),
+        "wall_s": out.wall_s,
+        "element_steps_per_s": elements as f64 * out.steps as f64 / out.wall_s,
+        "real_time_factor": sim_s / out.wall_s,
+        "kinetic_energy_final": out.kinetic_energy,
+        "max_displacement": max_displacement,
+        "prescribed_reaction_n": out.reaction_prescribed,
+        "fixed_reaction_n": out.reaction_fixed,
+        "wait_s_total": out.boards.iter().map(|b| b.wait_s).sum::<f64>(),
+        "bytes_sent_total": out.boards.iter().map(|b| b.bytes_sent.iter().sum::<u64>()).sum::<u64>(),
+        "boards": links,
+        "link_model": modelled,
+        "faults_injected": out.injected,
+        "global_network": global.map(|g| &g.json),
+    });
+    std::fs::write(p, serde_json::to_string_pretty(&rep)?)
+        .with_context(|| format!("writing {}", p.display()))
 }
 
 struct GlobalSummary {

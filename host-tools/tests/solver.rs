@@ -17,7 +17,7 @@ fn euler_bernoulli_tip(rho: f64, g: f64, l: f64, e: f64, h: f64) -> f64 {
 /// Runs damped steps until the tip's z-displacement changes by less than `tol` (relative)
 /// over 500 steps; returns it.
 fn settle(p: &Problem, tip: usize, tol: f64, max_steps: u64) -> f64 {
-    let (dt, _) = p.time_step().expect("stable step");
+    let dt = p.time_step.dt_s;
     let mut m = Model::<f64>::new(p, dt);
     let mut last = f64::NAN;
     for k in 0..max_steps {
@@ -85,7 +85,7 @@ fn undamped_energy_is_conserved_over_1e5_steps() {
         GRAVITY,
     );
     let p = problem(&sc);
-    let (dt, _) = p.time_step().unwrap();
+    let dt = p.time_step.dt_s;
     let mut m = Model::<f64>::new(&p, dt);
     let (mut emax, mut emin, mut stored_max) = (f64::MIN, f64::MAX, 0.0f64);
     for k in 0..100_000 {
@@ -126,7 +126,7 @@ ramp = [[0.0, 0.0], [0.1, 1.0], [0.2, 1.0], [0.3, 0.0]]
         extra,
     );
     let p = problem(&sc);
-    let (dt, _) = p.time_step().unwrap();
+    let dt = p.time_step.dt_s;
     let mut m = Model::<f64>::new(&p, dt);
     let mut peak = 0.0f64;
     let steps = (2.0 / dt) as u64;
@@ -159,14 +159,16 @@ ramp = [[0.0, 0.0], [0.1, 1.0], [0.2, 1.0], [0.3, 0.0]]
 fn dt_above_critical_is_refused_and_a_forced_one_is_caught() {
     let base = box_scene([0.05, 0.01, 0.01], [10, 2, 2], 1e6, 0.45, "", GRAVITY);
     let p = problem(&base);
-    let (crit, _) = p.critical_dt().unwrap();
+    let crit = p.time_step.critical.dt_critical_s;
     let mut sc = base.clone();
     sc.solver.dt = Some(1.01 * crit);
-    let err = problem(&sc).time_step().unwrap_err().to_string();
+    let err = Problem::from_scene(&sc, std::path::Path::new("."))
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("exceeds the critical step"), "{err}");
     sc.solver.dt = None;
     sc.solver.dt_safety = 1.1;
-    assert!(problem(&sc).time_step().is_err());
+    assert!(Problem::from_scene(&sc, std::path::Path::new(".")).is_err());
     sc.solver.force_dt = true;
     sc.solver.steps = Some(5000);
     let err = solver::run(&problem(&sc), "forced", &mut ())

@@ -131,7 +131,7 @@ acceleration = [0.0, 0.0, -9.81]
     )
     .unwrap();
     let p = Problem::from_scene(&sc, std::path::Path::new(".")).unwrap();
-    let (dt, _) = p.time_step().unwrap();
+    let dt = p.time_step.dt_s;
     let band = |m: &mut Model<'_, f64>, steps: usize| {
         let (mut sum, mut smax) = (0.0, 0.0f64);
         for _ in 0..steps {

@@ -79,6 +79,7 @@ fn a_surface_faster_than_the_speed_bound_is_reported() {
         }
     }
     p.paths[0].points = vec![(0.0, [0.0; 3]), (0.005, [0.005, 0.0, 0.0])];
+    p.update_time_step().expect("stable step");
     p.solver.steps = Some(100);
     let e = solver::run(&p, "fast", &mut ()).err().expect("refused");
     let msg = format!("{e}");

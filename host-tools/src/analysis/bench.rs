@@ -170,7 +170,7 @@ pub fn ns_per_element_step(
 ) -> Result<(usize, f64)> {
     let scene = bench_scene(elements, integration, precision)?;
     let p = Problem::from_scene(&scene, std::path::Path::new("."))?;
-    let (dt, _) = p.time_step()?;
+    let dt = p.time_step.dt_s;
     fn time<T: Real>(p: &Problem, dt: f64, steps: u64) -> Result<f64> {
         let mut m = Model::<T>::new(p, dt);
         for _ in 0..10 {

@@ -187,6 +187,35 @@ impl Observer for Progress {
     }
 }
 
+/// The `[solver]` settings a subcommand may override from the command line.
+struct Overrides {
+    steps: Option<u64>,
+    precision: Option<PrecisionArg>,
+    integration: Option<IntegrationArg>,
+}
+
+impl Overrides {
+    fn apply(&self, sc: &mut Scene) {
+        if let Some(n) = self.steps {
+            sc.solver.steps = Some(n);
+        }
+        if let Some(p) = self.precision {
+            sc.solver.precision = p.into();
+        }
+        if let Some(i) = self.integration {
+            sc.solver.integration = i.into();
+        }
+    }
+}
+
+/// What `pe solve` writes besides its summary.
+struct SolveOutputs {
+    output_nodes: Option<PathBuf>,
+    report: Option<PathBuf>,
+    vtk: Option<PathBuf>,
+    quiet: bool,
+}
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
@@ -199,79 +228,20 @@ fn main() -> Result<()> {
             precision,
             integration,
             quiet,
-        } => {
-            let (mut sc, dir, name) = scene.load()?;
-            if let Some(n) = steps {
-                sc.solver.steps = Some(n);
-            }
-            if let Some(p) = precision {
-                sc.solver.precision = p.into();
-            }
-            if let Some(i) = integration {
-                sc.solver.integration = i.into();
-            }
-            let problem =
-                Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
-            let (dt, dt_crit) = problem
-                .time_step()
-                .with_context(|| format!("scene {name}"))?;
-            let total = problem.steps(dt);
-            eprintln!(
-                "{name}: {} elements, {} nodes, {} {}, dt = {dt:.3e} s (critical {dt_crit:.3e} s), {total} steps",
-                problem.mesh.cells.len(),
-                problem.mesh.nodes.len(),
-                problem.solver.precision,
-                problem.solver.integration
-            );
-            let bar = (!quiet && total > 2000).then(|| {
-                let b = indicatif::ProgressBar::new(total);
-                b.set_style(
-                    indicatif::ProgressStyle::with_template(
-                        "{bar:40} {pos}/{len} steps  {elapsed} (eta {eta})",
-                    )
-                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-                );
-                b
-            });
-            let frames = match &vtk {
-                Some(d) => Some(output::FrameWriter::new(
-                    d,
-                    &problem.mesh,
-                    problem.solver.output_interval,
-                    dt,
-                )?),
-                None => None,
-            };
-            let mut obs = Progress {
-                bar,
-                frames,
-                error: None,
-            };
-            let out = solver::run(&problem, &name, &mut obs)?;
-            if let Some(b) = &obs.bar {
-                b.finish_and_clear();
-            }
-            if let Some(e) = obs.error.take() {
-                return Err(e);
-            }
-            if let Some(f) = obs.frames.take() {
-                f.finish()?;
-            }
-            let r = &out.report;
-            println!(
-                "{} steps in {:.2} s: {:.3e} element-steps/s, real-time factor {:.3}; max |u| = {:.4e} m at node {}; KE = {:.3e} J; probe/prescribed reaction = [{:.4e}, {:.4e}, {:.4e}] N",
-                r.steps, r.wall_s, r.element_steps_per_s, r.real_time_factor, r.max_displacement,
-                r.max_displacement_node, r.kinetic_energy_final,
-                r.prescribed_reaction_n[0], r.prescribed_reaction_n[1], r.prescribed_reaction_n[2]
-            );
-            if let Some(p) = output_nodes {
-                output::write_nodes_csv(&p, &problem.mesh, &out.displacements)?;
-            }
-            if let Some(p) = report {
-                std::fs::write(&p, serde_json::to_string_pretty(&out.report)?)
-                    .with_context(|| format!("writing {}", p.display()))?;
-            }
-        }
+        } => solve(
+            &scene,
+            &Overrides {
+                steps,
+                precision,
+                integration,
+            },
+            SolveOutputs {
+                output_nodes,
+                report,
+                vtk,
+                quiet,
+            },
+        )?,
         Command::Scene { scene } => {
             let (sc, _, _) = scene.load()?;
             print!("{}", sc.to_toml()?);
@@ -284,90 +254,23 @@ fn main() -> Result<()> {
             precision,
             steps,
             integration,
-        } => {
-            let (mut sc, dir, name) = scene.load()?;
-            if let Some(p) = precision {
-                sc.solver.precision = p.into();
-            }
-            if let Some(i) = integration {
-                sc.solver.integration = i.into();
-            }
-            if let Some(n) = steps {
-                sc.solver.steps = Some(n);
-            }
-            let machine = host_tools::compile::partition::Machine::parse(&boards)?;
-            let prof = pe_firmware::profile::profile(&profile).with_context(|| {
-                format!("--profile {profile:?}: known profiles are pe-board, qemu-mps2-an500")
-            })?;
-            let problem =
-                Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
-            let source = match (&scene.scene, scene.builtin) {
-                (Some(p), false) => std::fs::canonicalize(p)
-                    .unwrap_or(p.clone())
-                    .display()
-                    .to_string(),
-                _ => format!("builtin:{}", scene.level),
-            };
-            let rep = host_tools::compile::compile_to_dir(
-                &name, &source, &problem, machine, &prof, &output,
-            )?;
-            print!("{}", host_tools::compile::summary(&rep));
-            println!(
-                "  wrote {} images, manifest.json and report.json to {}",
-                rep.boards.len(),
-                output.display()
-            );
-        }
+        } => compile(
+            &scene,
+            &Overrides {
+                steps,
+                precision,
+                integration,
+            },
+            &boards,
+            &profile,
+            &output,
+        )?,
         Command::Image {
             dir,
             output,
             firmware,
-        } => {
-            let m = host_tools::firmware::image_dir(&dir, &output, firmware.as_deref())?;
-            println!(
-                "{} boards of {} ({}, {} {}): firmware {} (features {})",
-                m.boards.len(),
-                m.scene,
-                m.profile,
-                m.precision,
-                m.integration,
-                m.firmware,
-                m.firmware_features.join(",")
-            );
-            for b in &m.boards {
-                println!(
-                    "  board ({},{},{}): {} + {} at {}",
-                    b.board[0], b.board[1], b.board[2], b.elf, b.schedule, b.schedule_address
-                );
-            }
-            println!("  wrote {}", output.join("manifest.json").display());
-        }
-        Command::Compare { reference, other } => {
-            let c = host_tools::firmware::compare(&reference, &other)?;
-            if c.differing > 0 {
-                for (n, i, a, b) in &c.first {
-                    eprintln!(
-                        "  node {n} component {i}: reference {a:e} ({:016x}), other {b:e} ({:016x})",
-                        a.to_bits(),
-                        b.to_bits()
-                    );
-                }
-                anyhow::bail!(
-                    "MISMATCH: {} of {} components differ between {} and {} (max |diff| {:.3e} m)",
-                    c.differing,
-                    3 * c.nodes,
-                    reference.display(),
-                    other.display(),
-                    c.max_abs_diff
-                );
-            }
-            println!(
-                "bit-identical: {} nodes of {} and {}",
-                c.nodes,
-                reference.display(),
-                other.display()
-            );
-        }
+        } => image(&dir, &output, firmware.as_deref())?,
+        Command::Compare { reference, other } => compare(&reference, &other)?,
         Command::Inspect { dir, board } => {
             let c: Vec<usize> = board
                 .split(',')
@@ -400,5 +303,149 @@ fn main() -> Result<()> {
             host_tools::analysis::stability::run_cli(output.as_deref(), long, only.as_deref())?
         }
     }
+    Ok(())
+}
+
+/// `pe solve`: the serial reference run, with its summary and the asked-for outputs.
+fn solve(scene: &SceneArgs, overrides: &Overrides, outputs: SolveOutputs) -> Result<()> {
+    let (mut sc, dir, name) = scene.load()?;
+    overrides.apply(&mut sc);
+    let problem = Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
+    let (dt, dt_crit) = (
+        problem.time_step.dt_s,
+        problem.time_step.critical.dt_critical_s,
+    );
+    let total = problem.steps(dt);
+    eprintln!(
+        "{name}: {} elements, {} nodes, {} {}, dt = {dt:.3e} s (critical {dt_crit:.3e} s), {total} steps",
+        problem.mesh.cells.len(),
+        problem.mesh.nodes.len(),
+        problem.solver.precision,
+        problem.solver.integration
+    );
+    let bar = (!outputs.quiet && total > 2000).then(|| output::progress_bar(total));
+    let frames = match &outputs.vtk {
+        Some(d) => Some(output::FrameWriter::new(
+            d,
+            &problem.mesh,
+            problem.solver.output_interval,
+            dt,
+        )?),
+        None => None,
+    };
+    let mut obs = Progress {
+        bar,
+        frames,
+        error: None,
+    };
+    let out = solver::run(&problem, &name, &mut obs)?;
+    if let Some(b) = &obs.bar {
+        b.finish_and_clear();
+    }
+    if let Some(e) = obs.error.take() {
+        return Err(e);
+    }
+    if let Some(f) = obs.frames.take() {
+        f.finish()?;
+    }
+    let r = &out.report;
+    println!(
+        "{} steps in {:.2} s: {:.3e} element-steps/s, real-time factor {:.3}; max |u| = {:.4e} m at node {}; KE = {:.3e} J; probe/prescribed reaction = [{:.4e}, {:.4e}, {:.4e}] N",
+        r.steps, r.wall_s, r.element_steps_per_s, r.real_time_factor, r.max_displacement,
+        r.max_displacement_node, r.kinetic_energy_final,
+        r.prescribed_reaction_n[0], r.prescribed_reaction_n[1], r.prescribed_reaction_n[2]
+    );
+    if let Some(p) = outputs.output_nodes {
+        output::write_nodes_csv(&p, &problem.mesh, &out.displacements)?;
+    }
+    if let Some(p) = outputs.report {
+        std::fs::write(&p, serde_json::to_string_pretty(&out.report)?)
+            .with_context(|| format!("writing {}", p.display()))?;
+    }
+    Ok(())
+}
+
+/// `pe compile`: one schedule image per board, the manifest and the report.
+fn compile(
+    scene: &SceneArgs,
+    overrides: &Overrides,
+    boards: &str,
+    profile: &str,
+    output: &Path,
+) -> Result<()> {
+    let (mut sc, dir, name) = scene.load()?;
+    overrides.apply(&mut sc);
+    let machine = host_tools::compile::partition::Machine::parse(boards)?;
+    let prof = pe_firmware::profile::profile(profile).with_context(|| {
+        format!("--profile {profile:?}: known profiles are pe-board, qemu-mps2-an500")
+    })?;
+    let problem = Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
+    let source = match (&scene.scene, scene.builtin) {
+        (Some(p), false) => std::fs::canonicalize(p)
+            .unwrap_or(p.clone())
+            .display()
+            .to_string(),
+        _ => format!("builtin:{}", scene.level),
+    };
+    let rep =
+        host_tools::compile::compile_to_dir(&name, &source, &problem, machine, &prof, output)?;
+    print!("{}", host_tools::compile::summary(&rep));
+    println!(
+        "  wrote {} images, manifest.json and report.json to {}",
+        rep.boards.len(),
+        output.display()
+    );
+    Ok(())
+}
+
+/// `pe image`: the flashable artefacts of a compiled schedule.
+fn image(dir: &Path, output: &Path, firmware: Option<&Path>) -> Result<()> {
+    let m = host_tools::firmware::image_dir(dir, output, firmware)?;
+    println!(
+        "{} boards of {} ({}, {} {}): firmware {} (features {})",
+        m.boards.len(),
+        m.scene,
+        m.profile,
+        m.precision,
+        m.integration,
+        m.firmware,
+        m.firmware_features.join(",")
+    );
+    for b in &m.boards {
+        println!(
+            "  board ({},{},{}): {} + {} at {}",
+            b.board[0], b.board[1], b.board[2], b.elf, b.schedule, b.schedule_address
+        );
+    }
+    println!("  wrote {}", output.join("manifest.json").display());
+    Ok(())
+}
+
+/// `pe compare`: final displacements bit for bit.
+fn compare(reference: &Path, other: &Path) -> Result<()> {
+    let c = host_tools::firmware::compare(reference, other)?;
+    if c.differing > 0 {
+        for (n, i, a, b) in &c.first {
+            eprintln!(
+                "  node {n} component {i}: reference {a:e} ({:016x}), other {b:e} ({:016x})",
+                a.to_bits(),
+                b.to_bits()
+            );
+        }
+        anyhow::bail!(
+            "MISMATCH: {} of {} components differ between {} and {} (max |diff| {:.3e} m)",
+            c.differing,
+            3 * c.nodes,
+            reference.display(),
+            other.display(),
+            c.max_abs_diff
+        );
+    }
+    println!(
+        "bit-identical: {} nodes of {} and {}",
+        c.nodes,
+        reference.display(),
+        other.display()
+    );
     Ok(())
 }

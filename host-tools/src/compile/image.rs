@@ -346,7 +346,7 @@ pub fn graphics_params(problem: &Problem, dt: f64) -> GraphicsParams {
 
 /// Compiles every board's image.
 pub fn compile_images(problem: &Problem, plan: &Plan) -> Result<Vec<BoardImage>> {
-    let (dt, _) = problem.time_step()?;
+    let dt = problem.time_step.dt_s;
     let shared = Shared {
         dt_s: dt,
         contact: contact_tables(problem, plan, dt)?,

@@ -51,7 +51,7 @@ pub fn compile_to_dir(
     let images = compile_images(problem, &plan)?;
     check_fit(&images, profile)?;
     write_images(dir, &images)?;
-    let (dt, _) = problem.time_step()?;
+    let dt = problem.time_step.dt_s;
     let manifest = Manifest {
         format_version: FORMAT_VERSION,
         scene: scene.to_string(),

@@ -205,7 +205,7 @@ pub fn report(
     images: &[BoardImage],
     profile: &BoardProfile,
 ) -> Result<CompileReport> {
-    let (dt, _) = problem.time_step()?;
+    let dt = problem.time_step.dt_s;
     let epb: Vec<usize> = plan.boards.iter().map(|b| b.elements.len()).collect();
     let npb: Vec<usize> = plan.boards.iter().map(|b| b.nodes.len()).collect();
     let mean = epb.iter().sum::<usize>() as f64 / epb.len() as f64;

@@ -300,3 +300,25 @@ impl Mesh {
             .fold(f64::INFINITY, f64::min)
     }
 }
+
+/// A cube of edge `edge` at the origin, corners in VTK hexahedron order, and its six faces
+/// (the tests' smallest surface).
+#[cfg(test)]
+pub(crate) fn cube_surface(edge: f64) -> (Vec<[f64; 3]>, Vec<[u32; 4]>) {
+    let corners = [
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [1.0, 0.0, 1.0],
+        [1.0, 1.0, 1.0],
+        [0.0, 1.0, 1.0],
+    ];
+    let nodes = corners.iter().map(|c| c.map(|x| x * edge)).collect();
+    let quads = HEX_FACES
+        .iter()
+        .map(|f| [f[0] as u32, f[1] as u32, f[2] as u32, f[3] as u32])
+        .collect();
+    (nodes, quads)
+}

@@ -1,4 +1,5 @@
-//! Run outputs shared by `pe solve` and board-sim: the nodes CSV and ParaView frames.
+//! Run outputs shared by `pe solve` and board-sim: the nodes CSV (and the CSV writer every
+//! table goes through), ParaView frames and the progress bar.
 
 pub mod font;
 pub mod render;
@@ -15,20 +16,67 @@ use crate::output::vtk::VtkSeriesWriter;
 /// `node,x,y,z,ux,uy,uz`: every mesh node once, in mesh node order (node = its tag).
 /// Values are written with 17 significant digits so the CSV round-trips f64 exactly.
 pub fn write_nodes_csv(path: &Path, mesh: &Mesh, u: &[[f64; 3]]) -> Result<()> {
-    let mut out = String::with_capacity(mesh.nodes.len() * 120);
-    out.push_str("node,x,y,z,ux,uy,uz\n");
-    for (k, (p, d)) in mesh.nodes.iter().zip(u).enumerate() {
+    let rows = mesh.nodes.iter().zip(u).enumerate().map(|(k, (p, d))| {
         let tag = mesh.node_tags.get(k).copied().unwrap_or(k as u64 + 1);
-        out.push_str(&format!(
-            "{tag},{:.17e},{:.17e},{:.17e},{:.17e},{:.17e},{:.17e}\n",
-            p[0], p[1], p[2], d[0], d[1], d[2]
-        ));
-    }
-    let mut f =
+        let mut row = vec![tag.to_string()];
+        row.extend(p.iter().chain(d).map(|v| format!("{v:.17e}")));
+        row
+    });
+    write_csv(path, &["node", "x", "y", "z", "ux", "uy", "uz"], rows)
+}
+
+/// Writes the CSV file `path`: the header, then one record per row. The fields come
+/// formatted, so every number keeps the spelling its writer chose; the csv crate quotes
+/// where needed.
+pub fn write_csv<R, F>(path: &Path, header: &[&str], rows: R) -> Result<()>
+where
+    R: IntoIterator,
+    R::Item: IntoIterator<Item = F>,
+    F: AsRef<[u8]>,
+{
+    let file =
         std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    f.write_all(out.as_bytes())
-        .with_context(|| format!("writing {}", path.display()))?;
+    csv_records(file, header, rows).with_context(|| format!("writing {}", path.display()))?;
     Ok(())
+}
+
+/// The CSV text of `header` and `rows` (see [`write_csv`]).
+pub fn csv_string<R, F>(header: &[&str], rows: R) -> Result<String>
+where
+    R: IntoIterator,
+    R::Item: IntoIterator<Item = F>,
+    F: AsRef<[u8]>,
+{
+    let bytes = csv_records(Vec::new(), header, rows)?;
+    Ok(String::from_utf8(bytes)?)
+}
+
+/// Writes the header and the rows to `out` through the csv crate; returns `out`.
+fn csv_records<W, R, F>(out: W, header: &[&str], rows: R) -> Result<W>
+where
+    W: Write,
+    R: IntoIterator,
+    R::Item: IntoIterator<Item = F>,
+    F: AsRef<[u8]>,
+{
+    let mut w = csv::Writer::from_writer(out);
+    w.write_record(header)?;
+    for row in rows {
+        w.write_record(row)?;
+    }
+    w.into_inner().map_err(|e| anyhow::anyhow!("{}", e.error()))
+}
+
+/// The step counter of a long run (`pe solve`, board-sim).
+pub fn progress_bar(total: u64) -> indicatif::ProgressBar {
+    let b = indicatif::ProgressBar::new(total);
+    b.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{bar:40} {pos}/{len} steps  {elapsed} (eta {eta})",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    b
 }
 
 /// Writes a frame every `interval_s` of simulated time (and the last one).

@@ -34,12 +34,76 @@ impl PointField<'_> {
 /// `DIR/series.pvd`. Existing files of those names in `DIR` are overwritten.
 #[derive(Debug)]
 pub struct VtkSeriesWriter {
+    /// Reference positions: every mesh node; cells with their region sections.
+    series: FrameSeries,
+}
+
+/// What a series of `.vtu` frames shares: the directory, the reference positions, the cell
+/// sections (the same in every frame) and the frames written so far.
+#[derive(Debug)]
+struct FrameSeries {
     dir: PathBuf,
-    nodes: Vec<[f64; 3]>,
-    /// Connectivity, offsets, types and region sections, the same in every frame.
+    reference: Vec<[f64; 3]>,
+    /// Connectivity, offsets, types and cell data sections, the same in every frame.
     cells_xml: String,
     n_cells: usize,
     frames: Vec<(f64, String)>,
+}
+
+impl FrameSeries {
+    /// Writes `DIR/{prefix}_NNNNN.vtu`: the reference positions + `displacement` (one per
+    /// reference point), with the extra point data; returns its path.
+    fn write_frame(
+        &mut self,
+        prefix: &str,
+        time_s: f64,
+        displacement: &[[f64; 3]],
+        extra: &[(&str, PointField<'_>)],
+    ) -> Result<PathBuf, MeshError> {
+        let name = format!("{prefix}_{:05}.vtu", self.frames.len());
+        let path = self.dir.join(&name);
+        let n = self.reference.len();
+        if displacement.len() != n {
+            return Err(MeshError::LengthMismatch {
+                path,
+                what: "displacement".into(),
+                expected: n,
+                got: displacement.len(),
+            });
+        }
+        for (fname, field) in extra {
+            if field.len() != n {
+                return Err(MeshError::LengthMismatch {
+                    path,
+                    what: format!("point data {fname:?}"),
+                    expected: n,
+                    got: field.len(),
+                });
+            }
+        }
+        if !time_s.is_finite() {
+            return Err(MeshError::InvalidInput {
+                path,
+                msg: format!("frame time {time_s} is not finite"),
+            });
+        }
+        let s = frame_xml(
+            time_s,
+            &self.reference,
+            displacement,
+            &self.cells_xml,
+            self.n_cells,
+            extra,
+        );
+        fs::write(&path, s).map_err(io_err(&path))?;
+        self.frames.push((time_s, name));
+        Ok(path)
+    }
+
+    /// Writes (or rewrites) `DIR/series.pvd` listing the frames so far; returns its path.
+    fn write_pvd(&self) -> Result<PathBuf, MeshError> {
+        write_pvd_file(&self.dir, &self.frames)
+    }
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> MeshError + '_ {
@@ -77,17 +141,19 @@ impl VtkSeriesWriter {
             mesh.cell_regions.iter().map(|r| r.to_string()),
         );
         Ok(VtkSeriesWriter {
-            dir: dir.to_path_buf(),
-            nodes: mesh.nodes.clone(),
-            cells_xml: c,
-            n_cells: mesh.cells.len(),
-            frames: Vec::new(),
+            series: FrameSeries {
+                dir: dir.to_path_buf(),
+                reference: mesh.nodes.clone(),
+                cells_xml: c,
+                n_cells: mesh.cells.len(),
+                frames: Vec::new(),
+            },
         })
     }
 
     /// Number of frames written so far.
     pub fn frame_count(&self) -> usize {
-        self.frames.len()
+        self.series.frames.len()
     }
 
     /// Write the next frame: points at initial position + `displacement` (one per node).
@@ -108,52 +174,15 @@ impl VtkSeriesWriter {
         displacement: &[[f64; 3]],
         extra: &[(&str, PointField<'_>)],
     ) -> Result<PathBuf, MeshError> {
-        let name = format!("frame_{:05}.vtu", self.frames.len());
-        let path = self.dir.join(&name);
-        let n = self.nodes.len();
-        if displacement.len() != n {
-            return Err(MeshError::LengthMismatch {
-                path,
-                what: "displacement".into(),
-                expected: n,
-                got: displacement.len(),
-            });
-        }
-        for (fname, field) in extra {
-            if field.len() != n {
-                return Err(MeshError::LengthMismatch {
-                    path,
-                    what: format!("point data {fname:?}"),
-                    expected: n,
-                    got: field.len(),
-                });
-            }
-        }
-        if !time_s.is_finite() {
-            return Err(MeshError::InvalidInput {
-                path,
-                msg: format!("frame time {time_s} is not finite"),
-            });
-        }
-
-        let s = frame_xml(
-            time_s,
-            &self.nodes,
-            displacement,
-            &self.cells_xml,
-            self.n_cells,
-            extra,
-        );
-        fs::write(&path, s).map_err(io_err(&path))?;
-        self.frames.push((time_s, name));
-        Ok(path)
+        self.series
+            .write_frame("frame", time_s, displacement, extra)
     }
 
     /// Write (or rewrite) `DIR/series.pvd` listing the frames written so far with their
     /// times; returns its path. Call it now and then during a long run to be able to open
     /// the series before the run ends.
     pub fn write_pvd(&self) -> Result<PathBuf, MeshError> {
-        write_pvd_file(&self.dir, &self.frames)
+        self.series.write_pvd()
     }
 
     /// Write `DIR/series.pvd` listing every frame with its time and close the series;
@@ -331,12 +360,8 @@ fn write_vectors(s: &mut String, name: &str, v: &[[f64; 3]]) {
 /// field data "TimeValue". Existing files of those names in `DIR` are overwritten.
 #[derive(Debug)]
 pub struct SurfaceSeriesWriter {
-    dir: PathBuf,
-    reference: Vec<[f64; 3]>,
-    /// Connectivity, offsets, types and group sections, the same in every frame.
-    cells_xml: String,
-    n_cells: usize,
-    frames: Vec<(f64, String)>,
+    /// Reference positions: the surface's nodes; quads with their group section.
+    series: FrameSeries,
 }
 
 impl SurfaceSeriesWriter {
@@ -386,55 +411,32 @@ impl SurfaceSeriesWriter {
             quad_groups.iter().map(|g| g.to_string()),
         );
         Ok(SurfaceSeriesWriter {
-            dir: dir.to_path_buf(),
-            reference,
-            cells_xml: c,
-            n_cells: quads.len(),
-            frames: Vec::new(),
+            series: FrameSeries {
+                dir: dir.to_path_buf(),
+                reference,
+                cells_xml: c,
+                n_cells: quads.len(),
+                frames: Vec::new(),
+            },
         })
     }
 
     /// Number of frames written so far.
     pub fn frame_count(&self) -> usize {
-        self.frames.len()
+        self.series.frames.len()
     }
 
     /// One frame: displacement per surface node (same numbering), time in s.
     pub fn write_frame(&mut self, time_s: f64, displacement: &[[f64; 3]]) -> Result<(), MeshError> {
-        let name = format!("surface_{:05}.vtu", self.frames.len());
-        let path = self.dir.join(&name);
-        let n = self.reference.len();
-        if displacement.len() != n {
-            return Err(MeshError::LengthMismatch {
-                path,
-                what: "displacement".into(),
-                expected: n,
-                got: displacement.len(),
-            });
-        }
-        if !time_s.is_finite() {
-            return Err(MeshError::InvalidInput {
-                path,
-                msg: format!("frame time {time_s} is not finite"),
-            });
-        }
-        let s = frame_xml(
-            time_s,
-            &self.reference,
-            displacement,
-            &self.cells_xml,
-            self.n_cells,
-            &[],
-        );
-        fs::write(&path, s).map_err(io_err(&path))?;
-        self.frames.push((time_s, name));
+        self.series
+            .write_frame("surface", time_s, displacement, &[])?;
         Ok(())
     }
 
     /// Write (or rewrite) `DIR/series.pvd` listing the frames written so far; returns its
     /// path.
     pub fn write_pvd(&self) -> Result<PathBuf, MeshError> {
-        write_pvd_file(&self.dir, &self.frames)
+        self.series.write_pvd()
     }
 
     /// Writes series.pvd, returns its path.
@@ -446,7 +448,6 @@ impl SurfaceSeriesWriter {
 #[cfg(test)]
 mod surface_series_tests {
     use super::*;
-    use crate::mesh::HEX_FACES;
 
     fn temp_dir(tag: &str) -> PathBuf {
         static N: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
@@ -455,21 +456,7 @@ mod surface_series_tests {
     }
 
     fn cube() -> (Vec<[f64; 3]>, Vec<[u32; 4]>) {
-        let nodes = vec![
-            [0.0, 0.0, 0.0],
-            [0.01, 0.0, 0.0],
-            [0.01, 0.01, 0.0],
-            [0.0, 0.01, 0.0],
-            [0.0, 0.0, 0.01],
-            [0.01, 0.0, 0.01],
-            [0.01, 0.01, 0.01],
-            [0.0, 0.01, 0.01],
-        ];
-        let quads = HEX_FACES
-            .iter()
-            .map(|f| [f[0] as u32, f[1] as u32, f[2] as u32, f[3] as u32])
-            .collect();
-        (nodes, quads)
+        crate::mesh::cube_surface(0.01)
     }
 
     /// Two frames of a cube's surface read back with vtkio: 8 points, 6 quads, the groups,

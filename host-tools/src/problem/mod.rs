@@ -74,11 +74,21 @@ pub struct Problem {
     /// each belongs to.
     pub surface_faces: Vec<[u32; 4]>,
     pub surface_face_cells: Vec<u32>,
-    critical: std::sync::OnceLock<CriticalStep>,
+    /// The time step every run and compilation of this problem uses, computed once when
+    /// the problem is built.
+    pub time_step: TimeStep,
+}
+
+/// A problem's time step and the stability limit it was chosen against.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct TimeStep {
+    /// The step the scene asks for (`[solver] dt`, or `dt_safety ×` the critical step).
+    pub dt_s: f64,
+    pub critical: CriticalStep,
 }
 
 /// The stability limit of a problem's time step.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct CriticalStep {
     /// The step the solver treats as critical: min of the two below.
     pub dt_critical_s: f64,
@@ -154,6 +164,252 @@ fn region_tag(mesh: &Mesh, r: &RegionRef) -> Option<i32> {
     }
 }
 
+/// The materials of a problem: the laws, their densities and each cell's material index.
+struct Materials {
+    laws: Vec<MaterialLaw<f64>>,
+    densities: Vec<f64>,
+    cell_material: Vec<u16>,
+}
+
+/// Resolves the scene's materials on the mesh: region-specific first, the default (no
+/// region) for the rest.
+fn assign_materials(scene: &Scene, mesh: &Mesh) -> Result<Materials> {
+    if scene.materials.is_empty() {
+        bail!("the scene has no [material]");
+    }
+    let mut laws = Vec::new();
+    let mut densities = Vec::new();
+    let mut cell_material = vec![u16::MAX; mesh.cells.len()];
+    let mut default = None;
+    for (k, m) in scene.materials.iter().enumerate() {
+        let what = match &m.region {
+            Some(r) => format!("material {k} (region {r})"),
+            None => format!("material {k}"),
+        };
+        laws.push(law_from_spec(m, &what)?);
+        densities.push(m.density);
+        match &m.region {
+            None => {
+                if default.is_some() {
+                    bail!("{what}: two materials without `region`");
+                }
+                default = Some(k as u16);
+            }
+            Some(r) => {
+                let tag = region_tag(mesh, r).ok_or_else(|| {
+                    anyhow!(
+                        "{what}: mesh {} has no region {r} (regions: {:?})",
+                        mesh.source,
+                        mesh.region_names
+                    )
+                })?;
+                let mut hit = 0;
+                for (c, reg) in mesh.cell_regions.iter().enumerate() {
+                    if *reg == tag {
+                        cell_material[c] = k as u16;
+                        hit += 1;
+                    }
+                }
+                if hit == 0 {
+                    bail!("{what}: region {r} has no cells in mesh {}", mesh.source);
+                }
+            }
+        }
+    }
+    for (c, m) in cell_material.iter_mut().enumerate() {
+        if *m == u16::MAX {
+            *m = default.ok_or_else(|| {
+                let reg = mesh.cell_regions.get(c).copied().unwrap_or(0);
+                let name = mesh.region_names.get(&reg).cloned().unwrap_or_default();
+                anyhow!(
+                    "cell {c} of mesh {} is in region {reg} {name:?}, which has no material (add a [[material]] with region = {reg} or one without region)",
+                    mesh.source
+                )
+            })?;
+        }
+    }
+    Ok(Materials {
+        laws,
+        densities,
+        cell_material,
+    })
+}
+
+/// Reference geometry of every cell: refuses inverted/degenerate cells by name.
+fn reference_geometry(mesh: &Mesh) -> Result<Vec<ReferenceHex>> {
+    let mut reference = Vec::with_capacity(mesh.cells.len());
+    for c in 0..mesh.cells.len() {
+        let r = ReferenceHex::new(&mesh.cell_coords(c)).map_err(|e| {
+            anyhow!(
+                "mesh {}: cell {c} (nodes {:?}): {e}",
+                mesh.source,
+                mesh.cells[c].map(|n| mesh.node_tags.get(n as usize).copied().unwrap_or(n as u64))
+            )
+        })?;
+        reference.push(r);
+    }
+    Ok(reference)
+}
+
+/// Lumped mass per node: an eighth of each cell's mass on each of its nodes.
+fn lumped_mass(mesh: &Mesh, reference: &[ReferenceHex], m: &Materials) -> Vec<f64> {
+    let mut mass = vec![0.0; mesh.nodes.len()];
+    for (c, r) in reference.iter().enumerate() {
+        let cm = m.densities[m.cell_material[c] as usize] * r.volume / 8.0;
+        for &n in &mesh.cells[c] {
+            mass[n as usize] += cm;
+        }
+    }
+    mass
+}
+
+/// Selects mesh nodes by box, sphere or named node set.
+struct NodeSelector<'a> {
+    mesh: &'a Mesh,
+    node_sets: &'a BTreeMap<String, Vec<u32>>,
+}
+
+impl NodeSelector<'_> {
+    /// The nodes in the box, the sphere or the set of `s` (at least one).
+    fn select(&self, s: Selector<'_>, what: &str) -> Result<Vec<u32>> {
+        let (mesh, node_sets) = (self.mesh, self.node_sets);
+        let n_nodes = mesh.nodes.len();
+        let mut out = Vec::new();
+        if s.box_.is_none() && s.sphere.is_none() && s.set.is_none() {
+            bail!("{what}: give `box`, `sphere` or `set`");
+        }
+        let mut in_set = vec![false; n_nodes];
+        if let Some(name) = s.set {
+            let set = node_sets.get(name).ok_or_else(|| {
+                anyhow!(
+                    "{what}: the mesh provides no node set \"{name}\" (it has {:?})",
+                    node_sets.keys().collect::<Vec<_>>()
+                )
+            })?;
+            for &n in set {
+                in_set[n as usize] = true;
+            }
+        }
+        for (n, p) in mesh.nodes.iter().enumerate() {
+            let in_box = s
+                .box_
+                .is_some_and(|b| (0..3).all(|i| b[0][i] <= p[i] && p[i] <= b[1][i]));
+            let in_sphere = s.sphere.is_some_and(|sp| {
+                (0..3).map(|i| (p[i] - sp.center[i]).powi(2)).sum::<f64>() <= sp.radius * sp.radius
+            });
+            if in_box || in_sphere || in_set[n] {
+                out.push(n as u32);
+            }
+        }
+        if out.is_empty() {
+            bail!("{what} selects no node of mesh {}", mesh.source);
+        }
+        Ok(out)
+    }
+
+    /// A contact surface's node mask (None when it selects no nodes by position or set:
+    /// the whole region).
+    fn surface(&self, sp: &crate::scene::SurfaceSpec) -> Result<Option<Vec<bool>>> {
+        let sel = sp.selector();
+        if sel.box_.is_none() && sel.sphere.is_none() && sel.set.is_none() {
+            return Ok(None);
+        }
+        let mut m = vec![false; self.mesh.nodes.len()];
+        for n in self.select(sel, &format!("[[surface]] {:?}", sp.name))? {
+            m[n as usize] = true;
+        }
+        Ok(Some(m))
+    }
+}
+
+/// `[[fixed]]` and `[[prescribed]]`: how every node moves, and the prescribed paths.
+fn constraints(scene: &Scene, sel: &NodeSelector) -> Result<(Vec<NodeKind>, Vec<Path1<3>>)> {
+    let mut node_kind = vec![NodeKind::Free; sel.mesh.nodes.len()];
+    for (k, f) in scene.fixed.iter().enumerate() {
+        for n in sel.select(f.selector(), &format!("[[fixed]] {k}"))? {
+            node_kind[n as usize] = NodeKind::Fixed;
+        }
+    }
+    let mut paths = Vec::new();
+    for (k, p) in scene.prescribed.iter().enumerate() {
+        let what = format!("[[prescribed]] {k}");
+        if p.path.is_empty() || p.path.windows(2).any(|w| !(w[1][0] > w[0][0])) {
+            bail!("{what}: `path` needs points [t, ux, uy, uz] with increasing t");
+        }
+        for n in sel.select(p.selector(), &what)? {
+            if node_kind[n as usize] == NodeKind::Fixed {
+                bail!(
+                    "{what}: node {} is also fixed",
+                    sel.mesh.node_tags[n as usize]
+                );
+            }
+            node_kind[n as usize] = NodeKind::Prescribed(paths.len() as u32);
+        }
+        paths.push(Path1 {
+            points: p.path.iter().map(|q| (q[0], [q[1], q[2], q[3]])).collect(),
+        });
+    }
+    Ok((node_kind, paths))
+}
+
+/// `[[load]]`: each load's force shared equally by its nodes.
+fn nodal_loads(scene: &Scene, sel: &NodeSelector) -> Result<Vec<Load>> {
+    let mut loads = Vec::new();
+    for (k, l) in scene.load.iter().enumerate() {
+        let what = format!("[[load]] {k}");
+        let nodes = sel.select(l.selector(), &what)?;
+        let share = 1.0 / nodes.len() as f64;
+        let ramp = match &l.ramp {
+            Some(r) => {
+                if r.is_empty() || r.windows(2).any(|w| !(w[1][0] > w[0][0])) {
+                    bail!("{what}: `ramp` needs points [t, factor] with increasing t");
+                }
+                Some(Path1 {
+                    points: r.iter().map(|q| (q[0], [q[1]])).collect(),
+                })
+            }
+            None => None,
+        };
+        for n in nodes {
+            loads.push(Load {
+                node: n,
+                force: l.force.map(|f| f * share),
+                ramp: ramp.clone(),
+            });
+        }
+    }
+    Ok(loads)
+}
+
+/// The `[solver]` settings' ranges (and no `adapt_dt` with contact).
+fn check_solver(s: &SolverSpec, has_contact: bool) -> Result<()> {
+    if !(s.graphics_interval > 0.0) || s.graphics_spread_steps == 0 {
+        bail!("[solver] graphics_interval must be positive and graphics_spread_steps at least 1");
+    }
+    if !(s.mass_scaling >= 1.0) {
+        bail!("[solver] mass_scaling must be >= 1, got {}", s.mass_scaling);
+    }
+    if !(s.dt_safety > 0.0) || !(s.hourglass >= 0.0) || !(s.damping >= 0.0) {
+        bail!("[solver] dt_safety must be > 0, hourglass and damping >= 0");
+    }
+    if has_contact && s.adapt_dt {
+        bail!("[solver] adapt_dt with contact is not supported: the contact penalty and search interval follow from the step (lower dt_safety instead)");
+    }
+    if s.dt_recheck_interval == Some(0) {
+        bail!("[solver] dt_recheck_interval must be at least 1 (or left out)");
+    }
+    if s.dt_recheck_interval.is_some() && s.dt_recheck_iterations == 0 {
+        bail!("[solver] dt_recheck_iterations must be at least 1");
+    }
+    if !(s.speed_limit > 0.0) {
+        bail!(
+            "[solver] speed_limit must be positive, got {}",
+            s.speed_limit
+        );
+    }
+    Ok(())
+}
+
 impl Problem {
     /// Resolves `scene` on `mesh`. `node_sets` are the mesh's named node sets.
     pub fn new(
@@ -161,180 +417,18 @@ impl Problem {
         mesh: Mesh,
         node_sets: BTreeMap<String, Vec<u32>>,
     ) -> Result<Problem> {
-        let n_nodes = mesh.nodes.len();
-        let n_cells = mesh.cells.len();
-        if n_cells == 0 {
+        if mesh.cells.is_empty() {
             bail!("mesh {} has no hexahedra", mesh.source);
         }
-        // Materials: region-specific first, the default (no region) for the rest.
-        if scene.materials.is_empty() {
-            bail!("the scene has no [material]");
-        }
-        let mut laws = Vec::new();
-        let mut densities = Vec::new();
-        let mut cell_material = vec![u16::MAX; n_cells];
-        let mut default = None;
-        for (k, m) in scene.materials.iter().enumerate() {
-            let what = match &m.region {
-                Some(r) => format!("material {k} (region {r})"),
-                None => format!("material {k}"),
-            };
-            laws.push(law_from_spec(m, &what)?);
-            densities.push(m.density);
-            match &m.region {
-                None => {
-                    if default.is_some() {
-                        bail!("{what}: two materials without `region`");
-                    }
-                    default = Some(k as u16);
-                }
-                Some(r) => {
-                    let tag = region_tag(&mesh, r).ok_or_else(|| {
-                        anyhow!(
-                            "{what}: mesh {} has no region {r} (regions: {:?})",
-                            mesh.source,
-                            mesh.region_names
-                        )
-                    })?;
-                    let mut hit = 0;
-                    for (c, reg) in mesh.cell_regions.iter().enumerate() {
-                        if *reg == tag {
-                            cell_material[c] = k as u16;
-                            hit += 1;
-                        }
-                    }
-                    if hit == 0 {
-                        bail!("{what}: region {r} has no cells in mesh {}", mesh.source);
-                    }
-                }
-            }
-        }
-        for (c, m) in cell_material.iter_mut().enumerate() {
-            if *m == u16::MAX {
-                *m = default.ok_or_else(|| {
-                    let reg = mesh.cell_regions.get(c).copied().unwrap_or(0);
-                    let name = mesh.region_names.get(&reg).cloned().unwrap_or_default();
-                    anyhow!(
-                        "cell {c} of mesh {} is in region {reg} {name:?}, which has no material (add a [[material]] with region = {reg} or one without region)",
-                        mesh.source
-                    )
-                })?;
-            }
-        }
-        // Reference geometry: refuses inverted/degenerate cells by name.
-        let mut reference = Vec::with_capacity(n_cells);
-        for c in 0..n_cells {
-            let r = ReferenceHex::new(&mesh.cell_coords(c)).map_err(|e| {
-                anyhow!(
-                    "mesh {}: cell {c} (nodes {:?}): {e}",
-                    mesh.source,
-                    mesh.cells[c].map(|n| mesh
-                        .node_tags
-                        .get(n as usize)
-                        .copied()
-                        .unwrap_or(n as u64))
-                )
-            })?;
-            reference.push(r);
-        }
-        let mut mass = vec![0.0; n_nodes];
-        for (c, r) in reference.iter().enumerate() {
-            let m = densities[cell_material[c] as usize] * r.volume / 8.0;
-            for &n in &mesh.cells[c] {
-                mass[n as usize] += m;
-            }
-        }
-        let select = |s: Selector<'_>, what: &str| -> Result<Vec<u32>> {
-            let mut out = Vec::new();
-            if s.box_.is_none() && s.sphere.is_none() && s.set.is_none() {
-                bail!("{what}: give `box`, `sphere` or `set`");
-            }
-            let mut in_set = vec![false; n_nodes];
-            if let Some(name) = s.set {
-                let set = node_sets.get(name).ok_or_else(|| {
-                    anyhow!(
-                        "{what}: the mesh provides no node set \"{name}\" (it has {:?})",
-                        node_sets.keys().collect::<Vec<_>>()
-                    )
-                })?;
-                for &n in set {
-                    in_set[n as usize] = true;
-                }
-            }
-            for (n, p) in mesh.nodes.iter().enumerate() {
-                let in_box = s
-                    .box_
-                    .is_some_and(|b| (0..3).all(|i| b[0][i] <= p[i] && p[i] <= b[1][i]));
-                let in_sphere = s.sphere.is_some_and(|sp| {
-                    (0..3).map(|i| (p[i] - sp.center[i]).powi(2)).sum::<f64>()
-                        <= sp.radius * sp.radius
-                });
-                if in_box || in_sphere || in_set[n] {
-                    out.push(n as u32);
-                }
-            }
-            if out.is_empty() {
-                bail!("{what} selects no node of mesh {}", mesh.source);
-            }
-            Ok(out)
+        let materials = assign_materials(scene, &mesh)?;
+        let reference = reference_geometry(&mesh)?;
+        let mass = lumped_mass(&mesh, &reference, &materials);
+        let sel = NodeSelector {
+            mesh: &mesh,
+            node_sets: &node_sets,
         };
-        let mut node_kind = vec![NodeKind::Free; n_nodes];
-        for (k, f) in scene.fixed.iter().enumerate() {
-            for n in select(f.selector(), &format!("[[fixed]] {k}"))? {
-                node_kind[n as usize] = NodeKind::Fixed;
-            }
-        }
-        let mut paths = Vec::new();
-        for (k, p) in scene.prescribed.iter().enumerate() {
-            let what = format!("[[prescribed]] {k}");
-            if p.path.is_empty() || p.path.windows(2).any(|w| !(w[1][0] > w[0][0])) {
-                bail!("{what}: `path` needs points [t, ux, uy, uz] with increasing t");
-            }
-            for n in select(p.selector(), &what)? {
-                if node_kind[n as usize] == NodeKind::Fixed {
-                    bail!("{what}: node {} is also fixed", mesh.node_tags[n as usize]);
-                }
-                node_kind[n as usize] = NodeKind::Prescribed(paths.len() as u32);
-            }
-            paths.push(Path1 {
-                points: p.path.iter().map(|q| (q[0], [q[1], q[2], q[3]])).collect(),
-            });
-        }
-        let mut loads = Vec::new();
-        for (k, l) in scene.load.iter().enumerate() {
-            let what = format!("[[load]] {k}");
-            let nodes = select(l.selector(), &what)?;
-            let share = 1.0 / nodes.len() as f64;
-            let ramp = match &l.ramp {
-                Some(r) => {
-                    if r.is_empty() || r.windows(2).any(|w| !(w[1][0] > w[0][0])) {
-                        bail!("{what}: `ramp` needs points [t, factor] with increasing t");
-                    }
-                    Some(Path1 {
-                        points: r.iter().map(|q| (q[0], [q[1]])).collect(),
-                    })
-                }
-                None => None,
-            };
-            for n in nodes {
-                loads.push(Load {
-                    node: n,
-                    force: l.force.map(|f| f * share),
-                    ramp: ramp.clone(),
-                });
-            }
-        }
-        let select_surface = |sp: &crate::scene::SurfaceSpec| -> Result<Option<Vec<bool>>> {
-            let sel = sp.selector();
-            if sel.box_.is_none() && sel.sphere.is_none() && sel.set.is_none() {
-                return Ok(None);
-            }
-            let mut m = vec![false; n_nodes];
-            for n in select(sel, &format!("[[surface]] {:?}", sp.name))? {
-                m[n as usize] = true;
-            }
-            Ok(Some(m))
-        };
+        let (node_kind, mut paths) = constraints(scene, &sel)?;
+        let loads = nodal_loads(scene, &sel)?;
         let mut add_path = |points: Vec<(f64, [f64; 3])>| {
             paths.push(Path1 { points });
             (paths.len() - 1) as u32
@@ -348,39 +442,18 @@ impl Problem {
             &mesh,
             &surface_faces,
             &surface_face_cells,
-            &select_surface,
+            &|sp| sel.surface(sp),
             &|r| region_tag(&mesh, r),
             &mut add_path,
             &|c| reference[c as usize].characteristic_length,
         )?;
-        let s = &scene.solver;
-        if !(s.graphics_interval > 0.0) || s.graphics_spread_steps == 0 {
-            bail!(
-                "[solver] graphics_interval must be positive and graphics_spread_steps at least 1"
-            );
-        }
-        if !(s.mass_scaling >= 1.0) {
-            bail!("[solver] mass_scaling must be >= 1, got {}", s.mass_scaling);
-        }
-        if !(s.dt_safety > 0.0) || !(s.hourglass >= 0.0) || !(s.damping >= 0.0) {
-            bail!("[solver] dt_safety must be > 0, hourglass and damping >= 0");
-        }
-        if contact.is_some() && s.adapt_dt {
-            bail!("[solver] adapt_dt with contact is not supported: the contact penalty and search interval follow from the step (lower dt_safety instead)");
-        }
-        if s.dt_recheck_interval == Some(0) {
-            bail!("[solver] dt_recheck_interval must be at least 1 (or left out)");
-        }
-        if s.dt_recheck_interval.is_some() && s.dt_recheck_iterations == 0 {
-            bail!("[solver] dt_recheck_iterations must be at least 1");
-        }
-        if !(s.speed_limit > 0.0) {
-            bail!(
-                "[solver] speed_limit must be positive, got {}",
-                s.speed_limit
-            );
-        }
-        Ok(Problem {
+        check_solver(&scene.solver, contact.is_some())?;
+        let Materials {
+            laws,
+            densities,
+            cell_material,
+        } = materials;
+        let mut problem = Problem {
             mesh,
             node_sets,
             laws,
@@ -400,8 +473,10 @@ impl Problem {
             contact,
             surface_faces,
             surface_face_cells,
-            critical: std::sync::OnceLock::new(),
-        })
+            time_step: TimeStep::default(),
+        };
+        problem.time_step = problem.choose_time_step()?;
+        Ok(problem)
     }
 
     /// True for the nodes on the mesh's boundary (the surface the graphics engine draws).
@@ -446,11 +521,8 @@ impl Problem {
     /// mesh (power iteration on `M⁻¹K`, 200 iterations, at rest). On regular hexahedral
     /// meshes `2/ω_max` is 0.86–0.89 of `L_e/c` (measured; a 3D mesh has modes above the
     /// 1D bound `2c/h`), so the seed's formula alone would let a 0.9 safety factor blow up.
-    /// Computed once and cached.
-    pub fn critical_step(&self) -> Result<CriticalStep> {
-        if let Some(c) = self.critical.get() {
-            return Ok(*c);
-        }
+    /// Computed once, when the problem is built (see [`Problem::time_step`]).
+    fn critical_step(&self) -> Result<CriticalStep> {
         let (estimate, cell) = self.element_dt_estimate();
         // At rest, in f64, from the deterministic start vector: the solver's
         // `Model::<f64>::max_frequency(200)` without building the model.
@@ -470,25 +542,26 @@ impl Problem {
         } else {
             f64::INFINITY
         };
-        let c = CriticalStep {
+        Ok(CriticalStep {
             dt_critical_s: estimate.min(power),
             dt_element_estimate_s: estimate,
             dt_power_iteration_s: power,
             limiting_cell: cell,
-        };
-        let _ = self.critical.set(c);
-        Ok(c)
+        })
     }
 
-    /// Critical step and limiting cell (see [`Problem::critical_step`]).
-    pub fn critical_dt(&self) -> Result<(f64, usize)> {
-        let c = self.critical_step()?;
-        Ok((c.dt_critical_s, c.limiting_cell))
+    /// Recomputes [`Problem::time_step`] after the problem was edited by hand (node kinds,
+    /// materials, masses: what the critical step depends on). A problem built from a scene
+    /// needs no call.
+    pub fn update_time_step(&mut self) -> Result<()> {
+        self.time_step = self.choose_time_step()?;
+        Ok(())
     }
 
     /// The time step the scene asks for, refusing one above critical unless forced.
-    pub fn time_step(&self) -> Result<(f64, f64)> {
-        let (dt_crit, cell) = self.critical_dt()?;
+    fn choose_time_step(&self) -> Result<TimeStep> {
+        let critical = self.critical_step()?;
+        let (dt_crit, cell) = (critical.dt_critical_s, critical.limiting_cell);
         let dt = match self.solver.dt {
             Some(dt) => {
                 if !(dt > 0.0) {
@@ -512,7 +585,7 @@ impl Problem {
                 self.solver.dt_safety * dt_crit
             }
         };
-        Ok((dt, dt_crit))
+        Ok(TimeStep { dt_s: dt, critical })
     }
 
     /// Number of steps the scene runs.

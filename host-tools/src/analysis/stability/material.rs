@@ -9,21 +9,16 @@ pub fn poisson(nu: f64) -> Result<Case> {
         &format!("poisson_{nu}"),
         |c| {
             // E = 1e7 Pa keeps the sag at 0.4% of the length (small deflection).
-            let run = |nu: f64, solver: &str| -> Result<Problem> {
-                problem(&box_scene(
-                    [0.1, 0.02, 0.02],
-                    [10, 2, 2],
-                    1e7,
-                    nu,
-                    true,
-                    solver,
-                    GRAVITY,
-                )?)
+            let run = |nu: f64, solver: &dyn Fn(&mut SolverSpec)| -> Result<Problem> {
+                problem(
+                    &box_scene([0.1, 0.02, 0.02], [10, 2, 2], 1e7, nu, true, solver)
+                        .with_gravity(builders::gravity_down()),
+                )
             };
             // Damping 400/s critically damps the first bending mode (ω₁ ≈ 200 rad/s).
             let tip_of = |nu: f64| -> Result<(f64, f64, u64)> {
-                let p = run(nu, "damping = 400.0")?;
-                let (dt, crit) = p.time_step()?;
+                let p = run(nu, &|s| s.damping = 400.0)?;
+                let (dt, crit) = (p.time_step.dt_s, p.time_step.critical.dt_critical_s);
                 let tip = node_near(&p, [0.1, 0.01, 0.01]);
                 let mut m = Model::<f64>::new(&p, dt);
                 let w = settle(&mut m, 3_000_000, 1e-7, |m| m.u[tip][2])?;
@@ -38,7 +33,7 @@ pub fn poisson(nu: f64) -> Result<Case> {
             // neighbouring ν the ratio of the steps is √(M(ν')/M(ν)) within 3% (the shear
             // share of the top mode is ≤ 2μ/λ).
             let nu_ref = if nu == 0.49 { 0.499 } else { 0.49 };
-            let crit_ref = run(nu_ref, "")?.critical_dt()?.0;
+            let crit_ref = run(nu_ref, &|_| {})?.time_step.critical.dt_critical_s;
             let expected = (m_mod(nu_ref) / m_mod(nu)).sqrt();
             let ratio = crit / crit_ref;
             c.lt(
@@ -48,7 +43,7 @@ pub fn poisson(nu: f64) -> Result<Case> {
             );
             c.note(format!(
                 "critical step {crit:.3e} s (ν = {nu_ref}: {crit_ref:.3e} s; L_e/c {:.3e} s); settled in {steps} steps",
-                run(nu, "")?.element_dt_estimate().0
+                run(nu, &|_| {})?.element_dt_estimate().0
             ));
             // No volumetric locking: Euler-Bernoulli bending does not depend on ν, so the
             // settled tip matches ν = 0.3 within 8% (the 3D Poisson effects at the clamp
@@ -60,8 +55,8 @@ pub fn poisson(nu: f64) -> Result<Case> {
             );
             // Undamped from rest for 20000 steps at safety 0.9: central differences conserve
             // energy (a shadow of it) to well under 1% of the peak stored energy.
-            let p = run(nu, "")?;
-            let (dt, _) = p.time_step()?;
+            let p = run(nu, &|_| {})?;
+            let dt = p.time_step.dt_s;
             let mut m = Model::<f64>::new(&p, dt);
             let (lo, hi, smax) = energy_band(&mut m, 20_000, 20, 0)?;
             c.lt(
@@ -96,7 +91,7 @@ pub fn compression_50() -> Result<Case> {
         "compression_50",
         |c| {
             let (e, nu) = (1e4, 0.45);
-            let mk = |solver: &str| -> Result<Problem> {
+            let mk = |solver: &dyn Fn(&mut SolverSpec)| -> Result<Problem> {
                 let mut p = problem(&box_scene(
                     [0.01; 3],
                     [4, 4, 4],
@@ -104,8 +99,7 @@ pub fn compression_50() -> Result<Case> {
                     nu,
                     false,
                     solver,
-                    "",
-                )?)?;
+                ))?;
                 let lame = pe_firmware::physics::LameParameters::from_young_poisson(e, nu);
                 let (lt, _) = uniaxial_neo_hookean(lame.mu, lame.lambda, 0.5);
                 // Boundary on the homogeneous field, ramped over 50 ms then held: the
@@ -114,14 +108,17 @@ pub fn compression_50() -> Result<Case> {
                 prescribe_boundary(&mut p, &[0.0, 0.05], |x, t| {
                     let s = t / 0.05;
                     core::array::from_fn(|i| s * g[i] * (x[i] - 0.005))
-                });
+                })?;
                 Ok(p)
             };
             let lame = pe_firmware::physics::LameParameters::from_young_poisson(e, nu);
             let (lt, p33) = uniaxial_neo_hookean(lame.mu, lame.lambda, 0.5);
             // 1. Without re-checking the step: the rest step's safety margin is eaten by the
             // compression (expected: a fault, or at best a completed run; reported).
-            let p = mk("damping = 1000.0\nduration = 0.1")?;
+            let p = mk(&|s| {
+                s.damping = 1000.0;
+                s.duration = Some(0.1);
+            })?;
             let plain = solver::run(&p, "compression, fixed dt", &mut ());
             c.note(format!(
                 "fixed dt at 0.9 of the rest critical step: {}",
@@ -131,10 +128,13 @@ pub fn compression_50() -> Result<Case> {
                 }
             ));
             // 2. Re-checking every 10 steps and adapting dt: completes.
-            let p = mk(
-                "damping = 1000.0\nduration = 0.1\ndt_recheck_interval = 10\nadapt_dt = true",
-            )?;
-            let (dt0, crit0) = p.time_step()?;
+            let p = mk(&|s| {
+                s.damping = 1000.0;
+                s.duration = Some(0.1);
+                s.dt_recheck_interval = Some(10);
+                s.adapt_dt = true;
+            })?;
+            let (dt0, crit0) = (p.time_step.dt_s, p.time_step.critical.dt_critical_s);
             let out = solver::run(&p, "compression, adaptive dt", &mut ())?;
             let r = &out.report;
             c.is(
@@ -223,16 +223,18 @@ pub fn rigid_rotation() -> Result<Case> {
     timed(
         "rigid_rotation",
         |c| {
-            for integration in ["reduced", "full"] {
+            for integration in [Integration::Reduced, Integration::Full] {
                 let mut p = problem(&box_scene(
                     [0.02, 0.01, 0.01],
                     [6, 3, 3],
                     1e4,
                     0.45,
                     false,
-                    &format!("integration = \"{integration}\"\ndamping = 200.0"),
-                    "",
-                )?)?;
+                    |s| {
+                        s.integration = integration;
+                        s.damping = 200.0;
+                    },
+                ))?;
                 let axis = [1.0 / 3f64.sqrt(); 3];
                 let centre = [0.01, 0.005, 0.005];
                 let t_rot = 1.0;
@@ -255,8 +257,8 @@ pub fn rigid_rotation() -> Result<Case> {
                     let y = rotate(r, axis, theta(t));
                     core::array::from_fn(|i| y[i] - r[i])
                 };
-                prescribe_boundary(&mut p, &times, u_at);
-                let (dt, _) = p.time_step()?;
+                prescribe_boundary(&mut p, &times, u_at)?;
+                let dt = p.time_step.dt_s;
                 let mut m = Model::<f64>::new(&p, dt);
                 let steps = (1.5 / dt).ceil() as u64;
                 let mut peak = 0.0f64;
@@ -307,33 +309,18 @@ pub fn soft_stiff() -> Result<Case> {
         |c| {
             let (es, ew) = (1e6, 1e3);
             let d = 0.005; // tip pull (m): 10% strain in the soft half
-            let text = format!(
-                r#"
-[mesh]
-generate = {{ kind = "box", size = [0.1, 0.01, 0.01], cells = [10, 2, 2] }}
-[[material]]
-region = "stiff"
-law = "neo-hookean"
-youngs_modulus = {es}
-poisson_ratio = 0.0
-density = 1000.0
-[[material]]
-region = "soft"
-law = "neo-hookean"
-youngs_modulus = {ew}
-poisson_ratio = 0.0
-density = 1000.0
-[[fixed]]
-box = [[-1e-9, -1.0, -1.0], [1e-9, 1.0, 1.0]]
-[[prescribed]]
-box = [[0.0999, -1.0, -1.0], [1.0, 1.0, 1.0]]
-path = [[0.0, 0.0, 0.0, 0.0], [0.2, {d}, 0.0, 0.0]]
-[solver]
-damping = 60.0
-duration = 1.5
-"#
+            let sc = box_scene([0.1, 0.01, 0.01], [10, 2, 2], es, 0.0, true, |s| {
+                s.damping = 60.0;
+                s.duration = Some(1.5);
+            })
+            .with_materials(vec![
+                builders::neo_hookean(es, 0.0).in_region("stiff"),
+                builders::neo_hookean(ew, 0.0).in_region("soft"),
+            ])
+            .with_prescribed(
+                [[0.0999, -1.0, -1.0], [1.0, 1.0, 1.0]],
+                vec![[0.0, 0.0, 0.0, 0.0], [0.2, d, 0.0, 0.0]],
             );
-            let sc = Scene::from_toml(&text)?;
             let mut mesh = crate::mesh::io::generate_box([0.1, 0.01, 0.01], [10, 2, 2]);
             split_regions(&mut mesh, 0.05);
             let p = Problem::new(&sc, mesh, BTreeMap::new())?;
@@ -344,11 +331,10 @@ duration = 1.5
                 es,
                 0.0,
                 true,
-                "",
-                "",
-            )?)?;
-            let (crit, _) = p.critical_dt()?;
-            let (crit_s, _) = all_stiff.critical_dt()?;
+                |_| {},
+            ))?;
+            let crit = p.time_step.critical.dt_critical_s;
+            let crit_s = all_stiff.time_step.critical.dt_critical_s;
             c.lt(
                 "critical step vs an all-stiff bar, relative",
                 (crit / crit_s - 1.0).abs(),

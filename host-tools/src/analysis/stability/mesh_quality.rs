@@ -25,20 +25,21 @@ fn distorted(name: &str, mesh_of: impl Fn() -> Mesh, expected: &str) -> Result<C
             let lin = |x: [f64; 3]| -> [f64; 3] {
                 core::array::from_fn(|i| (0..3).map(|j| g[i][j] * (x[j] - lo[j])).sum())
             };
-            for integration in ["reduced", "full"] {
-                let mk = |solver: &str| -> Result<Problem> {
-                    let sc = box_scene([1.0; 3], [1; 3], 1e4, 0.45, false, solver, "")?;
+            for integration in [Integration::Reduced, Integration::Full] {
+                let mk = |solver: &dyn Fn(&mut SolverSpec)| -> Result<Problem> {
+                    let sc = box_scene([1.0; 3], [1; 3], 1e4, 0.45, false, solver);
                     let mut p = Problem::new(&sc, mesh.clone(), BTreeMap::new())?;
-                    prescribe_boundary(&mut p, &[0.0], |x, _| lin(x));
+                    prescribe_boundary(&mut p, &[0.0], |x, _| lin(x))?;
                     Ok(p)
                 };
                 // Patch test: boundary on the linear field, interior free and damped: the
                 // interior settles onto the field (one-point elements with the uniform
                 // gradient pass it on any mesh; Γ is orthogonal to linear fields).
-                let p = mk(&format!(
-                    "integration = \"{integration}\"\ndamping = 2000.0"
-                ))?;
-                let (dt, _) = p.time_step()?;
+                let p = mk(&|s| {
+                    s.integration = integration;
+                    s.damping = 2000.0;
+                })?;
+                let dt = p.time_step.dt_s;
                 let mut m = Model::<f64>::new(&p, dt);
                 let probe = p
                     .node_kind
@@ -64,10 +65,11 @@ fn distorted(name: &str, mesh_of: impl Fn() -> Mesh, expected: &str) -> Result<C
                 // steps 10..2000 (1% slack); an unstable mode would grow by ≥ 1% per step.
                 // (The sampled energy itself oscillates: kinetic energy from half-step
                 // velocities differs from the shadow energy by (ωdt/2)² in the top modes.)
-                let p = mk(&format!(
-                    "integration = \"{integration}\"\ndt_safety = 0.99"
-                ))?;
-                let (dt, crit) = p.time_step()?;
+                let p = mk(&|s| {
+                    s.integration = integration;
+                    s.dt_safety = 0.99;
+                })?;
+                let (dt, crit) = (p.time_step.dt_s, p.time_step.critical.dt_critical_s);
                 let mut m = Model::<f64>::new(&p, dt);
                 let (_, first, _) = energy_band(&mut m, 2_000, 1, 10)?;
                 let _ = energy_band(&mut m, 16_000, 100, 0)?;
@@ -125,26 +127,30 @@ pub fn skewed_mesh() -> Mesh {
     mesh
 }
 
+/// The sagging cantilever: soft, nearly incompressible, damped, under gravity for 2 s.
+fn sagging_scene() -> Scene {
+    box_scene([0.1, 0.01, 0.01], [20, 2, 2], 3e3, 0.49, true, |s| {
+        s.damping = 10.0;
+        s.duration = Some(2.0);
+    })
+    .with_gravity(builders::gravity_down())
+}
+
 /// A soft cantilever sagging under its own weight: the stable step shrinks as its elements
 /// compress; re-estimating it during the run catches or follows that.
 pub fn sagging_cantilever() -> Result<Case> {
     timed(
         "sagging_cantilever_dt",
         |c| {
-            let mk = |solver: &str| -> Result<Problem> {
-                problem(&box_scene(
-                    [0.1, 0.01, 0.01],
-                    [20, 2, 2],
-                    3e3,
-                    0.49,
-                    true,
-                    &format!("damping = 10.0\nduration = 2.0\n{solver}"),
-                    GRAVITY,
-                )?)
+            let mk = |solver: &dyn Fn(&mut SolverSpec)| -> Result<Problem> {
+                problem(&sagging_scene().with_solver(solver))
             };
             // 1. Re-checked every 20 steps, adapting dt: completes; how far the step fell.
-            let p = mk("dt_recheck_interval = 20\nadapt_dt = true")?;
-            let (dt0, crit0) = p.time_step()?;
+            let p = mk(&|s| {
+                s.dt_recheck_interval = Some(20);
+                s.adapt_dt = true;
+            })?;
+            let (dt0, crit0) = (p.time_step.dt_s, p.time_step.critical.dt_critical_s);
             let adaptive = solver::run(&p, "sagging, adaptive", &mut ())?;
             let r = &adaptive.report;
             let tip = node_near(&p, [0.1, 0.005, 0.005]);
@@ -168,7 +174,7 @@ pub fn sagging_cantilever() -> Result<Case> {
             ));
             // 2. The same run without re-checks at 0.9 of the rest step: the step ends up
             // above the shrunken critical one and a guard stops the blow-up.
-            let plain = solver::run(&mk("")?, "sagging, fixed dt", &mut ());
+            let plain = solver::run(&mk(&|_| {})?, "sagging, fixed dt", &mut ());
             c.is(
                 "without re-checks (dt = 0.9 × rest critical) the run blows up, caught by a guard",
                 plain.is_err(),
@@ -179,7 +185,11 @@ pub fn sagging_cantilever() -> Result<Case> {
             );
             // 3. Re-checked without adapting: stops with an error naming the step and the
             // new critical step before any blow-up.
-            let e = solver::run(&mk("dt_recheck_interval = 20")?, "sagging, checked", &mut ())
+            let e = solver::run(
+                &mk(&|s| s.dt_recheck_interval = Some(20))?,
+                "sagging, checked",
+                &mut (),
+            )
                 .err()
                 .map(|e| e.to_string())
                 .unwrap_or_default();
@@ -191,15 +201,7 @@ pub fn sagging_cantilever() -> Result<Case> {
             // 4. The adaptive run's answer equals one at a constant step below every
             // critical step met (0.9 × the smallest found): the rescaled history changed
             // nothing but the step. Settled by damping 10/s over 1.5 s, so 1e-3.
-            let mut sc = box_scene(
-                [0.1, 0.01, 0.01],
-                [20, 2, 2],
-                3e3,
-                0.49,
-                true,
-                "damping = 10.0\nduration = 2.0",
-                GRAVITY,
-            )?;
+            let mut sc = sagging_scene();
             sc.solver.dt = Some(0.9 * r.dt_critical_min_s);
             let fixed = solver::run(&problem(&sc)?, "sagging, small fixed dt", &mut ())?;
             let sag2 = -fixed.displacements[tip][2];

@@ -14,8 +14,9 @@ use pe_firmware::physics::{PhysicsError, Real};
 use crate::geom::norm;
 use crate::mesh::Mesh;
 use crate::problem::{NodeKind, Path1, Problem};
-use crate::scene::{builders, GravitySpec, LoadSpec, Scene, SolverSpec};
+use crate::scene::{builders, Scene, SolverSpec};
 use crate::solver::{self, Model};
+use pe_firmware::image::Integration;
 
 mod material;
 mod mesh_quality;
@@ -127,41 +128,22 @@ impl Case {
 // Helpers
 
 /// A box scene clamped at x = 0 (unless `clamp` is false), neo-Hookean, ρ = 1000
-/// ([`builders::box_cantilever`]), with the case's `[solver]` keys (`solver`) and extra
-/// sections (`extra`: gravity, loads) given as TOML lines.
+/// ([`builders::box_cantilever`]), with the case's `[solver]` settings (`solver` changes
+/// the defaults); gravity and loads are added with the builder methods of [`Scene`].
 fn box_scene(
     size: [f64; 3],
     cells: [usize; 3],
     e: f64,
     nu: f64,
     clamp: bool,
-    solver: &str,
-    extra: &str,
-) -> Result<Scene> {
-    #[derive(serde::Deserialize)]
-    #[serde(deny_unknown_fields)]
-    struct CaseSettings {
-        #[serde(default)]
-        load: Vec<LoadSpec>,
-        #[serde(default)]
-        gravity: Option<GravitySpec>,
-        #[serde(default)]
-        solver: SolverSpec,
-    }
-    let s: CaseSettings = toml::from_str(&format!("{extra}\n[solver]\n{solver}"))
-        .map_err(|e| anyhow!("stability case settings: {e}"))?;
-    let mut scene = builders::box_cantilever(size, cells, e, nu, clamp);
-    scene.load = s.load;
-    scene.gravity = s.gravity;
-    scene.solver = s.solver;
-    Ok(scene)
+    solver: impl FnOnce(&mut SolverSpec),
+) -> Scene {
+    builders::box_cantilever(size, cells, e, nu, clamp).with_solver(solver)
 }
 
 fn problem(scene: &Scene) -> Result<Problem> {
     Problem::from_scene(scene, Path::new("."))
 }
-
-const GRAVITY: &str = "[gravity]\nacceleration = [0.0, 0.0, -9.81]";
 
 /// Node nearest to `x`.
 fn node_near(p: &Problem, x: [f64; 3]) -> usize {
@@ -172,7 +154,11 @@ fn node_near(p: &Problem, x: [f64; 3]) -> usize {
 }
 
 /// Every boundary node follows its own path `u(X, t)`, given at the times `times`.
-fn prescribe_boundary(p: &mut Problem, times: &[f64], u: impl Fn([f64; 3], f64) -> [f64; 3]) {
+fn prescribe_boundary(
+    p: &mut Problem,
+    times: &[f64],
+    u: impl Fn([f64; 3], f64) -> [f64; 3],
+) -> Result<()> {
     for n in p.mesh.boundary_nodes() {
         let x = p.mesh.nodes[n as usize];
         p.node_kind[n as usize] = NodeKind::Prescribed(p.paths.len() as u32);
@@ -180,6 +166,7 @@ fn prescribe_boundary(p: &mut Problem, times: &[f64], u: impl Fn([f64; 3], f64) 
             points: times.iter().map(|&t| (t, u(x, t))).collect(),
         });
     }
+    p.update_time_step()
 }
 
 /// Runs `steps` steps, sampling the energies every `every` steps from step `from` on:

@@ -4,14 +4,11 @@
 use super::*;
 
 fn dt_scene() -> Result<Scene> {
-    box_scene(
-        [0.05, 0.01, 0.01],
-        [10, 2, 2],
-        1e6,
-        0.45,
-        true,
-        "damping = 0.0",
-        GRAVITY,
+    Ok(
+        box_scene([0.05, 0.01, 0.01], [10, 2, 2], 1e6, 0.45, true, |s| {
+            s.damping = 0.0
+        })
+        .with_gravity(builders::gravity_down()),
     )
 }
 
@@ -22,12 +19,12 @@ pub fn dt_fraction(fraction: f64) -> Result<Case> {
         |c| {
             let base = dt_scene()?;
             let p = problem(&base)?;
-            let (crit, _) = p.critical_dt()?;
+            let crit = p.time_step.critical.dt_critical_s;
             if fraction < 1.0 {
                 let mut sc = base.clone();
                 sc.solver.dt_safety = fraction;
                 let p = problem(&sc)?;
-                let (dt, _) = p.time_step()?;
+                let dt = p.time_step.dt_s;
                 let mut m = Model::<f64>::new(&p, dt);
                 // 20000 undamped steps under suddenly applied gravity: a stable scheme keeps
                 // the energy in a band well under 1% of the peak stored energy.
@@ -41,7 +38,7 @@ pub fn dt_fraction(fraction: f64) -> Result<Case> {
             } else {
                 let mut sc = base.clone();
                 sc.solver.dt = Some(fraction * crit);
-                let e = problem(&sc)?.time_step().err().map(|e| e.to_string());
+                let e = problem(&sc).err().map(|e| e.to_string());
                 c.is(
                     "explicit dt refused",
                     e.as_deref()
@@ -50,7 +47,7 @@ pub fn dt_fraction(fraction: f64) -> Result<Case> {
                 );
                 let mut sc2 = base.clone();
                 sc2.solver.dt_safety = fraction;
-                let e = problem(&sc2)?.time_step().err().map(|e| e.to_string());
+                let e = problem(&sc2).err().map(|e| e.to_string());
                 c.is(
                     "dt_safety > 1 refused",
                     e.as_deref().is_some_and(|e| e.contains("force_dt")),
@@ -59,7 +56,7 @@ pub fn dt_fraction(fraction: f64) -> Result<Case> {
                 sc.solver.force_dt = true;
                 sc.solver.steps = Some(100_000);
                 let p = problem(&sc)?;
-                let (dt, _) = p.time_step()?;
+                let dt = p.time_step.dt_s;
                 let mut m = Model::<f64>::new(&p, dt);
                 let mut fault = None;
                 for _ in 0..100_000 {
@@ -105,11 +102,11 @@ pub fn long_run(steps: u64) -> Result<Case> {
                 1e6,
                 0.45,
                 true,
-                "damping = 0.0",
-                GRAVITY,
-            )?;
+                |s| s.damping = 0.0,
+            )
+            .with_gravity(builders::gravity_down());
             let p = problem(&sc)?;
-            let (dt, _) = p.time_step()?;
+            let dt = p.time_step.dt_s;
             let window = steps / 10;
             fn run<T: Real>(
                 p: &Problem,
@@ -173,38 +170,33 @@ pub fn load_cycles(cycles: usize) -> Result<Case> {
         &format!("load_cycles_{cycles}"),
         |c| {
             let period = 0.2;
-            let mut ramp = String::from("[");
-            for k in 0..cycles {
-                let t0 = k as f64 * period;
-                let _ = write!(
-                    ramp,
-                    "[{t0}, 0.0], [{}, 1.0], [{}, 1.0], [{}, 0.0], ",
-                    t0 + 0.05,
-                    t0 + 0.1,
-                    t0 + 0.15
-                );
-            }
-            ramp.push(']');
-            let extra = format!(
-                "[[load]]\nbox = [[0.0999, -1.0, -1.0], [1.0, 1.0, 1.0]]\nforce = [0.0, 0.0, -0.2]\nramp = {ramp}"
+            let ramp: Vec<[f64; 2]> = (0..cycles)
+                .flat_map(|k| {
+                    let t0 = k as f64 * period;
+                    [
+                        [t0, 0.0],
+                        [t0 + 0.05, 1.0],
+                        [t0 + 0.1, 1.0],
+                        [t0 + 0.15, 0.0],
+                    ]
+                })
+                .collect();
+            let sc = box_scene([0.1, 0.02, 0.02], [10, 2, 2], 5e5, 0.45, true, |s| {
+                s.damping = 60.0
+            })
+            .with_load(
+                [[0.0999, -1.0, -1.0], [1.0, 1.0, 1.0]],
+                [0.0, 0.0, -0.2],
+                Some(ramp),
             );
-            let sc = box_scene(
-                [0.1, 0.02, 0.02],
-                [10, 2, 2],
-                5e5,
-                0.45,
-                true,
-                "damping = 60.0",
-                &extra,
-            )?;
             let mut sc = sc;
             // A whole number of steps per cycle (at most 0.9 of critical), so that every
             // cycle samples the same phases.
-            let crit = problem(&sc)?.critical_dt()?.0;
+            let crit = problem(&sc)?.time_step.critical.dt_critical_s;
             let per_cycle = (period / (0.9 * crit)).ceil();
             sc.solver.dt = Some(period / per_cycle);
             let p = problem(&sc)?;
-            let (dt, _) = p.time_step()?;
+            let dt = p.time_step.dt_s;
             let tip = node_near(&p, [0.1, 0.01, 0.01]);
             let mut m = Model::<f64>::new(&p, dt);
             let mut ends = Vec::new();
@@ -270,7 +262,7 @@ pub fn guards() -> Result<Case> {
             // step), so |u̇| passes 100 m/s while the displacement jump per step (~5e-4 m)
             // is still far from inverting a 5 mm cell: the speed guard trips first.
             let mut sc = dt_scene()?;
-            let crit = problem(&sc)?.critical_dt()?.0;
+            let crit = problem(&sc)?.time_step.critical.dt_critical_s;
             sc.solver.dt = Some(1.02 * crit);
             sc.solver.force_dt = true;
             let p = problem(&sc)?;
@@ -299,7 +291,7 @@ pub fn guards() -> Result<Case> {
             // Non-finite guard: a corrupted history value (as a bit flip would leave) at
             // one node gives NaN there in the next update.
             let p = problem(&dt_scene()?)?;
-            let (dt, _) = p.time_step()?;
+            let dt = p.time_step.dt_s;
             let mut m = Model::<f64>::new(&p, dt);
             for _ in 0..10 {
                 m.advance()
@@ -332,7 +324,8 @@ pub fn guards() -> Result<Case> {
             p.paths.push(Path1 {
                 points: vec![(0.0, [0.0; 3]), (1e-9, [-0.03, 0.0, 0.0])],
             });
-            let (dt, _) = p.time_step()?;
+            p.update_time_step()?;
+            let dt = p.time_step.dt_s;
             let mut m = Model::<f64>::new(&p, dt);
             let err = (0..10).find_map(|_| m.advance().err());
             match err {

@@ -430,7 +430,7 @@ pub fn run(
     if scene.solver.duration.is_none() {
         // The grid changes dt: hold the simulated time, not the step count, fixed.
         let p = Problem::from_scene(&scene, dir)?;
-        let (dt, _) = p.time_step()?;
+        let dt = p.time_step.dt_s;
         scene.solver.duration = Some(p.steps(dt) as f64 * dt);
     }
     scene.solver.steps = None;

@@ -3,17 +3,8 @@
 
 use super::*;
 
-fn csv_escape(s: &str) -> String {
-    if s.contains(',') || s.contains('"') {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
-}
-
 /// The CSV: one row per configuration, a header naming every column.
 pub fn to_csv(rows: &[Row]) -> Result<String> {
-    let mut out = String::new();
     let header: Vec<String> = match serde_json::to_value(rows.first())? {
         serde_json::Value::Object(m) => m.keys().cloned().collect(),
         _ => vec![],
@@ -49,22 +40,18 @@ pub fn to_csv(rows: &[Row]) -> Result<String> {
         "pareto",
     ];
     debug_assert_eq!(header.len(), order.len());
-    out.push_str(&order.join(","));
-    out.push('\n');
-    for r in rows {
-        let v = serde_json::to_value(r)?;
-        let cells: Vec<String> = order
-            .iter()
-            .map(|k| match &v[*k] {
-                serde_json::Value::String(s) => csv_escape(s),
-                serde_json::Value::Null => String::new(),
-                other => other.to_string(),
-            })
-            .collect();
-        out.push_str(&cells.join(","));
-        out.push('\n');
-    }
-    Ok(out)
+    let values = rows
+        .iter()
+        .map(serde_json::to_value)
+        .collect::<Result<Vec<_>, _>>()?;
+    let records = values.iter().map(|v| {
+        order.iter().map(|k| match &v[*k] {
+            serde_json::Value::String(s) => s.clone(),
+            serde_json::Value::Null => String::new(),
+            other => other.to_string(),
+        })
+    });
+    crate::output::csv_string(&order, records)
 }
 
 /// Cost ratio full/reduced and the accuracy of each, per precision, from the cross rows at

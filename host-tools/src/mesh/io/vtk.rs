@@ -2,6 +2,7 @@
 //! faults by line, then `vtkio` for the data.
 
 use super::*;
+use vtkio::model::{Attribute, CellType, Cells, DataSet, IOBuffer, Piece, UnstructuredGridPiece};
 
 /// `VTK_HEXAHEDRON`.
 const VTK_HEXAHEDRON: u8 = 12;
@@ -22,19 +23,41 @@ const REGION_ARRAY_NAMES: [&str; 5] = [
 /// `gmsh:physical`, `PhysicalGroup`, `CellEntityIds`, else the first one-component integer
 /// cell array); without one every cell is in region 0. Node tags are 1-based indices.
 pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
-    use vtkio::model::{Attribute, CellType, DataSet, IOBuffer, Piece};
-
-    let perr = |line: Option<usize>, msg: String| MeshError::Parse {
-        path: path.to_path_buf(),
-        line,
-        msg,
-    };
     // vtkio reports neither where nor what went wrong, and silently drops a cell data array
     // cut short by a truncated file, so walk the ASCII structure first: it finds those faults
     // with a line number.
     if std::str::from_utf8(bytes).is_ok() {
         walk_vtk(&mut Reader::new(path, bytes))?;
     }
+    let piece = read_piece(path, bytes)?;
+    let nodes = piece_nodes(path, piece.points)?;
+    let node_tags: Vec<u64> = (1..=nodes.len() as u64).collect();
+    let cells = piece_cells(path, piece.cells, nodes.len())?;
+    let cell_regions = piece_regions(path, piece.data.cell, cells.len())?;
+
+    let mesh = Mesh {
+        nodes,
+        node_tags,
+        cells,
+        cell_regions,
+        region_names: BTreeMap::new(),
+        source: path.display().to_string(),
+    };
+    mesh.validate()?;
+    Ok(mesh)
+}
+
+/// A parse error of `path` (at `line` when known).
+fn perr(path: &Path, line: Option<usize>, msg: String) -> MeshError {
+    MeshError::Parse {
+        path: path.to_path_buf(),
+        line,
+        msg,
+    }
+}
+
+/// The one inline unstructured grid piece of the file, through vtkio.
+fn read_piece(path: &Path, bytes: &[u8]) -> Result<UnstructuredGridPiece, MeshError> {
     let vtk = vtkio::Vtk::parse_legacy_be(bytes).map_err(|e| MeshError::Parse {
         path: path.to_path_buf(),
         line: None,
@@ -50,6 +73,7 @@ pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
         DataSet::UnstructuredGrid { pieces, .. } => pieces,
         _ => {
             return Err(perr(
+                path,
                 None,
                 "dataset is not an UNSTRUCTURED_GRID".to_string(),
             ))
@@ -57,6 +81,7 @@ pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
     };
     if pieces.len() != 1 {
         return Err(perr(
+            path,
             None,
             format!(
                 "expected one unstructured grid piece, found {}",
@@ -64,45 +89,56 @@ pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
             ),
         ));
     }
-    let piece = match pieces.into_iter().next() {
-        Some(Piece::Inline(p)) => *p,
-        _ => {
-            return Err(perr(
-                None,
-                "unstructured grid data is not inline".to_string(),
-            ))
-        }
-    };
+    match pieces.into_iter().next() {
+        Some(Piece::Inline(p)) => Ok(*p),
+        _ => Err(perr(
+            path,
+            None,
+            "unstructured grid data is not inline".to_string(),
+        )),
+    }
+}
 
-    let coords: Vec<f64> = match piece.points {
+/// The POINTS as finite 3-vectors.
+fn piece_nodes(path: &Path, points: IOBuffer) -> Result<Vec<[f64; 3]>, MeshError> {
+    let coords: Vec<f64> = match points {
         IOBuffer::F64(v) => v,
         IOBuffer::F32(v) => v.into_iter().map(f64::from).collect(),
-        other => other
-            .cast_into::<f64>()
-            .ok_or_else(|| perr(None, "POINTS have an unsupported number type".to_string()))?,
+        other => other.cast_into::<f64>().ok_or_else(|| {
+            perr(
+                path,
+                None,
+                "POINTS have an unsupported number type".to_string(),
+            )
+        })?,
     };
     if !coords.chunks_exact(3).remainder().is_empty() {
         return Err(perr(
+            path,
             None,
             format!("POINTS hold {} numbers, not a multiple of 3", coords.len()),
         ));
     }
     let nodes: Vec<[f64; 3]> = coords.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-    let node_tags: Vec<u64> = (1..=nodes.len() as u64).collect();
     for (i, p) in nodes.iter().enumerate() {
         if !p.iter().all(|x| x.is_finite()) {
             return Err(MeshError::NonFiniteCoordinate {
                 path: path.to_path_buf(),
-                node: node_tags[i],
+                node: i as u64 + 1,
                 coords: *p,
             });
         }
     }
+    Ok(nodes)
+}
 
-    let types = piece.cells.types;
-    let (connectivity, offsets) = piece.cells.cell_verts.into_xml();
+/// The cells, all hexahedra of eight distinct nodes among the `n_nodes`.
+fn piece_cells(path: &Path, cells: Cells, n_nodes: usize) -> Result<Vec<[u32; 8]>, MeshError> {
+    let types = cells.types;
+    let (connectivity, offsets) = cells.cell_verts.into_xml();
     if offsets.len() != types.len() {
         return Err(perr(
+            path,
             None,
             format!("{} cells but {} CELL_TYPES", offsets.len(), types.len()),
         ));
@@ -126,12 +162,14 @@ pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
         let end = end as usize;
         let verts = connectivity.get(start..end).ok_or_else(|| {
             perr(
+                path,
                 None,
                 format!("cell {ci}: connectivity offsets out of range"),
             )
         })?;
         if verts.len() != 8 {
             return Err(perr(
+                path,
                 None,
                 format!(
                     "cell {ci} is VTK_HEXAHEDRON ({VTK_HEXAHEDRON}) but has {} points",
@@ -141,12 +179,12 @@ pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
         }
         let mut cell = [0u32; 8];
         for (a, &v) in verts.iter().enumerate() {
-            if v as usize >= nodes.len() {
+            if v as usize >= n_nodes {
                 return Err(MeshError::NodeIndexOutOfRange {
                     path: path.to_path_buf(),
                     cell: ci,
                     index: u32::try_from(v).unwrap_or(u32::MAX),
-                    nodes: nodes.len(),
+                    nodes: n_nodes,
                 });
             }
             if cell[..a].contains(&(v as u32)) {
@@ -161,11 +199,17 @@ pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
         cells.push(cell);
         start = end;
     }
+    Ok(cells)
+}
 
-    // Region tags from an integer cell data array.
-    let arrays: Vec<_> = piece
-        .data
-        .cell
+/// Region tags from an integer cell data array (see [`REGION_ARRAY_NAMES`]); 0 for every
+/// cell without one.
+fn piece_regions(
+    path: &Path,
+    cell_data: Vec<Attribute>,
+    n_cells: usize,
+) -> Result<Vec<i32>, MeshError> {
+    let arrays: Vec<_> = cell_data
         .into_iter()
         .filter_map(|a| match a {
             Attribute::DataArray(d) => Some(d),
@@ -191,82 +235,37 @@ pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
         .or_else(|| {
             arrays
                 .iter()
-                .find(|a| is_int(&a.data) && a.data.len() == cells.len())
+                .find(|a| is_int(&a.data) && a.data.len() == n_cells)
         });
-    let cell_regions = match chosen {
-        None => vec![0; cells.len()],
-        Some(a) => {
-            let name = a.name.clone();
-            let vals = a
-                .data
-                .clone()
-                .cast_into::<i64>()
-                .ok_or_else(|| perr(None, format!("cell data {name:?} is not numeric")))?;
-            if vals.len() != cells.len() {
-                return Err(MeshError::LengthMismatch {
-                    path: path.to_path_buf(),
-                    what: format!("cell data {name:?}"),
-                    expected: cells.len(),
-                    got: vals.len(),
-                });
-            }
-            vals.into_iter()
-                .map(|v| {
-                    i32::try_from(v).map_err(|_| perr(None, format!("region {v} out of i32 range")))
-                })
-                .collect::<Result<Vec<i32>, _>>()?
-        }
+    let Some(a) = chosen else {
+        return Ok(vec![0; n_cells]);
     };
-
-    let mesh = Mesh {
-        nodes,
-        node_tags,
-        cells,
-        cell_regions,
-        region_names: BTreeMap::new(),
-        source: path.display().to_string(),
-    };
-    mesh.validate()?;
-    Ok(mesh)
+    let name = a.name.clone();
+    let vals = a
+        .data
+        .clone()
+        .cast_into::<i64>()
+        .ok_or_else(|| perr(path, None, format!("cell data {name:?} is not numeric")))?;
+    if vals.len() != n_cells {
+        return Err(MeshError::LengthMismatch {
+            path: path.to_path_buf(),
+            what: format!("cell data {name:?}"),
+            expected: n_cells,
+            got: vals.len(),
+        });
+    }
+    vals.into_iter()
+        .map(|v| {
+            i32::try_from(v).map_err(|_| perr(path, None, format!("region {v} out of i32 range")))
+        })
+        .collect()
 }
 
 /// Walk the sections of an ASCII legacy VTK file (POINTS, CELLS, CELL_TYPES,
 /// CELL_DATA/POINT_DATA with SCALARS, VECTORS, NORMALS, FIELD), checking the counts and that
 /// every value is a number. Stops without error at the first keyword it does not know.
 fn walk_vtk(r: &mut Reader<'_>) -> Result<(), MeshError> {
-    let (l, head) = r.next_line().ok_or_else(|| r.err(Some(1), "empty file"))?;
-    if !head.starts_with("# vtk DataFile Version") {
-        return Err(r.err(
-            Some(l),
-            format!(
-                "expected \"# vtk DataFile Version x.y\", found {:?}",
-                truncate(head)
-            ),
-        ));
-    }
-    // The title line may be blank, so take it raw.
-    r.raw_line();
-    let (l, enc) = r
-        .next_line()
-        .ok_or_else(|| r.err(Some(r.eof_line()), "file ends after the title"))?;
-    if enc != "ASCII" {
-        return Err(r.err(
-            Some(l),
-            format!("expected ASCII, found {:?}", truncate(enc)),
-        ));
-    }
-    let (l, ds) = r
-        .next_line()
-        .ok_or_else(|| r.err(Some(r.eof_line()), "no DATASET line"))?;
-    if ds.split_whitespace().collect::<Vec<_>>() != ["DATASET", "UNSTRUCTURED_GRID"] {
-        return Err(r.err(
-            Some(l),
-            format!(
-                "expected DATASET UNSTRUCTURED_GRID, found {:?}",
-                truncate(ds)
-            ),
-        ));
-    }
+    walk_vtk_header(r)?;
     let mut attr_count = 0usize;
     loop {
         let (kw, l) = match r.token("keyword") {
@@ -361,4 +360,42 @@ fn walk_vtk(r: &mut Reader<'_>) -> Result<(), MeshError> {
             _ => return Ok(()),
         }
     }
+}
+
+/// The four header lines: version, title, ASCII, `DATASET UNSTRUCTURED_GRID`.
+fn walk_vtk_header(r: &mut Reader<'_>) -> Result<(), MeshError> {
+    let (l, head) = r.next_line().ok_or_else(|| r.err(Some(1), "empty file"))?;
+    if !head.starts_with("# vtk DataFile Version") {
+        return Err(r.err(
+            Some(l),
+            format!(
+                "expected \"# vtk DataFile Version x.y\", found {:?}",
+                truncate(head)
+            ),
+        ));
+    }
+    // The title line may be blank, so take it raw.
+    r.raw_line();
+    let (l, enc) = r
+        .next_line()
+        .ok_or_else(|| r.err(Some(r.eof_line()), "file ends after the title"))?;
+    if enc != "ASCII" {
+        return Err(r.err(
+            Some(l),
+            format!("expected ASCII, found {:?}", truncate(enc)),
+        ));
+    }
+    let (l, ds) = r
+        .next_line()
+        .ok_or_else(|| r.err(Some(r.eof_line()), "no DATASET line"))?;
+    if ds.split_whitespace().collect::<Vec<_>>() != ["DATASET", "UNSTRUCTURED_GRID"] {
+        return Err(r.err(
+            Some(l),
+            format!(
+                "expected DATASET UNSTRUCTURED_GRID, found {:?}",
+                truncate(ds)
+            ),
+        ));
+    }
+    Ok(())
 }

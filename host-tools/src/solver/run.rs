@@ -1,0 +1,240 @@
+//! Running a problem to its end: the loop around [`Model::advance`], the observer, the
+//! run report, and step errors in the mesh's own words.
+
+use std::time::Instant;
+
+use anyhow::{anyhow, Result};
+use pe_firmware::image::Precision;
+use pe_firmware::physics::{PhysicsError, Real};
+use serde::Serialize;
+
+use super::{DtMonitor, Model, StepError};
+use crate::problem::Problem;
+
+/// What a run reports (`--report FILE.json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct RunReport {
+    pub scene: String,
+    pub precision: String,
+    pub integration: String,
+    pub steps: u64,
+    pub dt_s: f64,
+    pub dt_critical_s: f64,
+    pub simulated_s: f64,
+    pub elements: usize,
+    pub nodes: usize,
+    pub wall_s: f64,
+    pub element_steps_per_s: f64,
+    pub real_time_factor: f64,
+    pub kinetic_energy_final: f64,
+    pub stored_energy_final: f64,
+    pub max_displacement: f64,
+    pub max_displacement_node: u64,
+    /// Force the prescribed nodes exert on the tissue at the end (N): the probe push.
+    pub prescribed_reaction_n: [f64; 3],
+    pub fixed_reaction_n: [f64; 3],
+    /// Step at the end (differs from `dt_s` only when `adapt_dt` lowered it).
+    pub dt_final_s: f64,
+    /// Smallest critical step found by the re-checks (`dt_recheck_interval`), s; the
+    /// initial one when re-checks are off.
+    pub dt_critical_min_s: f64,
+    /// Re-checks done and how many of them lowered `dt`.
+    pub dt_rechecks: u64,
+    pub dt_reductions: u64,
+    /// Contact figures (absent without contact).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub contact: Option<ContactReport>,
+}
+
+/// What contact did over a run.
+#[derive(Clone, Debug, Serialize)]
+pub struct ContactReport {
+    pub tools: Vec<String>,
+    /// Force of the tissue on each tool at the end and the largest magnitude over the run (N).
+    pub tool_force_final_n: Vec<[f64; 3]>,
+    pub tool_force_peak_n: Vec<f64>,
+    /// Deepest penetration over the run (m) and the scene's tolerance.
+    pub max_penetration_m: f64,
+    pub tolerance_m: f64,
+    /// Largest |Σ forces of a pair| / Σ|forces| over the run (zero to round-off).
+    pub pair_force_sum_rel_max: f64,
+    pub check_interval_steps: u32,
+    pub checks: u64,
+    pub candidates_max: usize,
+    pub active_contacts_final: u32,
+}
+
+/// Result of a run: final displacements (f64) and the report.
+pub struct RunOutput {
+    pub displacements: Vec<[f64; 3]>,
+    pub report: RunReport,
+    /// Per step, the force of the tissue on each tool (N): `tool_force[step · tools + t]`.
+    pub tool_force: Vec<[f64; 3]>,
+}
+
+/// Called every step with the model's state after the step (for progress and frames).
+pub trait Observer {
+    fn after_step(
+        &mut self,
+        step: u64,
+        time_s: f64,
+        steps_total: u64,
+        u: &dyn Fn() -> Vec<[f64; 3]>,
+    );
+}
+
+impl Observer for () {
+    fn after_step(&mut self, _: u64, _: f64, _: u64, _: &dyn Fn() -> Vec<[f64; 3]>) {}
+}
+
+/// Runs the problem to its end in its scene's precision.
+pub fn run(problem: &Problem, name: &str, observer: &mut dyn Observer) -> Result<RunOutput> {
+    match problem.solver.precision {
+        Precision::F32 => run_typed::<f32>(problem, name, observer),
+        Precision::F64 => run_typed::<f64>(problem, name, observer),
+    }
+}
+
+pub fn run_typed<T: Real>(
+    problem: &Problem,
+    name: &str,
+    observer: &mut dyn Observer,
+) -> Result<RunOutput> {
+    let (dt, dt_crit) = (
+        problem.time_step.dt_s,
+        problem.time_step.critical.dt_critical_s,
+    );
+    let mut steps = problem.steps(dt);
+    let mut model = Model::<T>::new(problem, dt);
+    let mut monitor = DtMonitor::new(problem, dt_crit);
+    let start = Instant::now();
+    let mut tool_force = Vec::new();
+    let mut peak: Vec<f64> = Vec::new();
+    let mut pair_rel: f64 = 0.0;
+    while model.step < steps {
+        model
+            .advance()
+            .map_err(|e| anyhow!("{name}: {}", describe_step_error(problem, &e)))?;
+        if let Some(c) = &model.contact {
+            tool_force.extend_from_slice(&c.tool_force);
+            peak.resize(c.tool_force.len(), 0.0);
+            for (p, f) in peak.iter_mut().zip(&c.tool_force) {
+                *p = p.max((f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt());
+            }
+            for (s, m) in c.stats.pair_sum_n.iter().zip(&c.stats.pair_magnitude_n) {
+                if *m > 0.0 {
+                    pair_rel = pair_rel.max((s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt() / m);
+                }
+            }
+        }
+        if monitor.due(model.step) && model.step < steps {
+            if let Some(dt_new) = monitor.check(&model).map_err(|e| anyhow!("{name}: {e}"))? {
+                model.set_dt(dt_new);
+                if problem.solver.steps.is_none() {
+                    let left = problem.solver.duration.unwrap_or(1.0) - model.time_s();
+                    steps = model.step + (left / dt_new).ceil().max(0.0) as u64;
+                }
+            }
+        }
+        let m = &model;
+        observer.after_step(m.step, m.time_s(), steps, &|| m.displacements());
+    }
+    let wall_s = start.elapsed().as_secs_f64();
+    let displacements = model.displacements();
+    let (max_node, max_disp) = displacements
+        .iter()
+        .enumerate()
+        .map(|(k, u)| (k, (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()))
+        .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
+    let elements = model.elements.len();
+    let report = RunReport {
+        scene: name.to_string(),
+        precision: T::NAME.to_string(),
+        integration: problem.solver.integration.name().to_string(),
+        steps,
+        dt_s: dt,
+        dt_critical_s: dt_crit,
+        simulated_s: model.time_s(),
+        elements,
+        nodes: problem.mesh.nodes.len(),
+        wall_s,
+        element_steps_per_s: (elements as f64 * steps as f64) / wall_s.max(1e-12),
+        real_time_factor: model.time_s() / wall_s.max(1e-12),
+        kinetic_energy_final: model.kinetic_energy,
+        stored_energy_final: model.stored_energy()?,
+        max_displacement: max_disp,
+        max_displacement_node: problem.mesh.node_tags.get(max_node).copied().unwrap_or(0),
+        prescribed_reaction_n: model.reaction_prescribed,
+        fixed_reaction_n: model.reaction_fixed,
+        dt_final_s: model.dt_s,
+        dt_critical_min_s: monitor.dt_critical_min_s,
+        dt_rechecks: monitor.rechecks,
+        dt_reductions: monitor.reductions,
+        contact: model.contact.as_ref().map(|c| ContactReport {
+            tools: problem
+                .contact
+                .as_ref()
+                .map(|s| s.tool_names.clone())
+                .unwrap_or_default(),
+            tool_force_final_n: c.tool_force.clone(),
+            tool_force_peak_n: peak.clone(),
+            max_penetration_m: c.max_depth_m,
+            tolerance_m: c.run.params.tolerance_m,
+            pair_force_sum_rel_max: pair_rel,
+            check_interval_steps: c.run.params.check_interval_steps,
+            checks: c.checks,
+            candidates_max: c.candidates_max,
+            active_contacts_final: c.stats.active,
+        }),
+    };
+    Ok(RunOutput {
+        displacements,
+        report,
+        tool_force,
+    })
+}
+
+/// A step failure in words a user can act on: the step and time, and the mesh's own name
+/// (tag) and position of the node, or the nodes of the element.
+pub fn describe_step_error(problem: &Problem, e: &StepError) -> String {
+    let tag = |n: u32| {
+        problem
+            .mesh
+            .node_tags
+            .get(n as usize)
+            .copied()
+            .unwrap_or(n as u64 + 1)
+    };
+    let at = |n: u32| {
+        problem
+            .mesh
+            .nodes
+            .get(n as usize)
+            .map(|p| format!(" at [{:.4e}, {:.4e}, {:.4e}] m", p[0], p[1], p[2]))
+            .unwrap_or_default()
+    };
+    let detail = match e.error {
+        PhysicsError::NonFinite { node }
+        | PhysicsError::SpeedLimit { node, .. }
+        | PhysicsError::Penetration { node, .. }
+        | PhysicsError::ContactSpeedBound { node, .. } => {
+            format!(
+                " (node index {node} = mesh node tag {}{})",
+                tag(node),
+                at(node)
+            )
+        }
+        PhysicsError::InvertedElement { element, .. } | PhysicsError::BadIndex { element } => {
+            match problem.mesh.cells.get(element as usize) {
+                Some(c) => format!(
+                    " (element {element} = mesh cell {element}, nodes {:?}{})",
+                    c.map(tag),
+                    at(c[0]).replace(" at", ", first node at")
+                ),
+                None => String::new(),
+            }
+        }
+        PhysicsError::BadContactIndex { .. } => String::new(),
+    };
+    format!("{e}{detail}")
+}
