@@ -457,6 +457,21 @@ struct Collected {
 }
 
 impl Collected {
+    fn new(steps: u64, n_nodes: usize, boards: usize) -> Self {
+        Collected {
+            steps,
+            n_nodes,
+            displacements: vec![[0.0; 3]; n_nodes],
+            pending: Default::default(),
+            frames: Vec::new(),
+            results: vec![None; boards],
+            reaction_prescribed: [0.0; 3],
+            reaction_fixed: [0.0; 3],
+            kinetic_energy: 0.0,
+            faults: Vec::new(),
+        }
+    }
+
     fn file(&mut self, report: Report) {
         match report {
             Report::Frame { step, nodes } => {
@@ -498,6 +513,50 @@ impl Collected {
             Report::Failed(f) => self.faults.push(f),
         }
     }
+}
+
+/// Faults ordered root cause first: the earliest step; a timeout is a consequence of a
+/// neighbour's fault.
+fn root_cause_first(mut faults: Vec<Fault>) -> Vec<Fault> {
+    faults.sort_by_key(|f: &Fault| {
+        (
+            f.step,
+            matches!(f.kind, pe_firmware::runtime::FaultKind::LinkTimeout { .. }) as u8,
+            f.board,
+        )
+    });
+    faults
+}
+
+/// One thread per worker, each running its boards; a worker's first fault stops the run.
+fn spawn_workers(
+    per_worker: Vec<(Vec<BoardCtx>, Vec<BoxedLinks>)>,
+    bells: &[Arc<links::Doorbell>],
+    tx: &mpsc::Sender<Report>,
+    stop: &Arc<std::sync::atomic::AtomicBool>,
+    sizing: StorageSizing,
+    header: &ImageHeader,
+) -> Result<Vec<std::thread::JoinHandle<()>>> {
+    let (p, i) = (header.precision, header.integration);
+    let mut handles = Vec::new();
+    for (w, (ctxs, mut ls)) in per_worker.into_iter().enumerate() {
+        let out = tx.clone();
+        let bell = bells[w].clone();
+        let stop = stop.clone();
+        let h = std::thread::Builder::new()
+            .name(format!("board-worker-{w}"))
+            .stack_size(16 << 20)
+            .spawn(move || {
+                let mut env = ThreadEnv::new(bell);
+                if let Err(f) = dispatch(ctxs, sizing, &mut ls, &mut env, &out, p, i) {
+                    stop.store(true, Ordering::Relaxed);
+                    let _ = out.send(Report::Failed(f));
+                }
+            })
+            .context("spawning a worker thread")?;
+        handles.push(h);
+    }
+    Ok(handles)
 }
 
 /// Runs the compiled machine in `dir`. `on_progress(step, total)` is called from the
@@ -569,39 +628,9 @@ pub fn run(
         per_worker[b % workers].0.push(ctx);
         per_worker[b % workers].1.push(l);
     }
-    let mut handles = Vec::new();
-    for (w, (ctxs, mut ls)) in per_worker.into_iter().enumerate() {
-        let out = tx.clone();
-        let bell = bells[w].clone();
-        let stop2 = stop.clone();
-        let sizing = opts.storage;
-        let h = std::thread::Builder::new()
-            .name(format!("board-worker-{w}"))
-            .stack_size(16 << 20)
-            .spawn(move || {
-                let mut env = ThreadEnv::new(bell);
-                let (p, i) = (header.precision, header.integration);
-                if let Err(f) = dispatch(ctxs, sizing, &mut ls, &mut env, &out, p, i) {
-                    stop2.store(true, Ordering::Relaxed);
-                    let _ = out.send(Report::Failed(f));
-                }
-            })
-            .context("spawning a worker thread")?;
-        handles.push(h);
-    }
+    let handles = spawn_workers(per_worker, &bells, &tx, &stop, opts.storage, &header)?;
     drop(tx);
-    let mut c = Collected {
-        steps,
-        n_nodes,
-        displacements: vec![[0.0; 3]; n_nodes],
-        pending: Default::default(),
-        frames: Vec::new(),
-        results: vec![None; count],
-        reaction_prescribed: [0.0; 3],
-        reaction_fixed: [0.0; 3],
-        kinetic_energy: 0.0,
-        faults: Vec::new(),
-    };
+    let mut c = Collected::new(steps, n_nodes, count);
     loop {
         match rx.recv_timeout(Duration::from_millis(100)) {
             Ok(report) => c.file(report),
@@ -616,15 +645,7 @@ pub fn run(
     let wall_s = start.elapsed().as_secs_f64();
     let injected = injected.lock().map(|v| v.clone()).unwrap_or_default();
     if !c.faults.is_empty() {
-        let mut faults = c.faults;
-        // Root cause first: the earliest step; a timeout is a consequence of a neighbour's fault.
-        faults.sort_by_key(|f: &Fault| {
-            (
-                f.step,
-                matches!(f.kind, pe_firmware::runtime::FaultKind::LinkTimeout { .. }) as u8,
-                f.board,
-            )
-        });
+        let faults = root_cause_first(c.faults);
         return Err(SimFault { faults, injected }.into());
     }
     let boards = c
