@@ -112,7 +112,7 @@ fn relax(elements: &[HexReduced<f64>], p: &Patch, a: f64) -> (f64, f64) {
     let hg = elements
         .iter()
         .map(|e| {
-            let ue = e.nodes.map(|k| u[k as usize]);
+            let ue = e.nodes().map(|k| u[k as usize]);
             (0..4)
                 .map(|al| {
                     (0..3)

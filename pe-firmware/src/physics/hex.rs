@@ -243,8 +243,7 @@ impl ReferenceHex {
         let k =
             hourglass_coefficient * hourglass_modulus * self.volume * self.gradient_norm_sq() / 8.0;
         HexReduced {
-            nodes,
-            material,
+            connectivity: Connectivity { nodes, material },
             volume: T::from_f64(self.volume),
             gradients: cast2(&self.mean_gradients),
             hourglass: cast2(&self.hourglass),
@@ -255,8 +254,7 @@ impl ReferenceHex {
     /// Fully integrated (2x2x2) element.
     pub fn full<T: Real>(&self, nodes: [u32; 8], material: u16) -> HexFull<T> {
         HexFull {
-            nodes,
-            material,
+            connectivity: Connectivity { nodes, material },
             gauss: core::array::from_fn(|g| GaussPoint {
                 gradients: cast2(&self.gauss_gradients[g]),
                 volume: T::from_f64(self.gauss_volumes[g]),
@@ -305,10 +303,25 @@ fn add_stress_forces<T: Real>(
     }
 }
 
+/// What every element kind shares: its nodes (local indices, reference order) and its
+/// material. (Serialised inline: an element record's bytes start with these fields.)
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Connectivity {
+    pub nodes: [u32; 8],
+    pub material: u16,
+}
+
 /// An element that turns nodal displacements into internal nodal forces.
 pub trait HexElement<T: Real> {
-    fn nodes(&self) -> &[u32; 8];
-    fn material(&self) -> usize;
+    fn connectivity(&self) -> &Connectivity;
+    #[inline(always)]
+    fn nodes(&self) -> &[u32; 8] {
+        &self.connectivity().nodes
+    }
+    #[inline(always)]
+    fn material(&self) -> usize {
+        self.connectivity().material as usize
+    }
     /// Internal nodal forces for the element's nodal displacements `u` (reference order).
     fn internal_forces(
         &self,
@@ -322,8 +335,7 @@ pub trait HexElement<T: Real> {
 /// One-point (reduced) element with hourglass control.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HexReduced<T> {
-    pub nodes: [u32; 8],
-    pub material: u16,
+    pub connectivity: Connectivity,
     pub volume: T,
     pub gradients: [[T; 3]; 8],
     pub hourglass: [[T; 4]; 8],
@@ -349,12 +361,8 @@ impl<T: Real> HexReduced<T> {
 
 impl<T: Real> HexElement<T> for HexReduced<T> {
     #[inline(always)]
-    fn nodes(&self) -> &[u32; 8] {
-        &self.nodes
-    }
-    #[inline(always)]
-    fn material(&self) -> usize {
-        self.material as usize
+    fn connectivity(&self) -> &Connectivity {
+        &self.connectivity
     }
     #[inline]
     fn internal_forces(
@@ -402,19 +410,14 @@ pub struct GaussPoint<T> {
 /// Fully integrated (2x2x2 Gauss) element.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HexFull<T> {
-    pub nodes: [u32; 8],
-    pub material: u16,
+    pub connectivity: Connectivity,
     pub gauss: [GaussPoint<T>; 8],
 }
 
 impl<T: Real> HexElement<T> for HexFull<T> {
     #[inline(always)]
-    fn nodes(&self) -> &[u32; 8] {
-        &self.nodes
-    }
-    #[inline(always)]
-    fn material(&self) -> usize {
-        self.material as usize
+    fn connectivity(&self) -> &Connectivity {
+        &self.connectivity
     }
     #[inline]
     fn internal_forces(

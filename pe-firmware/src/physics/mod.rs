@@ -8,6 +8,8 @@ pub mod real;
 pub mod tensor;
 
 pub use explicit::{accumulate_internal_forces, CentralDifference, PhysicsError};
-pub use hex::{GaussPoint, GeometryError, HexElement, HexFull, HexReduced, ReferenceHex};
+pub use hex::{
+    Connectivity, GaussPoint, GeometryError, HexElement, HexFull, HexReduced, ReferenceHex,
+};
 pub use material::{LameParameters, MaterialLaw, Volumetric};
 pub use real::Real;

@@ -107,7 +107,7 @@ fn main() -> ! {
     let mut ul = [[Scalar::ZERO; 3]; 8 * SAMPLES];
     let mut fl = [[Scalar::ZERO; 3]; 8 * SAMPLES];
     for (j, (e, ue)) in list.iter_mut().zip(&ues).enumerate() {
-        e.nodes = core::array::from_fn(|a| (8 * j + a) as u32);
+        e.connectivity.nodes = core::array::from_fn(|a| (8 * j + a) as u32);
         ul[8 * j..8 * j + 8].copy_from_slice(ue);
     }
     bench_mark(4);
