@@ -3,6 +3,7 @@
 //! (`pe_firmware::runtime`), not a copy.
 
 pub mod links;
+mod storage;
 pub mod timing;
 
 use std::path::Path;
@@ -18,11 +19,11 @@ use pe_firmware::image::{
     ElementRecord, ImageError, ImageHeader, ImageReader, Integration, Precision,
 };
 use pe_firmware::physics::{HexFull, HexReduced};
-use pe_firmware::runtime::{
-    Capacities, Fault, GlobalStats, LinkStats, Runtime, RuntimeConfig, Shelf, StorageBuf, WireReal,
-};
+use pe_firmware::runtime::{Fault, GlobalStats, LinkStats, Runtime, RuntimeConfig, WireReal};
 
 use links::{build_links, FaultSpec, FaultyLinks, Injected, ThreadEnv};
+use storage::HostStorage;
+pub use storage::{load_check, StorageSizing, VecShelf};
 
 /// How to run.
 #[derive(Clone, Debug)]
@@ -184,74 +185,6 @@ impl std::fmt::Display for SimFault {
     }
 }
 impl std::error::Error for SimFault {}
-
-/// Growable vectors: board-sim's storage, sized when a board is loaded.
-pub struct VecShelf;
-
-impl Shelf for VecShelf {
-    type Of<R: Copy, const N: usize> = Vec<R>;
-    fn empty<R: Copy, const N: usize>() -> Vec<R> {
-        Vec::new()
-    }
-    fn fill<R: Copy, const N: usize>(v: &mut Vec<R>, len: usize, value: R) -> bool {
-        v.clear();
-        v.resize(len, value);
-        true
-    }
-}
-
-/// One board's storage on the host (capacities chosen at run time).
-type HostStorage<T, E> = StorageBuf<VecShelf, T, E, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0>;
-
-/// How board-sim sizes each board's storage.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum StorageSizing {
-    /// Exactly what each image needs (with room for the contact search).
-    Exact,
-    /// As the firmware of this profile does ([`Capacities::for_board`]): an image the board
-    /// would refuse is refused here, with the same message.
-    Board(pe_firmware::profile::BoardProfile),
-}
-
-impl StorageSizing {
-    fn capacities<T, E>(&self, image: &[u8]) -> Result<Capacities, ImageError> {
-        Ok(match self {
-            StorageSizing::Exact => {
-                Capacities::exact(&ImageReader::new(image, None)?.header.counts)
-            }
-            StorageSizing::Board(p) => Capacities::for_board::<T, E>(p),
-        })
-    }
-}
-
-/// Loads `image` for `board` into storage sized by `sizing`, as a board-sim worker does,
-/// and drops it: what board-sim says of an image before running it.
-pub fn load_check(image: &[u8], board: [u8; 3], sizing: StorageSizing) -> Result<(), ImageError> {
-    fn typed<T: WireReal, E: ElementRecord<T>>(
-        image: &[u8],
-        board: [u8; 3],
-        sizing: StorageSizing,
-    ) -> Result<(), ImageError> {
-        let mut buf = HostStorage::<T, E>::empty();
-        let st = buf
-            .fill(&sizing.capacities::<T, E>(image)?)
-            .ok_or(ImageError::Malformed {
-                record: "zero record (storage)",
-            })?;
-        Runtime::load(image, board, st, RuntimeConfig::default()).map(|_| ())
-    }
-    let h = ImageReader::new(image, Some(board))?.header;
-    match (h.precision, h.integration) {
-        (Precision::F64, Integration::Reduced) => {
-            typed::<f64, HexReduced<f64>>(image, board, sizing)
-        }
-        (Precision::F64, Integration::Full) => typed::<f64, HexFull<f64>>(image, board, sizing),
-        (Precision::F32, Integration::Reduced) => {
-            typed::<f32, HexReduced<f32>>(image, board, sizing)
-        }
-        (Precision::F32, Integration::Full) => typed::<f32, HexFull<f32>>(image, board, sizing),
-    }
-}
 
 /// A board's links as the worker threads hold them.
 type BoxedLinks = Box<dyn Links + Send>;
