@@ -374,6 +374,10 @@ fn read_images(dir: &Path, manifest: &Manifest) -> Result<(Vec<Vec<u8>>, ImageHe
     Ok((images, header))
 }
 
+fn add3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
 /// What the collector gathers from the board threads.
 struct Collected {
     steps: u64,
@@ -383,9 +387,9 @@ struct Collected {
     pending: std::collections::BTreeMap<u64, (usize, Vec<[f64; 3]>)>,
     frames: Vec<(u64, Vec<[f64; 3]>)>,
     results: Vec<Option<BoardResult>>,
-    reaction_prescribed: [f64; 3],
-    reaction_fixed: [f64; 3],
-    kinetic_energy: f64,
+    /// Per board: prescribed and fixed reactions and kinetic energy, summed in board order
+    /// at the end (so a report does not depend on which thread finished first).
+    energies: Vec<([f64; 3], [f64; 3], f64)>,
     faults: Vec<Fault>,
 }
 
@@ -398,9 +402,7 @@ impl Collected {
             pending: Default::default(),
             frames: Vec::new(),
             results: vec![None; boards],
-            reaction_prescribed: [0.0; 3],
-            reaction_fixed: [0.0; 3],
-            kinetic_energy: 0.0,
+            energies: vec![([0.0; 3], [0.0; 3], 0.0); boards],
             faults: Vec::new(),
         }
     }
@@ -436,11 +438,7 @@ impl Collected {
                 reaction_fixed,
                 kinetic_energy,
             } => {
-                for i in 0..3 {
-                    self.reaction_prescribed[i] += reaction_prescribed[i];
-                    self.reaction_fixed[i] += reaction_fixed[i];
-                }
-                self.kinetic_energy += kinetic_energy;
+                self.energies[board] = (reaction_prescribed, reaction_fixed, kinetic_energy);
                 self.results[board] = Some(result);
             }
             Report::Failed(f) => self.faults.push(f),
@@ -600,9 +598,9 @@ pub fn run(
         displacements: c.displacements,
         frames: c.frames,
         boards,
-        reaction_prescribed: c.reaction_prescribed,
-        reaction_fixed: c.reaction_fixed,
-        kinetic_energy: c.kinetic_energy,
+        reaction_prescribed: c.energies.iter().fold([0.0; 3], |s, e| add3(s, e.0)),
+        reaction_fixed: c.energies.iter().fold([0.0; 3], |s, e| add3(s, e.1)),
+        kinetic_energy: c.energies.iter().fold(0.0, |s, e| s + e.2),
         injected,
     })
 }
