@@ -500,6 +500,22 @@ pub fn run(
     let manifest = read_manifest(dir)?;
     let (images, header) = read_images(dir, &manifest)?;
     let dims = manifest.machine;
+    if let Some((b, step)) = opts.faults.as_ref().and_then(|f| f.stall) {
+        if (0..3).any(|a| b[a] >= dims[a]) {
+            bail!(
+                "--faults stall={}.{}.{}@{step}: no board ({},{},{}) on this {}x{}x{} machine",
+                b[0],
+                b[1],
+                b[2],
+                b[0],
+                b[1],
+                b[2],
+                dims[0],
+                dims[1],
+                dims[2]
+            );
+        }
+    }
     let count = images.len();
     let steps = opts
         .steps

@@ -120,6 +120,23 @@ fn invalid_parameters_are_named() {
     );
 }
 
+/// Run settings that cannot mean anything are refused before the run, naming the key:
+/// a negative duration, zero steps, a gravity that is not a number.
+#[test]
+fn absurd_run_settings_are_refused() {
+    let d = tmp_dir("absurd");
+    assert!(resolve(&d, BOX).is_ok(), "the base scene resolves");
+    let e = err(&d, &format!("{BOX}[solver]\nduration = -1.0\n"));
+    assert!(e.contains("duration") && e.contains("-1"), "{e}");
+    let e = err(&d, &format!("{BOX}[solver]\nsteps = 0\n"));
+    assert!(e.contains("steps") && e.contains("at least 1"), "{e}");
+    let e = err(
+        &d,
+        &format!("{BOX}[gravity]\nacceleration = [0.0, nan, -9.81]\n"),
+    );
+    assert!(e.contains("[gravity]") && e.contains("NaN"), "{e}");
+}
+
 /// A real organ mesh from ../shared/meshes runs through `Problem` (every cell valid, masses
 /// positive, total mass = density × volume within round-off 1e-12 relative).
 #[test]

@@ -138,6 +138,33 @@ fn two_runs_are_bit_identical() {
     );
 }
 
+/// A stall on a board the machine does not have is refused, not silently ignored.
+#[test]
+fn a_stall_outside_the_machine_is_refused() {
+    let p = builtin_problem("coarse", 20);
+    let dir = compile(&p, "builtin:coarse", "2x2x2", "stall-outside");
+    let opts = SimOptions {
+        faults: Some(FaultSpec::parse("seed=1,stall=5.5.5@10").unwrap()),
+        ..Default::default()
+    };
+    let e = run(&dir, &opts, &mut |_, _| {})
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(e.contains("no board (5,5,5)") && e.contains("2x2x2"), "{e}");
+    // Inside the machine the same spec runs (and stalls).
+    let opts = SimOptions {
+        faults: Some(FaultSpec::parse("seed=1,stall=1.1.1@10").unwrap()),
+        link_timeout: Duration::from_millis(500),
+        ..Default::default()
+    };
+    assert!(run(&dir, &opts, &mut |_, _| {})
+        .err()
+        .expect("a stall is a fault")
+        .downcast::<SimFault>()
+        .is_ok());
+}
+
 fn faulty(dir: &std::path::Path, spec: &str) -> SimFault {
     let opts = SimOptions {
         faults: Some(FaultSpec::parse(spec).unwrap()),

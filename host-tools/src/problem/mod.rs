@@ -407,7 +407,28 @@ fn check_solver(s: &SolverSpec, has_contact: bool) -> Result<()> {
             s.speed_limit
         );
     }
+    if let Some(d) = s.duration {
+        if !(d > 0.0 && d.is_finite()) {
+            bail!("[solver] duration must be a positive number of seconds, got {d}");
+        }
+    }
+    if s.steps == Some(0) {
+        bail!("[solver] steps (or --steps) must be at least 1, got 0");
+    }
     Ok(())
+}
+
+/// The gravity vector, refused unless finite.
+fn gravity_of(scene: &Scene) -> Result<[f64; 3]> {
+    let g = scene
+        .gravity
+        .as_ref()
+        .map(|g| g.acceleration)
+        .unwrap_or([0.0; 3]);
+    if !g.iter().all(|v| v.is_finite()) {
+        bail!("[gravity] acceleration must be finite (m/s²), got {g:?}");
+    }
+    Ok(g)
 }
 
 impl Problem {
@@ -463,11 +484,7 @@ impl Problem {
             node_kind,
             paths,
             loads,
-            gravity: scene
-                .gravity
-                .as_ref()
-                .map(|g| g.acceleration)
-                .unwrap_or([0.0; 3]),
+            gravity: gravity_of(scene)?,
             solver: scene.solver.clone(),
             mass,
             contact,
