@@ -135,6 +135,15 @@ fn absurd_run_settings_are_refused() {
         &format!("{BOX}[gravity]\nacceleration = [0.0, nan, -9.81]\n"),
     );
     assert!(e.contains("[gravity]") && e.contains("NaN"), "{e}");
+    // A box far too large is refused with its memory estimate, not by an allocation abort.
+    let e = err(
+        &d,
+        &BOX.replace("cells = [4, 1, 1]", "cells = [100000, 100000, 100000]"),
+    );
+    assert!(
+        e.contains("[mesh] generate") && e.contains("1.000e15 hexahedra") && e.contains("bytes"),
+        "{e}"
+    );
 }
 
 /// A real organ mesh from ../shared/meshes runs through `Problem` (every cell valid, masses

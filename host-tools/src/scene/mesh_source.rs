@@ -33,6 +33,7 @@ pub fn load(spec: &MeshSpec, scene_dir: &Path) -> Result<(Mesh, BTreeMap<String,
                     b.name
                 );
             }
+            check_box_size(&format!("[[mesh.blocks]] {k} ({:?})", b.name), b.cells)?;
             let part = crate::mesh::io::generate_box(b.size, b.cells);
             let base = mesh.nodes.len() as u32;
             let region = k as i32 + 1;
@@ -64,6 +65,7 @@ pub fn load(spec: &MeshSpec, scene_dir: &Path) -> Result<(Mesh, BTreeMap<String,
         if g.cells.contains(&0) || g.size.iter().any(|&s| !(s > 0.0)) {
             bail!("[mesh] generate: size and cells must be positive");
         }
+        check_box_size("[mesh] generate", g.cells)?;
         return Ok((
             crate::mesh::io::generate_box(g.size, g.cells),
             BTreeMap::new(),
@@ -135,4 +137,25 @@ fn probe_nodes(a: &builtin::Anatomy) -> Vec<u32> {
         }
         r *= 1.5;
     }
+}
+
+/// Most cells a generated box may have: at [`BYTES_PER_CELL`] this is about 50 GB, more
+/// than a workstation holds.
+pub const MAX_GENERATED_CELLS: f64 = 2e7;
+/// Memory a problem takes per hexahedron (bytes), estimated from its per-cell records: the
+/// reference geometry for both integrations (`ReferenceHex`, about 2.1 kB in f64) plus
+/// connectivity, material and the element record the solver builds.
+pub const BYTES_PER_CELL: f64 = 2.5e3;
+
+/// Refuses a generated box too large to build, with the memory it would take, before any
+/// allocation.
+fn check_box_size(what: &str, cells: [usize; 3]) -> Result<()> {
+    let n = cells.iter().map(|&c| c as f64).product::<f64>();
+    if n > MAX_GENERATED_CELLS {
+        bail!(
+            "{what}: cells {cells:?} make {n:.3e} hexahedra, about {:.3e} bytes of memory; at most {MAX_GENERATED_CELLS:.0e} cells are built",
+            n * BYTES_PER_CELL
+        );
+    }
+    Ok(())
 }
