@@ -83,14 +83,8 @@ pub const QEMU_MPS2_AN500: BoardProfile = BoardProfile {
     global_bytes_per_s: 12_500_000,
     image_origin: 0x0020_0000,
     probe_chip: "",
-    contact_nodes_max: 512,
-    contact_faces_max: 512,
-    materials_max: 8,
-    exchange_max: 4096,
-    path_points_max: 64,
-    loads_max: 256,
-    contact_candidates_max: 2048,
-    contact_sends_max: 1024,
+    // The same firmware tables as the PE board (the RAM decides the elements).
+    ..PE_BOARD
 };
 
 pub const PROFILES: [BoardProfile; 2] = [PE_BOARD, QEMU_MPS2_AN500];

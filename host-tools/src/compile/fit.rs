@@ -4,7 +4,7 @@
 //! board, the table and the overflow.
 
 use anyhow::{bail, Result};
-use pe_firmware::image::{Counts, ImageHeader, Integration, Precision};
+use pe_firmware::image::{ImageHeader, Integration, Precision};
 use pe_firmware::physics::{HexFull, HexReduced};
 use pe_firmware::profile::BoardProfile;
 use pe_firmware::runtime::{Capacities, ROUNDS_PER_AXIS_MAX};
@@ -26,30 +26,6 @@ pub fn board_capacities(profile: &BoardProfile, h: &ImageHeader) -> Capacities {
     }
 }
 
-/// Every table of `c` that exceeds `caps`: (what, needed, held), in the loader's order.
-fn shortfalls(caps: &Capacities, c: &Counts) -> Vec<(&'static str, usize, usize)> {
-    let mut caps = *caps;
-    let mut out = Vec::new();
-    // The loader stops at the first; list them all by raising each one found.
-    while let Some((what, n, max)) = caps.first_shortfall(c) {
-        out.push((what, n, max));
-        let raised = match what {
-            "materials" => &mut caps.materials,
-            "elements" => &mut caps.elements,
-            "nodes" => &mut caps.nodes,
-            "exchange sends" | "exchange receives" => &mut caps.exchange,
-            "path points" => &mut caps.path_points,
-            "loads" => &mut caps.loads,
-            "contact nodes" => &mut caps.contact_nodes,
-            "contact faces" => &mut caps.contact_faces,
-            "nodes (contact map)" => &mut caps.contact_map,
-            _ => &mut caps.graphics_nodes,
-        };
-        *raised = n;
-    }
-    out
-}
-
 /// Why the images do not fit `profile`, one line per board and table (empty: they fit).
 pub fn fit_problems(images: &[BoardImage], profile: &BoardProfile) -> Vec<String> {
     let mut problems = Vec::new();
@@ -67,7 +43,7 @@ pub fn fit_problems(images: &[BoardImage], profile: &BoardProfile) -> Vec<String
         }
         let c = &im.header.counts;
         let caps = board_capacities(profile, &im.header);
-        for (what, n, max) in shortfalls(&caps, c) {
+        for (what, n, max) in caps.shortfalls(c) {
             if what.starts_with("contact") {
                 continue; // the same on every board: said once below
             }
@@ -103,7 +79,7 @@ pub fn fit_problems(images: &[BoardImage], profile: &BoardProfile) -> Vec<String
     // The contact tables are the same on every board.
     if let Some(im) = images.first() {
         let caps = board_capacities(profile, &im.header);
-        for (what, n, max) in shortfalls(&caps, &im.header.counts) {
+        for (what, n, max) in caps.shortfalls(&im.header.counts) {
             if what.starts_with("contact") {
                 let what = what.replace("contact ", "contact-surface ");
                 problems.push(format!(

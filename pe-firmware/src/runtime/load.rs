@@ -11,7 +11,7 @@ use super::{
     global, FrameBuffers, LinkStats, Program, Runtime, RuntimeConfig, Storage, WireReal,
     ROUNDS_PER_AXIS_MAX,
 };
-use crate::image::{read_image, ElementRecord, ImageError, ImageHeader};
+use crate::image::{read_image, ElementRecord, ImageError};
 use crate::physics::CentralDifference;
 
 impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
@@ -99,11 +99,6 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
             kinetic_energy: 0.0,
             st,
         })
-    }
-
-    /// The loaded image's header.
-    pub fn image_header(&self) -> &ImageHeader {
-        &self.header
     }
 }
 

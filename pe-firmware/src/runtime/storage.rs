@@ -114,9 +114,9 @@ impl Capacities {
             + self.graphics_nodes * size_of::<u16>()
     }
 
-    /// The first capacity `c` exceeds: (what, needed, held). The runtime's loader refuses
-    /// the same image with the same figures.
-    pub fn first_shortfall(&self, c: &Counts) -> Option<(&'static str, usize, usize)> {
+    /// Every table of `c` that exceeds these capacities: (what, needed, held), in the
+    /// loader's order (the loader refuses the first with the same figures).
+    pub fn shortfalls(&self, c: &Counts) -> impl Iterator<Item = (&'static str, usize, usize)> {
         let nc = c.contact_nodes as usize;
         [
             ("materials", c.materials as usize, self.materials),
@@ -144,7 +144,7 @@ impl Capacities {
             ),
         ]
         .into_iter()
-        .find(|&(_, n, max)| n > max)
+        .filter(|&(_, n, max)| n > max)
     }
 }
 
