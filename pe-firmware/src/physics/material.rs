@@ -196,6 +196,35 @@ impl<T: Real> MaterialLaw<T> {
         Ok(s)
     }
 
+    /// First Piola-Kirchhoff stress `P = F S(F)`, what the element kernels need, with the
+    /// neo-Hookean laws in closed form through the cofactor matrix `cof F = J F⁻ᵀ` (no `C`,
+    /// no `C⁻¹`): `P = μ F + ((λ ln J − μ)/J) cof F` (compressible),
+    /// `P = a F + ((κ (J−1) J − a I₁/3)/J) cof F` with `a = μ J^(−2/3)`, `I₁ = F : F`
+    /// (decoupled); Mooney-Rivlin as `F S`.
+    #[inline(always)]
+    pub fn first_piola_kirchhoff(&self, f: &Mat3<T>) -> Result<Mat3<T>, NonPositiveJacobian> {
+        let (a, b_over_j, cof) = match *self {
+            MaterialLaw::MooneyRivlin { .. } => {
+                let s = self.second_piola_kirchhoff(f)?;
+                return Ok(tensor::mul(f, &s));
+            }
+            MaterialLaw::NeoHookean(LameParameters { mu, lambda }) => {
+                let (cof, j) = positive_cofactor(f)?;
+                (mu, (lambda * j.ln() - mu) / j, cof)
+            }
+            MaterialLaw::NeoHookeanDecoupled { mu, kappa } => {
+                let (cof, j) = positive_cofactor(f)?;
+                let a = mu * inv_j_two_thirds(j);
+                let i1 = tensor::ddot(f, f);
+                let b = kappa * (j - T::ONE) * j - a * i1 / T::from_i32(3);
+                (a, b / j, cof)
+            }
+        };
+        Ok(core::array::from_fn(|i| {
+            core::array::from_fn(|k| a * f[i][k] + b_over_j * cof[i][k])
+        }))
+    }
+
     /// Strain energy density `W(F)` per unit reference volume (J/m³).
     pub fn strain_energy_density(&self, f: &Mat3<T>) -> Result<T, NonPositiveJacobian> {
         let j = tensor::det(f);
@@ -233,6 +262,19 @@ impl<T: Real> MaterialLaw<T> {
             }
         })
     }
+}
+
+/// The cofactor matrix `cof F = J F⁻ᵀ` and `J = det F`, refused unless `J > 0`.
+#[inline(always)]
+fn positive_cofactor<T: Real>(f: &Mat3<T>) -> Result<(Mat3<T>, T), NonPositiveJacobian> {
+    let cof = tensor::cofactor(f);
+    let j = f[0][0] * cof[0][0] + f[0][1] * cof[0][1] + f[0][2] * cof[0][2];
+    if !(j > T::ZERO) {
+        return Err(NonPositiveJacobian {
+            jacobian: j.to_f64(),
+        });
+    }
+    Ok((cof, j))
 }
 
 /// `J^(−2/3)`.

@@ -9,7 +9,7 @@ pub mod tensor;
 
 pub use explicit::{accumulate_internal_forces, CentralDifference, PhysicsError};
 pub use hex::{
-    Connectivity, GaussPoint, GeometryError, HexElement, HexFull, HexReduced, ReferenceHex,
+    Connectivity, GaussPoint, GeometryError, HexBox, HexElement, HexFull, HexReduced, ReferenceHex,
 };
 pub use material::{LameParameters, MaterialLaw, Volumetric};
 pub use real::Real;

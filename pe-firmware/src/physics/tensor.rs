@@ -45,6 +45,28 @@ pub fn det<T: Real>(a: &Mat3<T>) -> T {
         + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
 }
 
+/// Cofactor matrix `cof A = det(A) A⁻ᵀ` (`cof_ij` = signed minor of `a_ij`).
+#[inline(always)]
+pub fn cofactor<T: Real>(a: &Mat3<T>) -> Mat3<T> {
+    [
+        [
+            a[1][1] * a[2][2] - a[1][2] * a[2][1],
+            a[1][2] * a[2][0] - a[1][0] * a[2][2],
+            a[1][0] * a[2][1] - a[1][1] * a[2][0],
+        ],
+        [
+            a[0][2] * a[2][1] - a[0][1] * a[2][2],
+            a[0][0] * a[2][2] - a[0][2] * a[2][0],
+            a[0][1] * a[2][0] - a[0][0] * a[2][1],
+        ],
+        [
+            a[0][1] * a[1][2] - a[0][2] * a[1][1],
+            a[0][2] * a[1][0] - a[0][0] * a[1][2],
+            a[0][0] * a[1][1] - a[0][1] * a[1][0],
+        ],
+    ]
+}
+
 /// Inverse of a symmetric matrix `c` given its determinant (caller checks `det > 0`).
 #[inline(always)]
 pub fn inverse_symmetric<T: Real>(c: &Mat3<T>, det: T) -> Mat3<T> {
