@@ -44,12 +44,18 @@ build_firmware() { # FEATURES -> prints the ELF path (a copy per variant)
     echo "$elf"
 }
 
-for PREC in f64 f32; do
-    D=$OUT/$PREC
-    echo "qemu-check: built-in coarse scene, 1x1x1, $PREC reduced, $STEPS steps"
-    "$PE" compile --builtin --level coarse --boards 1x1x1 --profile qemu-mps2-an500 \
+# Each element kernel: the built-in anatomy (every cell distorted: the general kernel) and
+# the seed's box at 10x5x5 cells (every cell a parallelepiped: the cheap kernel).
+sed 's/cells = \[20, 10, 10\]/cells = [10, 5, 5]/' scenes/seed-box.toml >"$OUT/box.toml"
+grep -q 'cells = \[10, 5, 5\]' "$OUT/box.toml"
+for SCENE in builtin box; do
+  if [ "$SCENE" = builtin ]; then SRC=(--builtin --level coarse); else SRC=("$OUT/box.toml"); fi
+  for PREC in f64 f32; do
+    D=$OUT/$SCENE-$PREC
+    echo "qemu-check: $SCENE scene, 1x1x1, $PREC reduced, $STEPS steps"
+    "$PE" compile "${SRC[@]}" --boards 1x1x1 --profile qemu-mps2-an500 \
         --precision "$PREC" --steps "$STEPS" -o "$D/compiled" >/dev/null
-    "$PE" solve --builtin --level coarse --steps "$STEPS" --precision "$PREC" --quiet \
+    "$PE" solve "${SRC[@]}" --steps "$STEPS" --precision "$PREC" --quiet \
         --output-nodes "$D/solve.csv" >/dev/null 2>&1
     # A comparison of zero fields proves nothing: the probe must have moved the tube.
     awk -F, 'NR > 1 { for (i = 5; i <= 7; i++) { v = $i < 0 ? -$i : $i; if (v > m) m = v } }
@@ -66,12 +72,13 @@ for PREC in f64 f32; do
     RC=$?
     set -e
     if [ $RC -ne 0 ]; then
-        echo "qemu-check: FAILED: the firmware exited with $RC ($PREC); its output:" >&2
+        echo "qemu-check: FAILED: the firmware exited with $RC ($SCENE $PREC); its output:" >&2
         tail -5 "$D/qemu.txt" "$D/qemu.err" >&2
         exit 1
     fi
     "$PE" compare "$D/solve.csv" "$D/qemu.txt"
     "$PE" compare "$D/solve.csv" "$D/board-sim.csv"
+  done
 done
 
 # Faults end the run with a report and a failing exit.
@@ -89,7 +96,7 @@ expect_fault() { # NAME PATTERN QEMU-ARGS...
     fi
     echo "qemu-check: $name refused: $(grep -o 'FAULT.*' "$OUT/fault-$name.txt")"
 }
-I=$OUT/f64/image
+I=$OUT/builtin-f64/image
 python3 - "$I/board-0-0-0.sched" "$OUT/corrupt.sched" <<'PY'
 import sys
 b = bytearray(open(sys.argv[1], "rb").read())

@@ -22,7 +22,7 @@ impl Shelf for VecShelf {
 }
 
 /// One board's storage on the host (capacities chosen at run time).
-pub(crate) type HostStorage<T, E> = StorageBuf<VecShelf, T, E, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0>;
+pub(crate) type HostStorage<T, E> = StorageBuf<VecShelf, T, E, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0>;
 
 /// How board-sim sizes each board's storage.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -35,7 +35,13 @@ pub enum StorageSizing {
 }
 
 impl StorageSizing {
-    pub(crate) fn capacities<T, E>(&self, image: &[u8]) -> Result<Capacities, ImageError> {
+    pub(crate) fn capacities<
+        T: pe_firmware::physics::Real,
+        E: pe_firmware::image::ElementRecord<T>,
+    >(
+        &self,
+        image: &[u8],
+    ) -> Result<Capacities, ImageError> {
         Ok(match self {
             StorageSizing::Exact => {
                 Capacities::exact(&ImageReader::new(image, None)?.header.counts)

@@ -20,6 +20,8 @@ pub struct SimTiming {
     pub clock_hz: f64,
     pub cycles_per_element_reduced: f64,
     pub cycles_per_element_full: f64,
+    /// A parallelepiped (reduced integration's cheap kernel).
+    pub cycles_per_box_element: f64,
     pub cycles_per_node_update: f64,
     pub link_bytes_per_s: f64,
     pub link_latency_s: f64,
@@ -41,6 +43,7 @@ impl SimTiming {
             clock_hz: p.clock_hz as f64,
             cycles_per_element_reduced: reduced.per_element_step as f64,
             cycles_per_element_full: full.per_element_step as f64,
+            cycles_per_box_element: reduced.box_per_element_step as f64,
             cycles_per_node_update: reduced.per_node_update.max(full.per_node_update) as f64,
             link_bytes_per_s: p.link_bytes_per_s as f64,
             link_latency_s: p.link_latency_ns as f64 * 1e-9,
@@ -112,10 +115,11 @@ pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::R
             let im = &imgs[b];
             match op {
                 Op::Batch(k) => {
-                    let e = im.header.counts.batch_ends;
                     let k = k as usize;
-                    let n = if k == 0 { e[0] } else { e[k] - e[k - 1] };
-                    let c = n as f64 * cpe / t.clock_hz;
+                    let size = |e: [u32; 4]| if k == 0 { e[0] } else { e[k] - e[k - 1] } as f64;
+                    let c = (size(im.header.counts.batch_ends) * cpe
+                        + size(im.header.counts.box_batch_ends) * t.cycles_per_box_element)
+                        / t.clock_hz;
                     now[b] += c;
                     compute[b] += c;
                 }

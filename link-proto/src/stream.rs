@@ -49,8 +49,9 @@ impl<S, const RX: usize, const TX: usize> StreamPort<S, RX, TX>
 where
     S: Read + Write + ReadReady + WriteReady,
 {
-    /// A port over `stream`, queues empty.
-    pub fn new(stream: S) -> Self {
+    /// A port over `stream`, queues empty (a `const fn`, so a port can be a static built at
+    /// compile time rather than on a small stack).
+    pub const fn new(stream: S) -> Self {
         StreamPort {
             stream,
             rx: StreamDecoder::new(),
@@ -66,6 +67,13 @@ where
     /// The stream.
     pub fn stream(&self) -> &S {
         &self.stream
+    }
+
+    /// Puts `stream` under the port (queues emptied), returning the old one.
+    pub fn replace_stream(&mut self, stream: S) -> S {
+        self.rx = StreamDecoder::new();
+        (self.chunk_pos, self.chunk_len, self.tx_pos, self.tx_len) = (0, 0, 0, 0);
+        core::mem::replace(&mut self.stream, stream)
     }
 
     /// The stream, mutable.
@@ -170,6 +178,15 @@ where
     F: Read + Write + ReadReady + WriteReady,
     G: Read + Write + ReadReady + WriteReady,
 {
+    /// Only the global port, over `global` (a `const fn`: the links, over 170 KB of
+    /// buffers, can be a static built at compile time, never a stack temporary).
+    pub const fn unlinked(global: G) -> Self {
+        StreamLinks {
+            faces: [const { None }; Face::COUNT],
+            global: StreamPort::new(global),
+        }
+    }
+
     /// Links over the given streams, indexed by [`Face::index`].
     pub fn new(faces: [Option<F>; Face::COUNT], global: G) -> Self {
         StreamLinks {

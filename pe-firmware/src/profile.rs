@@ -96,41 +96,59 @@ pub fn profile(name: &str) -> Option<BoardProfile> {
 
 /// Executed instructions of the board firmware per element and per node in one step,
 /// measured under QEMU (mps2-an500, Cortex-M7 with FPU, `-C target-cpu=cortex-m7`) with an
-/// exact instruction counter by `scripts/board-cost.sh` on the built-in coarse scene (351
-/// elements, 731 nodes, 1x1x1) after 900 steps, the probe pressing the tube. The node
-/// update includes the step's contact, graphics and external-force work. Instructions, not
-/// cycles: capacity figures take one instruction per cycle.
+/// exact instruction counter by `scripts/board-cost.sh`: the general kernel and the node
+/// update on the built-in coarse scene (351 elements, all distorted, 731 nodes, 1x1x1) after
+/// 900 steps, the probe pressing the tube; the parallelepiped kernel on a 10x5x5 box sagging
+/// under gravity. The node update includes the step's contact, graphics and external-force
+/// work. Instructions, not cycles: capacity figures take one instruction per cycle.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FirmwareCost {
     pub precision: crate::image::Precision,
     pub integration: crate::image::Integration,
-    /// One element's internal forces (the physics kernel alone).
+    /// One general element's internal forces (the physics kernel alone).
     pub kernel_per_element: u32,
-    /// Per element of the element loop: kernel, gathering displacements, scattering forces.
+    /// Per general element of the element loop: kernel, gathering displacements,
+    /// scattering forces.
     pub per_element_step: u32,
+    /// The same for a parallelepiped ([`crate::physics::HexBox`]; 0 for full
+    /// integration, which has no such kernel).
+    pub box_kernel_per_element: u32,
+    pub box_per_element_step: u32,
     /// Per node and step: external forces, central-difference update, checks.
     pub per_node_update: u32,
-    /// A whole step divided by the elements, on the measured scene (2.08 nodes per element).
+    /// A whole step divided by the elements, on the measured scene.
     pub step_per_element: u32,
 }
 
 impl FirmwareCost {
-    /// Instructions of one step of a board holding `elements` and `nodes` (no exchange).
-    pub fn step_instructions(&self, elements: usize, nodes: usize) -> f64 {
-        elements as f64 * self.per_element_step as f64 + nodes as f64 * self.per_node_update as f64
+    /// Instructions of one step of a board holding `general` and `boxes` elements of each
+    /// kernel and `nodes` nodes (no exchange).
+    pub fn step_instructions(&self, general: usize, boxes: usize, nodes: usize) -> f64 {
+        general as f64 * self.per_element_step as f64
+            + boxes as f64 * self.box_per_element_step as f64
+            + nodes as f64 * self.per_node_update as f64
+    }
+
+    /// Per element of a mix with a fraction `box_fraction` of parallelepipeds.
+    pub fn per_element_of_mix(&self, box_fraction: f64) -> f64 {
+        (1.0 - box_fraction) * self.per_element_step as f64
+            + box_fraction * self.box_per_element_step as f64
     }
 
     /// Elements one board of `profile` computes at `rate_hz` steps per second, with
-    /// `nodes_per_element` nodes per element, taking one instruction per cycle.
+    /// `nodes_per_element` nodes per element and a fraction `box_fraction` of
+    /// parallelepipeds, taking one instruction per cycle.
     pub fn elements_per_board(
         &self,
         profile: &BoardProfile,
         rate_hz: f64,
         nodes_per_element: f64,
+        box_fraction: f64,
     ) -> f64 {
         profile.clock_hz as f64
             / rate_hz
-            / (self.per_element_step as f64 + nodes_per_element * self.per_node_update as f64)
+            / (self.per_element_of_mix(box_fraction)
+                + nodes_per_element * self.per_node_update as f64)
     }
 }
 
@@ -142,34 +160,42 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
         FirmwareCost {
             precision: F64,
             integration: Reduced,
-            kernel_per_element: 1197,
-            per_element_step: 1426,
+            kernel_per_element: 1037,
+            per_element_step: 1135,
+            box_kernel_per_element: 617,
+            box_per_element_step: 716,
             per_node_update: 598,
-            step_per_element: 2671,
+            step_per_element: 2380,
         },
         FirmwareCost {
             precision: F64,
             integration: Full,
-            kernel_per_element: 4785,
-            per_element_step: 5015,
-            per_node_update: 579,
-            step_per_element: 6220,
+            kernel_per_element: 4443,
+            per_element_step: 4878,
+            box_kernel_per_element: 0,
+            box_per_element_step: 0,
+            per_node_update: 577,
+            step_per_element: 6080,
         },
         FirmwareCost {
             precision: F32,
             integration: Reduced,
-            kernel_per_element: 937,
-            per_element_step: 1193,
-            per_node_update: 584,
-            step_per_element: 2410,
+            kernel_per_element: 771,
+            per_element_step: 894,
+            box_kernel_per_element: 463,
+            box_per_element_step: 592,
+            per_node_update: 585,
+            step_per_element: 2112,
         },
         FirmwareCost {
             precision: F32,
             integration: Full,
-            kernel_per_element: 3573,
-            per_element_step: 3829,
-            per_node_update: 590,
-            step_per_element: 5058,
+            kernel_per_element: 3265,
+            per_element_step: 3624,
+            box_kernel_per_element: 0,
+            box_per_element_step: 0,
+            per_node_update: 589,
+            step_per_element: 4852,
         },
     ]
 };

@@ -4,7 +4,9 @@
 //! parallelepiped kernel against the general one on parallelepipeds, and the forces
 //! against the energy's gradient.
 
-use pe_firmware::physics::hex::NODE_XI;
+#![allow(clippy::needless_range_loop)] // index loops follow the formulas
+
+use pe_firmware::physics::hex::{KernelFault, NODE_XI};
 use pe_firmware::physics::{
     tensor, HexElement, LameParameters, MaterialLaw, ReferenceHex, Volumetric,
 };
@@ -81,7 +83,10 @@ fn textbook_forces(
     let mut out = [[0.0; 3]; 8];
     for a in 0..8 {
         for i in 0..3 {
-            out[a][i] = r.volume * (0..3).map(|j| p[i][j] * r.mean_gradients[a][j]).sum::<f64>();
+            out[a][i] = r.volume
+                * (0..3)
+                    .map(|j| p[i][j] * r.mean_gradients[a][j])
+                    .sum::<f64>();
             for al in 0..4 {
                 let q: f64 = (0..8).map(|b| r.hourglass[b][al] * u[b][i]).sum();
                 out[a][i] += k * r.hourglass[a][al] * q;
@@ -198,7 +203,10 @@ fn box_kernel_equals_the_general_kernel_on_parallelepipeds() {
                 // The same stress from F summed in another order: a few ulps of the
                 // largest force (measured up to 1.1e-14).
                 let tol = 1e-13;
-                assert!(d < tol, "f64, law {law:?}, strain {strain}: {d:e} > {tol:e}");
+                assert!(
+                    d < tol,
+                    "f64, law {law:?}, strain {strain}: {d:e} > {tol:e}"
+                );
                 let ea = general.energy(&law, &u).unwrap();
                 let eb = boxed.energy(&law, &u).unwrap();
                 assert!(ea.abs() > 0.0 && (ea - eb).abs() <= 1e-12 * ea.abs());
@@ -236,8 +244,8 @@ fn box_kernel_forces_are_the_energy_gradient() {
                 let (mut up, mut dn) = (u, u);
                 up[a][i] += step;
                 dn[a][i] -= step;
-                fd[a][i] = (e.energy(&law, &up).unwrap() - e.energy(&law, &dn).unwrap())
-                    / (2.0 * step);
+                fd[a][i] =
+                    (e.energy(&law, &up).unwrap() - e.energy(&law, &dn).unwrap()) / (2.0 * step);
             }
         }
         let d = rel_diff(&fd, &f);
@@ -256,12 +264,61 @@ fn both_kernels_refuse_an_inverted_state() {
     let u = x.map(|v| core::array::from_fn(|i| -2.0 * (v[i] - c[i])));
     for law in laws() {
         let g = law.hourglass_modulus();
-        let e1 = r.reduced::<f64>(NODES, 0, g, KAPPA_HG).internal_forces(&law, &u);
+        let e1 = r
+            .reduced::<f64>(NODES, 0, g, KAPPA_HG)
+            .internal_forces(&law, &u);
         let e2 = r
             .parallelepiped::<f64>(NODES, 0, g, KAPPA_HG)
             .internal_forces(&law, &u);
         let j1 = e1.unwrap_err().jacobian;
         let j2 = e2.unwrap_err().jacobian;
-        assert!((j1 + 1.0).abs() < 1e-9 && (j2 + 1.0).abs() < 1e-9, "{j1} {j2}");
+        assert!(
+            (j1 + 1.0).abs() < 1e-9 && (j2 + 1.0).abs() < 1e-9,
+            "{j1} {j2}"
+        );
     }
+}
+
+/// The fused element loop (gather, kernel, scatter in one) adds bit for bit the forces
+/// `internal_forces` returns, for both kernels (the host's and the board's loops use the
+/// former, the kernel tests the latter); a node index outside the arrays is an error.
+#[test]
+fn fused_accumulation_adds_exactly_the_kernel_forces() {
+    let mut rng = Lcg(0x5eed_0006);
+    let x = parallelepiped(&mut rng, 0.01);
+    let r = ReferenceHex::new(&x).unwrap();
+    let law = laws()[0];
+    let g = law.hourglass_modulus();
+    // Nodes scattered over a larger array, in a shuffled order.
+    let nodes: [u32; 8] = [11, 3, 7, 0, 14, 9, 5, 12];
+    let general = r.reduced::<f64>(nodes, 0, g, KAPPA_HG);
+    let boxed = r.parallelepiped::<f64>(nodes, 0, g, KAPPA_HG);
+    let ue = displacements(&mut rng, &x, 0.2);
+    let mut u = vec![[0.0; 3]; 16];
+    for (a, &n) in nodes.iter().enumerate() {
+        u[n as usize] = ue[a];
+    }
+    type Accumulate<'a> = &'a dyn Fn(&mut [[f64; 3]]) -> Result<(), KernelFault>;
+    let check = |fe: [[f64; 3]; 8], acc: Accumulate| {
+        let mut f = vec![[0.0; 3]; 16];
+        acc(&mut f).unwrap();
+        assert!(
+            fe.iter().flatten().any(|v| v.abs() > 1e-6),
+            "trivial forces"
+        );
+        assert_eq!(f.len(), u.len());
+        for (a, &n) in nodes.iter().enumerate() {
+            for i in 0..3 {
+                assert_eq!(f[n as usize][i].to_bits(), fe[a][i].to_bits());
+            }
+        }
+        let mut short = vec![[0.0; 3]; 14];
+        assert_eq!(acc(&mut short), Err(KernelFault::BadIndex));
+    };
+    check(general.internal_forces(&law, &ue).unwrap(), &|f| {
+        general.accumulate(&law, &u, f)
+    });
+    check(boxed.internal_forces(&law, &ue).unwrap(), &|f| {
+        boxed.accumulate(&law, &u, f)
+    });
 }

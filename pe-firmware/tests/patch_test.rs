@@ -119,12 +119,7 @@ fn relax(elements: &[HexReduced<f64>], p: &Patch, a: f64) -> (f64, f64) {
             (0..4)
                 .map(|al| {
                     (0..3)
-                        .map(|i| {
-                            (0..8)
-                                .map(|b| gamma[b][al] * ue[b][i])
-                                .sum::<f64>()
-                                .abs()
-                        })
+                        .map(|i| (0..8).map(|b| gamma[b][al] * ue[b][i]).sum::<f64>().abs())
                         .fold(0.0, f64::max)
                 })
                 .fold(0.0, f64::max)
@@ -190,7 +185,7 @@ fn centroid_gradients_fail_the_distorted_patch() {
             // Γ = h − γ·B with the same γ (the record keeps γ; the kernel builds Γ from
             // the gradients it is given).
             let mut e = r.reduced::<f64>(*c, 0, 1.5e6, 0.1);
-            e.gradients = g;
+            e.gradient_moments = pe_firmware::physics::hex::corner_moments(&g);
             e.volume = 8.0 * d;
             e
         })
@@ -214,13 +209,29 @@ fn every_patch_cell_sees_the_homogeneous_deformation_gradient() {
         let r = ReferenceHex::new(&c.map(|n| p.x[n as usize])).unwrap();
         let e = r.reduced::<f64>(*c, 0, 1.0, 0.1);
         let u = c.map(|n| linear_field(a, &p.x[n as usize]));
-        let f = pe_firmware::physics::hex::deformation_gradient(&u, &e.gradients);
+        let f = pe_firmware::physics::hex::deformation_gradient(&u, &r.mean_gradients);
         for i in 0..3 {
             for j in 0..3 {
                 assert!((f[i][j] - fexact[i][j]).abs() < 1e-13);
             }
         }
+        // The kernel's forces are V₀ P B_a of the exact F (no hourglass force on a linear
+        // field), to 1e-12 of the largest (round-off of a few terms).
         let law = MaterialLaw::NeoHookean(LameParameters::from_young_poisson(1.0e6, 0.25));
-        let _ = e.internal_forces(&law, &u).unwrap();
+        let got = e.internal_forces(&law, &u).unwrap();
+        let pk = tensor::mul(&fexact, &law.second_piola_kirchhoff(&fexact).unwrap());
+        let want: [[f64; 3]; 8] = core::array::from_fn(|n| {
+            core::array::from_fn(|i| {
+                r.volume
+                    * (0..3)
+                        .map(|j| pk[i][j] * r.mean_gradients[n][j])
+                        .sum::<f64>()
+            })
+        });
+        let scale = want.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(scale > 1.0, "forces are trivial: {scale}");
+        for (w, g) in want.iter().flatten().zip(got.iter().flatten()) {
+            assert!((w - g).abs() < 1e-12 * scale, "{w} vs {g}");
+        }
     }
 }

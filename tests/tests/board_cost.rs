@@ -20,14 +20,14 @@ fn measured_cost_table_matches_the_firmware() {
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
-        Some("variant,elements,nodes,kernel_per_element,per_element_step,step_per_element,per_node_update"),
+        Some("variant,scene,elements,boxes,nodes,kernel_general,element_step_general,kernel_box,element_step_box,step_per_element,per_node_update"),
         "{path}: header"
     );
     let mut stale = Vec::new();
-    let mut variants = 0;
+    let mut rows = Vec::new();
     for line in lines {
         let f: Vec<&str> = line.split(',').collect();
-        assert_eq!(f.len(), 7, "{path}: {line}");
+        assert_eq!(f.len(), 11, "{path}: {line}");
         let (precision, integration) = match f[0] {
             "f64-reduced" => (Precision::F64, Integration::Reduced),
             "f64-full" => (Precision::F64, Integration::Full),
@@ -37,24 +37,60 @@ fn measured_cost_table_matches_the_firmware() {
         };
         let n = |k: usize| -> f64 { f[k].parse().expect("a number") };
         let table = measured_cost(precision, integration);
-        assert!(n(1) > 100.0 && n(2) > 100.0, "{path}: a real scene: {line}");
-        for (what, measured, held) in [
-            ("kernel_per_element", n(3), table.kernel_per_element),
-            ("per_element_step", n(4), table.per_element_step),
-            ("step_per_element", n(5), table.step_per_element),
-            ("per_node_update", n(6), table.per_node_update),
-        ] {
+        assert!(n(2) > 100.0 && n(4) > 100.0, "{path}: a real scene: {line}");
+        // The built-in anatomy measures the general kernel and the node update (its cells
+        // are all distorted); the regular box the parallelepiped kernel (all boxes).
+        let checks = match f[1] {
+            "builtin" => {
+                assert_eq!(
+                    n(3),
+                    0.0,
+                    "{path}: the built-in has no parallelepipeds: {line}"
+                );
+                vec![
+                    ("kernel_per_element", n(5), table.kernel_per_element),
+                    ("per_element_step", n(6), table.per_element_step),
+                    ("step_per_element", n(9), table.step_per_element),
+                    ("per_node_update", n(10), table.per_node_update),
+                ]
+            }
+            "regular" => {
+                assert_eq!(
+                    n(3),
+                    n(2),
+                    "{path}: every cell of the box is a parallelepiped"
+                );
+                vec![
+                    ("box_kernel_per_element", n(7), table.box_kernel_per_element),
+                    ("box_per_element_step", n(8), table.box_per_element_step),
+                ]
+            }
+            s => panic!("{path}: unknown scene {s}"),
+        };
+        for (what, measured, held) in checks {
             assert!(measured > 50.0, "{path}: {what} of {} is {measured}", f[0]);
             if (held as f64 - measured).abs() > STALE * measured {
                 stale.push(format!(
-                    "{} {what}: table {held}, measured {measured}",
-                    f[0]
+                    "{} {} {what}: table {held}, measured {measured}",
+                    f[0], f[1]
                 ));
             }
         }
-        variants += 1;
+        rows.push(format!("{}-{}", f[1], f[0]));
     }
-    assert_eq!(variants, 4, "{path}: every precision and integration");
+    rows.sort();
+    assert_eq!(
+        rows,
+        [
+            "builtin-f32-full",
+            "builtin-f32-reduced",
+            "builtin-f64-full",
+            "builtin-f64-reduced",
+            "regular-f32-reduced",
+            "regular-f64-reduced"
+        ],
+        "{path}: every variant"
+    );
     assert!(
         stale.is_empty(),
         "pe_firmware::profile::MEASURED_COST is stale (more than {}% off): update it:\n  {}",

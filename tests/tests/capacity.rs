@@ -30,6 +30,7 @@ macro_rules! firmware {
                 $e,
                 { $cap.materials },
                 { $cap.elements },
+                { $cap.boxes },
                 { $cap.nodes },
                 { $cap.exchange },
                 { $cap.path_points },

@@ -5,11 +5,10 @@ use std::cell::Cell;
 use std::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{anyhow, Result};
 use pe_firmware::image::{Integration, Precision};
 use pe_firmware::physics::{HexElement, Real};
 
-use crate::problem::elements::Elements;
 use crate::problem::Problem;
 use crate::scene::{builders, Scene};
 use crate::solver::Model;
@@ -140,25 +139,43 @@ pub fn bench_scene(
 }
 
 /// Flops of one element's internal-force evaluation (the element kernel of one step) at a
-/// generic deformed state, and of one node update.
-pub fn element_step_flops(integration: Integration) -> Result<(FlopCount, FlopCount)> {
+/// generic deformed state, per kernel ("parallelepiped" and "general" for reduced
+/// integration, "full"), and of one node update. The general kernel is counted on a
+/// distorted copy of the bench cell.
+pub fn element_step_flops(
+    integration: Integration,
+) -> Result<(Vec<(&'static str, FlopCount)>, FlopCount)> {
     let scene = bench_scene(32, integration, Precision::F64)?;
     let p = Problem::from_scene(&scene, std::path::Path::new("."))?;
-    let elements = Elements::<Counted>::build(&p);
     let law = p.laws[0].cast::<Counted>();
+    let modulus = p.laws[0].hourglass_modulus();
     let u: [[Counted; 3]; 8] = core::array::from_fn(|a| {
         core::array::from_fn(|i| Counted(1e-4 * ((a * 3 + i) as f64).sin()))
     });
+    let mut x: [[f64; 3]; 8] = p.mesh.cells[0].map(|n| p.mesh.nodes[n as usize]);
+    let cell = pe_firmware::physics::ReferenceHex::new(&x).map_err(|e| anyhow!("{e}"))?;
+    x[6][0] += 0.1 * cell.characteristic_length;
+    let distorted = pe_firmware::physics::ReferenceHex::new(&x).map_err(|e| anyhow!("{e}"))?;
+    let (nodes, m, k) = (p.mesh.cells[0], 0, p.solver.hourglass);
+    let mut out = Vec::new();
     take_flops();
-    let _ = match &elements {
-        Elements::Reduced(v) => v[0].internal_forces(&law, &u),
-        Elements::Full(v) => v[0].internal_forces(&law, &u),
-    };
-    let elem = take_flops();
+    if integration == Integration::Full {
+        let _ = cell.full::<Counted>(nodes, m).internal_forces(&law, &u);
+        out.push(("full", take_flops()));
+    } else {
+        let _ = cell
+            .parallelepiped::<Counted>(nodes, m, modulus, k)
+            .internal_forces(&law, &u);
+        out.push(("parallelepiped", take_flops()));
+        let _ = distorted
+            .reduced::<Counted>(nodes, m, modulus, k)
+            .internal_forces(&law, &u);
+        out.push(("general", take_flops()));
+    }
     let cd = pe_firmware::physics::CentralDifference::<Counted>::new(1e-4, 20.0);
     let r = [Counted(1.0); 3];
     let _ = cd.advance(&r, &r, Counted(0.1), &r);
-    Ok((elem, take_flops()))
+    Ok((out, take_flops()))
 }
 
 /// ns per element-step of a whole serial step (forces, assembly, update) for one config.
@@ -205,16 +222,18 @@ pub fn run_cli(elements: usize, steps: u64) -> Result<()> {
     }
     println!("\nfloating-point operations of one element's internal force (neo-Hookean):");
     for integ in [Integration::Reduced, Integration::Full] {
-        let (e, node) = element_step_flops(integ)?;
-        println!(
-            "{integ:<8} element: {} (add {}, mul {}, div {}, sqrt/ln/cbrt {}); node update: {}",
-            e.total(),
-            e.add,
-            e.mul,
-            e.div,
-            e.special,
-            node.total()
-        );
+        let (kernels, node) = element_step_flops(integ)?;
+        for (kind, e) in kernels {
+            println!(
+                "{integ:<8} {kind:<15} element: {} (add {}, mul {}, div {}, sqrt/ln/cbrt {}); node update: {}",
+                e.total(),
+                e.add,
+                e.mul,
+                e.div,
+                e.special,
+                node.total()
+            );
+        }
     }
     println!("seed's budget: ~700 flops per element-step (reduced integration)");
     Ok(())

@@ -55,7 +55,12 @@ fn decode_typed<T: ImageReal, E: ElementRecord<T>>(
     }
     Ok(DecodedImage {
         header,
-        element_nodes: t.elements.iter().map(|e| *e.nodes()).collect(),
+        element_nodes: t
+            .elements
+            .iter()
+            .map(|e| *e.nodes())
+            .chain(t.boxes.iter().map(|e| e.connectivity.nodes))
+            .collect(),
         nodes: t
             .nodes
             .iter()

@@ -9,6 +9,7 @@ use serde::Serialize;
 use super::image::BoardImage;
 use super::image::{contact_tables, graphics_params, image_file_name};
 use super::plan::Plan;
+use crate::problem::elements::is_box;
 use crate::problem::Problem;
 
 /// Figures of a compiled schedule (`DIR/report.json`).
@@ -170,7 +171,11 @@ fn contact_report(
 #[derive(Clone, Debug, Serialize)]
 pub struct Capacity {
     pub clock_hz: u64,
+    /// Per element-step of the general kernel and of the parallelepiped kernel.
     pub instructions_per_element_step: u32,
+    pub instructions_per_box_element_step: u32,
+    /// Elements of the scene that take the parallelepiped kernel.
+    pub parallelepipeds: usize,
     pub instructions_per_node_update: u32,
     /// Instructions of one step on the busiest board (no exchange).
     pub step_instructions_max: f64,
@@ -285,10 +290,19 @@ impl LinkTraffic {
 fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f64) -> Capacity {
     let cost =
         pe_firmware::profile::measured_cost(problem.solver.precision, problem.solver.integration);
+    let boxes = |b: &super::plan::BoardPlan| {
+        b.elements
+            .iter()
+            .filter(|&&e| is_box(problem, e as usize))
+            .count()
+    };
     let busiest = plan
         .boards
         .iter()
-        .map(|b| cost.step_instructions(b.elements.len(), b.nodes.len()))
+        .map(|b| {
+            let nb = boxes(b);
+            cost.step_instructions(b.elements.len() - nb, nb, b.nodes.len())
+        })
         .fold(0.0f64, f64::max);
     let npe = plan
         .boards
@@ -296,17 +310,26 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
         .max_by_key(|b| b.elements.len())
         .map(|b| b.nodes.len() as f64 / b.elements.len().max(1) as f64)
         .unwrap_or(2.0);
-    let at_10k = cost.elements_per_board(profile, 1e4, npe);
+    let n = problem.mesh.cells.len();
+    let box_fraction = (0..n).filter(|&e| is_box(problem, e)).count() as f64 / n.max(1) as f64;
+    let at_10k = cost.elements_per_board(profile, 1e4, npe, box_fraction);
     Capacity {
         clock_hz: profile.clock_hz,
         instructions_per_element_step: cost.per_element_step,
+        instructions_per_box_element_step: cost.box_per_element_step,
+        parallelepipeds: (box_fraction * n as f64).round() as usize,
         instructions_per_node_update: cost.per_node_update,
         step_instructions_max: busiest,
         step_compute_s_max: busiest / profile.clock_hz as f64,
         compute_keeps_real_time: busiest / profile.clock_hz as f64 <= dt,
-        elements_per_board_at_scene_rate: cost.elements_per_board(profile, 1.0 / dt, npe),
+        elements_per_board_at_scene_rate: cost.elements_per_board(
+            profile,
+            1.0 / dt,
+            npe,
+            box_fraction,
+        ),
         elements_per_board_at_10_khz: at_10k,
-        boards_needed_at_10_khz: (problem.mesh.cells.len() as f64 / at_10k).ceil() as usize,
+        boards_needed_at_10_khz: (n as f64 / at_10k).ceil() as usize,
     }
 }
 
@@ -418,8 +441,9 @@ pub fn summary(r: &CompileReport) -> String {
     );
     let c = &r.capacity;
     s += &format!(
-        "  board compute ({} profile, {:.0} MHz, measured {} instructions per element-step and {} per node update, one instruction per cycle assumed): busiest board {:.1} us per step against dt = {:.1} us ({}); {:.1} elements per board at this scene's rate, {:.1} at 10 kHz, so {} boards for this scene at 10 kHz\n",
-        r.profile, c.clock_hz as f64 / 1e6, c.instructions_per_element_step, c.instructions_per_node_update,
+        "  element kernels: {} parallelepipeds, {} general\n  board compute ({} profile, {:.0} MHz, measured {} instructions per element-step (general), {} (parallelepiped) and {} per node update, one instruction per cycle assumed): busiest board {:.1} us per step against dt = {:.1} us ({}); {:.1} elements per board at this scene's rate, {:.1} at 10 kHz, so {} boards for this scene at 10 kHz\n",
+        c.parallelepipeds, r.elements - c.parallelepipeds,
+        r.profile, c.clock_hz as f64 / 1e6, c.instructions_per_element_step, c.instructions_per_box_element_step, c.instructions_per_node_update,
         c.step_compute_s_max * 1e6, r.dt_s * 1e6,
         if c.compute_keeps_real_time { "keeps real time" } else { "does NOT keep real time" },
         c.elements_per_board_at_scene_rate, c.elements_per_board_at_10_khz, c.boards_needed_at_10_khz

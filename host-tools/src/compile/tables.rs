@@ -2,13 +2,14 @@
 //! decoder reads back into, both through the firmware's codec ([`ImageParts`]).
 
 use pe_firmware::image::*;
-use pe_firmware::physics::MaterialLaw;
+use pe_firmware::physics::{HexBox, MaterialLaw};
 
 /// One vector per image section.
 #[derive(Clone, Debug)]
 pub struct ImageTables<T, E> {
     pub laws: Vec<MaterialLaw<T>>,
     pub elements: Vec<E>,
+    pub boxes: Vec<HexBox<T>>,
     pub nodes: Vec<NodeRecord<T>>,
     pub lists: Vec<ExchangeList>,
     pub sends: Vec<u16>,
@@ -38,6 +39,7 @@ impl<T: ImageReal, E: ElementRecord<T>> ImageTables<T, E> {
         Ok(ImageTables {
             laws: zeros(c.materials as usize)?,
             elements: zeros(c.elements as usize)?,
+            boxes: zeros(c.boxes as usize)?,
             nodes: zeros(c.nodes as usize)?,
             lists: zeros(c.exchange_lists())?,
             sends: zeros(c.sends as usize)?,
@@ -54,13 +56,21 @@ impl<T: ImageReal, E: ElementRecord<T>> ImageTables<T, E> {
         })
     }
 
-    /// The counts of what the tables hold (batch ends, exchanged nodes per face and rounds
-    /// come from the plan).
-    pub fn counts(&self, batch_ends: [u32; 4], exchange: [u16; 6], rounds: [u8; 3]) -> Counts {
+    /// The counts of what the tables hold (batch ends of each kernel, exchanged nodes per
+    /// face and rounds come from the plan).
+    pub fn counts(
+        &self,
+        batch_ends: [u32; 4],
+        box_batch_ends: [u32; 4],
+        exchange: [u16; 6],
+        rounds: [u8; 3],
+    ) -> Counts {
         Counts {
             materials: self.laws.len() as u16,
             elements: self.elements.len() as u32,
             batch_ends,
+            boxes: self.boxes.len() as u32,
+            box_batch_ends,
             nodes: self.nodes.len() as u32,
             exchange,
             rounds,
@@ -82,6 +92,7 @@ impl<T: ImageReal, E: ElementRecord<T>> ImageTables<T, E> {
         ImageParts {
             laws: &mut self.laws,
             elements: &mut self.elements,
+            boxes: &mut self.boxes,
             nodes: &mut self.nodes,
             lists: &mut self.lists,
             sends: &mut self.sends,

@@ -22,6 +22,8 @@ pub struct RunReport {
     pub dt_critical_s: f64,
     pub simulated_s: f64,
     pub elements: usize,
+    /// Elements that take the parallelepiped kernel (reduced integration), as a fraction.
+    pub box_fraction: f64,
     pub nodes: usize,
     pub wall_s: f64,
     pub element_steps_per_s: f64,
@@ -156,6 +158,7 @@ pub fn run_typed<T: Real>(
         dt_critical_s: dt_crit,
         simulated_s: model.time_s(),
         elements,
+        box_fraction: model.elements.boxes() as f64 / elements.max(1) as f64,
         nodes: problem.mesh.nodes.len(),
         wall_s,
         element_steps_per_s: (elements as f64 * steps as f64) / wall_s.max(1e-12),

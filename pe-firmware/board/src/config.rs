@@ -44,6 +44,7 @@ pub type BoardStorage = StorageBuf<
     Element,
     { CAPACITIES.materials },
     { CAPACITIES.elements },
+    { CAPACITIES.boxes },
     { CAPACITIES.nodes },
     { CAPACITIES.exchange },
     { CAPACITIES.path_points },

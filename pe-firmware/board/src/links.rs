@@ -8,7 +8,6 @@
 //! board build links no face and the global port is [`LinkStream::Absent`]. An image that
 //! needs a face without a driver is refused before the first step.
 
-use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicBool, Ordering};
 
 use embedded_io::{ErrorType, Read, ReadReady, Write, WriteReady};
@@ -88,10 +87,11 @@ pub fn face_linked(_face: Face) -> bool {
     false
 }
 
-static mut LINKS: MaybeUninit<BoardLinks> = MaybeUninit::uninit();
+static mut LINKS: BoardLinks = StreamLinks::unlinked(LinkStream::Absent);
 static TAKEN: AtomicBool = AtomicBool::new(false);
 
-/// The links, built once in a static (about 200 KB of frame buffers: not on the stack).
+/// The links: a static built at compile time (about 170 KB of frame buffers: never on
+/// the stack), given the global port's stream once.
 pub fn take() -> Option<&'static mut BoardLinks> {
     if TAKEN.swap(true, Ordering::AcqRel) {
         return None;
@@ -99,9 +99,9 @@ pub fn take() -> Option<&'static mut BoardLinks> {
     // SAFETY: TAKEN makes this the only reference to LINKS, created once; the global port
     // is not yet driven by anyone else (the fault reporter only takes it after the links
     // are dropped from use, at the end of a run).
-    let slot: &'static mut MaybeUninit<BoardLinks> =
-        unsafe { &mut *core::ptr::addr_of_mut!(LINKS) };
-    let global = unsafe { global_stream() };
-    let faces = [None, None, None, None, None, None];
-    Some(slot.write(StreamLinks::new(faces, global)))
+    let links: &'static mut BoardLinks = unsafe { &mut *core::ptr::addr_of_mut!(LINKS) };
+    links
+        .global_port()
+        .replace_stream(unsafe { global_stream() });
+    Some(links)
 }

@@ -4,7 +4,7 @@
 //! are written once. [`validate`] checks every index a loaded image holds.
 //!
 //! Sections (counts from the header's [`Counts`]): materials × [`MaterialLaw<T>`], elements
-//! × `E` (batch order x, y, z, inner), nodes × [`NodeRecord<T>`], exchange lists ×
+//! × `E` (batch order x, y, z, inner), parallelepipeds × [`HexBox<T>`] (batch order), nodes × [`NodeRecord<T>`], exchange lists ×
 //! [`ExchangeList`] (axis, round, face), sends × `u16` (local nodes), receives ×
 //! [`RecvEntry`], path points × [`PathPoint`], loads × [`LoadRecord`], contact nodes ×
 //! [`ContactNode`], contact-node places × [`ContactNodePlace`], contact faces ×
@@ -18,7 +18,7 @@
 use serde::{de::DeserializeOwned, Serialize};
 
 use super::*;
-use crate::physics::{HexElement, HexFull, HexReduced, MaterialLaw, Real};
+use crate::physics::{HexBox, HexElement, HexFull, HexReduced, MaterialLaw, Real};
 
 /// A scalar an image can hold.
 pub trait ImageReal: Real + Serialize + DeserializeOwned {
@@ -52,6 +52,7 @@ impl<T: ImageReal> ElementRecord<T> for HexFull<T> {
 pub struct ImageParts<'a, T, E> {
     pub laws: &'a mut [MaterialLaw<T>],
     pub elements: &'a mut [E],
+    pub boxes: &'a mut [HexBox<T>],
     pub nodes: &'a mut [NodeRecord<T>],
     pub lists: &'a mut [ExchangeList],
     pub sends: &'a mut [u16],
@@ -103,6 +104,7 @@ pub fn transcode<T: ImageReal, E: ElementRecord<T>, C: Codec>(
 ) -> Result<(), ImageError> {
     section(codec, "materials", c.materials as usize, p.laws)?;
     section(codec, "elements", c.elements as usize, p.elements)?;
+    section(codec, "parallelepipeds", c.boxes as usize, p.boxes)?;
     section(codec, "nodes", c.nodes as usize, p.nodes)?;
     section(codec, "exchange lists", c.exchange_lists(), p.lists)?;
     section(codec, "exchange sends", c.sends as usize, p.sends)?;
@@ -156,22 +158,34 @@ pub fn validate<T: ImageReal, E: ElementRecord<T>>(
         c.nodes as usize,
         c.contact_nodes as usize,
     );
-    let b = c.batch_ends;
-    if !(b[0] <= b[1] && b[1] <= b[2] && b[2] <= b[3] && b[3] as usize == ne) {
+    let nb = c.boxes as usize;
+    let ordered =
+        |b: [u32; 4], n: usize| b[0] <= b[1] && b[1] <= b[2] && b[2] <= b[3] && b[3] as usize == n;
+    if !ordered(c.batch_ends, ne) || !ordered(c.box_batch_ends, nb) {
         return Err(ImageError::Malformed {
             record: "batch ends",
         });
     }
-    for (k, e) in p.elements[..ne].iter().enumerate() {
+    if nb > 0 && E::INTEGRATION != Integration::Reduced {
+        return Err(ImageError::Malformed {
+            record: "parallelepipeds in a fully integrated image",
+        });
+    }
+    // Elements are numbered general first, then parallelepipeds.
+    let all = p.elements[..ne]
+        .iter()
+        .map(|e| e.connectivity())
+        .chain(p.boxes[..nb].iter().map(|e| e.connectivity()));
+    for (k, e) in all.enumerate() {
         index_ok(
             "node of element",
             k,
-            e.nodes().iter().all(|&n| (n as usize) < nn),
+            e.nodes.iter().all(|&n| (n as usize) < nn),
         )?;
         index_ok(
             "material of element",
             k,
-            e.material() < c.materials as usize,
+            (e.material as usize) < c.materials as usize,
         )?;
     }
     let lists = &p.lists[..c.exchange_lists()];

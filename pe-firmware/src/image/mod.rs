@@ -31,7 +31,7 @@ pub use crate::physics::contact::{ContactFace, ContactNode, ContactPair, Tool};
 /// First four bytes of every schedule image.
 pub const MAGIC: [u8; 4] = *b"PESI";
 /// Format version; bumped whenever a record type changes.
-pub const FORMAT_VERSION: u16 = 3;
+pub const FORMAT_VERSION: u16 = 4;
 
 /// Scalar type of the image's element and node records.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -83,9 +83,15 @@ impl core::fmt::Display for Integration {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Counts {
     pub materials: u16,
+    /// Elements of the general kernel (the image's integration's record).
     pub elements: u32,
     /// End (exclusive) of batches x, y, z, inner in the element list.
     pub batch_ends: [u32; 4],
+    /// Parallelepipeds ([`crate::physics::HexBox`], reduced integration only): the cheap
+    /// kernel's elements, chosen at compile time, and their batch ends. A batch runs its
+    /// general elements, then its parallelepipeds.
+    pub boxes: u32,
+    pub box_batch_ends: [u32; 4],
     pub nodes: u32,
     /// Distinct nodes exchanged across each face (+x, −x, +y, −y, +z, −z).
     pub exchange: [u16; 6],

@@ -11,7 +11,7 @@
 //! applied with the true mass by whoever builds `f_ext`, so static answers do not change.
 //! Nothing here panics: bad indices and numerical failure come back as [`PhysicsError`].
 
-use super::hex::HexElement;
+use super::hex::{HexElement, KernelFault};
 use super::material::MaterialLaw;
 use super::real::Real;
 
@@ -137,26 +137,13 @@ pub fn accumulate_internal_forces<T: Real, E: HexElement<T>>(
         let law = laws
             .get(e.material())
             .ok_or(PhysicsError::BadIndex { element })?;
-        let mut ue = [[T::ZERO; 3]; 8];
-        for (a, &n) in e.nodes().iter().enumerate() {
-            ue[a] = *u
-                .get(n as usize)
-                .ok_or(PhysicsError::BadIndex { element })?;
-        }
-        let fe = e
-            .internal_forces(law, &ue)
-            .map_err(|j| PhysicsError::InvertedElement {
+        e.accumulate(law, u, f_int).map_err(|fault| match fault {
+            KernelFault::Inverted(j) => PhysicsError::InvertedElement {
                 element,
                 jacobian: j.jacobian,
-            })?;
-        for (a, &n) in e.nodes().iter().enumerate() {
-            let dst = f_int
-                .get_mut(n as usize)
-                .ok_or(PhysicsError::BadIndex { element })?;
-            for i in 0..3 {
-                dst[i] += fe[a][i];
-            }
-        }
+            },
+            KernelFault::BadIndex => PhysicsError::BadIndex { element },
+        })?;
     }
     Ok(())
 }

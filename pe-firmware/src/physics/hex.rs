@@ -75,6 +75,27 @@ pub fn natural_gradients(xi: [f64; 3]) -> [[f64; 3]; 8] {
     })
 }
 
+/// Corner moments `β_k = (1/8) Σ_a (Π_{j∈k} ξ_aj) g_a` of nodal vectors `g` (Gmsh order)
+/// for the masks `k = 1..=7` (bit 0: ξ, bit 1: η, bit 2: ζ). For gradients (`Σ_a g_a = 0`)
+/// `g_a = Σ_k (Π_{j∈k} ξ_aj) β_k`.
+pub fn corner_moments(g: &[[f64; 3]; 8]) -> [[f64; 3]; 7] {
+    core::array::from_fn(|m| {
+        let k = m + 1;
+        core::array::from_fn(|i| {
+            (0..8)
+                .map(|a| {
+                    let sign: f64 = (0..3)
+                        .filter(|j| k & (1 << j) != 0)
+                        .map(|j| NODE_XI[a][j])
+                        .product();
+                    sign * g[a][i]
+                })
+                .sum::<f64>()
+                / 8.0
+        })
+    })
+}
+
 /// Why a reference hexahedron cannot be used.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum GeometryError {
@@ -269,17 +290,18 @@ impl ReferenceHex {
         self.parallelepiped
     }
 
-    /// The gradient basis `b_j = (1/8) Σ_a ξ_aj B_a` (rows, 1/m): on a parallelepiped
-    /// `B_a = Σ_j ξ_aj b_j` exactly.
+    /// The gradients' corner moments `β_k = (1/8) Σ_a (Π_{j∈k} ξ_aj) B_a` for the masks
+    /// `k = 1..=7` (1/m): `B_a = Σ_k (Π_{j∈k} ξ_aj) β_k` (the corner basis is orthogonal,
+    /// and `β_0 = Σ_a B_a / 8 = 0`).
+    pub fn gradient_moments(&self) -> [[f64; 3]; 7] {
+        corner_moments(&self.mean_gradients)
+    }
+
+    /// The gradient basis `b_j = β_{ξ,η,ζ}` (rows, 1/m): on a parallelepiped
+    /// `B_a = Σ_j ξ_aj b_j` exactly (the other moments vanish).
     pub fn gradient_basis(&self) -> Mat3<f64> {
-        core::array::from_fn(|j| {
-            core::array::from_fn(|i| {
-                (0..8)
-                    .map(|a| NODE_XI[a][j] * self.mean_gradients[a][i])
-                    .sum::<f64>()
-                    / 8.0
-            })
-        })
+        let beta = self.gradient_moments();
+        [beta[0], beta[1], beta[3]]
     }
 
     /// One-point element with hourglass stiffness `k = κ_hg G V Σ|B_a|² / 8` (the general
@@ -295,7 +317,7 @@ impl ReferenceHex {
         HexReduced {
             connectivity: Connectivity { nodes, material },
             volume: T::from_f64(self.volume),
-            gradients: cast2(&self.mean_gradients),
+            gradient_moments: cast2(&self.gradient_moments()),
             hourglass_geometry: cast2(&self.hourglass_geometry),
             hourglass_stiffness: T::from_f64(k),
         }
@@ -396,6 +418,52 @@ pub trait HexElement<T: Real> {
     ) -> Result<[[T; 3]; 8], NonPositiveJacobian>;
     /// Stored energy (J): strain energy plus hourglass energy.
     fn energy(&self, law: &MaterialLaw<T>, u: &[[T; 3]; 8]) -> Result<T, NonPositiveJacobian>;
+    /// Gathers the element's displacements from `u`, computes its internal forces and adds
+    /// them into `f` (the element loop's body; a kernel may fuse the three). The per-node
+    /// values added are bit for bit those of [`Self::internal_forces`].
+    #[inline(always)]
+    fn accumulate(
+        &self,
+        law: &MaterialLaw<T>,
+        u: &[[T; 3]],
+        f: &mut [[T; 3]],
+    ) -> Result<(), KernelFault> {
+        let nodes = checked_nodes(self.nodes(), u.len().min(f.len()))?;
+        let ue = nodes.map(|n| u[n]);
+        let fe = self
+            .internal_forces(law, &ue)
+            .map_err(KernelFault::Inverted)?;
+        for (a, &n) in nodes.iter().enumerate() {
+            for i in 0..3 {
+                f[n][i] += fe[a][i];
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Why [`HexElement::accumulate`] failed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum KernelFault {
+    /// `J ≤ 0`.
+    Inverted(NonPositiveJacobian),
+    /// A node index outside the displacement or force array.
+    BadIndex,
+}
+
+/// The element's node indices as `usize`, all checked against `len` (one comparison each,
+/// before any access).
+#[inline(always)]
+fn checked_nodes(nodes: &[u32; 8], len: usize) -> Result<[usize; 8], KernelFault> {
+    let mut max = 0;
+    for &n in nodes {
+        max = max.max(n);
+    }
+    if (max as usize) < len {
+        Ok(nodes.map(|n| n as usize))
+    } else {
+        Err(KernelFault::BadIndex)
+    }
 }
 
 /// Node (Gmsh order) at binary corner `p = b_ξ + 2 b_η + 4 b_ζ` (`b = 1` where the
@@ -407,86 +475,127 @@ const CORNER: [usize; 8] = [0, 1, 3, 2, 4, 5, 7, 6];
 const LINEAR: [usize; 3] = [1, 2, 4];
 const HOURGLASS: [usize; 4] = [3, 6, 5, 7];
 
-/// Corner transform (a Walsh-Hadamard transform, 24 additions per component):
-/// `c_k = Σ_a (Π_{j ∈ k} ξ_aj) v_a` for every mask `k` of the natural axes. `c_0` is the sum,
-/// `c_LINEAR[j]` the linear moments `Σ_a ξ_aj v_a`, `c_HOURGLASS[α]` the hourglass moments
-/// `Σ_a h_aα v_a`.
+/// Corner transform of one component (a Walsh-Hadamard transform, 24 additions):
+/// `c_k = Σ_p (Π_{j ∈ k} ξ_pj) v_p` for every mask `k` of the natural axes, `v` in corner
+/// order. `c_0` is the sum, `c_LINEAR[j]` the linear moments `Σ ξ_j v`, `c_HOURGLASS[α]`
+/// the hourglass moments `Σ h_α v`. The corner basis is orthogonal: `Σ_p v_p w_p =
+/// (1/8) Σ_k c_k(v) c_k(w)`.
 #[inline(always)]
-fn corner_transform<T: Real>(v: &[[T; 3]; 8]) -> [[T; 3]; 8] {
-    let mut w: [[T; 3]; 8] = core::array::from_fn(|p| v[CORNER[p]]);
+fn transform8<T: Real>(mut w: [T; 8]) -> [T; 8] {
     for bit in [1, 2, 4] {
         for p in 0..8 {
             if p & bit == 0 {
                 let (lo, hi) = (w[p], w[p | bit]);
-                for i in 0..3 {
-                    w[p][i] = lo[i] + hi[i];
-                    w[p | bit][i] = hi[i] - lo[i];
-                }
+                w[p] = lo + hi;
+                w[p | bit] = hi - lo;
             }
         }
     }
     w
 }
 
-/// The transpose of [`corner_transform`]: nodal vectors `f_a = Σ_k (Π_{j ∈ k} ξ_aj) c_k`
-/// (Gmsh order) from moments `c` (24 additions per component).
+/// The transpose of [`transform8`]: corner values `v_p = Σ_k (Π_{j ∈ k} ξ_pj) c_k` from
+/// moments `c` (24 additions).
 #[inline(always)]
-fn corner_synthesis<T: Real>(mut w: [[T; 3]; 8]) -> [[T; 3]; 8] {
+fn synthesis8<T: Real>(mut w: [T; 8]) -> [T; 8] {
     for bit in [4, 2, 1] {
         for p in 0..8 {
             if p & bit == 0 {
                 let (s, d) = (w[p], w[p | bit]);
-                for i in 0..3 {
-                    w[p][i] = s[i] - d[i];
-                    w[p | bit][i] = s[i] + d[i];
-                }
+                w[p] = s - d;
+                w[p | bit] = s + d;
             }
         }
     }
-    let mut out = [[T::ZERO; 3]; 8];
-    for p in 0..8 {
-        out[CORNER[p]] = w[p];
-    }
-    out
+    w
 }
 
-/// One-point (reduced) element with hourglass control, any hexahedron (the general kernel).
-///
-/// With the displacement gradient `H = Σ_a u_a ⊗ B_a` (`F = I + H`) and the hourglass
-/// moments `c_α = Σ_a h_aα u_a` from the [`corner_transform`], the hourglass displacements
-/// are `q_α = Σ_a Γ_aα u_a = c_α − H γ_α`, and the forces
-/// `f_a = (V₀ P − M) B_a + Σ_α h_aα Q_α` with `Q_α = k q_α`, `M = Σ_α Q_α ⊗ γ_α`: the
-/// hourglass control costs two corner transforms and two 3x3x4 products instead of
-/// `Γ` (8x4) products per component.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct HexReduced<T> {
-    pub connectivity: Connectivity,
-    pub volume: T,
-    pub gradients: [[T; 3]; 8],
-    /// `γ_α = Σ_b h_bα X_b` (m), see [`ReferenceHex::hourglass_geometry`].
-    pub hourglass_geometry: [[T; 3]; 4],
-    pub hourglass_stiffness: T,
+/// Where a reduced kernel reads displacements and puts forces, by corner (binary order)
+/// and component: the element's own arrays ([`HexElement::internal_forces`]) or the
+/// board's, fused with the gather and scatter ([`HexElement::accumulate`]). Both see the
+/// same values, so both give the same bits.
+trait Corners<T> {
+    fn get(&self, p: usize, i: usize) -> T;
+    fn add(&mut self, p: usize, i: usize, v: T);
 }
 
-impl<T: Real> HexReduced<T> {
-    /// `H = Σ_a u_a ⊗ B_a` and the hourglass displacements `q_α = c_α − H γ_α`.
+/// An element's own arrays (Gmsh order).
+struct Local<'a, T> {
+    u: &'a [[T; 3]; 8],
+    f: [[T; 3]; 8],
+}
+
+impl<T: Real> Corners<T> for Local<'_, T> {
     #[inline(always)]
-    fn strain_and_modes(&self, u: &[[T; 3]; 8]) -> (Mat3<T>, [[T; 3]; 4]) {
-        let mut h = [[T::ZERO; 3]; 3];
-        for a in 0..8 {
-            for i in 0..3 {
-                for j in 0..3 {
-                    h[i][j] += u[a][i] * self.gradients[a][j];
-                }
-            }
+    fn get(&self, p: usize, i: usize) -> T {
+        self.u[CORNER[p]][i]
+    }
+    #[inline(always)]
+    fn add(&mut self, p: usize, i: usize, v: T) {
+        self.f[CORNER[p]][i] += v;
+    }
+}
+
+/// The board's arrays at the element's nodes: [`Global::new`] checks every node against
+/// both arrays (equal lengths), so the force additions below always land.
+struct Global<'a, T> {
+    /// Displacement of each corner (binary order).
+    u: [&'a [T; 3]; 8],
+    f: &'a mut [[T; 3]],
+    /// Node of each corner (binary order).
+    at: [usize; 8],
+}
+
+impl<'a, T: Real> Global<'a, T> {
+    #[inline(always)]
+    fn new(nodes: &[u32; 8], u: &'a [[T; 3]], f: &'a mut [[T; 3]]) -> Result<Self, KernelFault> {
+        if u.len() != f.len() {
+            return Err(KernelFault::BadIndex);
         }
-        let c = corner_transform(u);
-        let q = core::array::from_fn(|alpha| {
-            let g = &self.hourglass_geometry[alpha];
-            let m = &c[HOURGLASS[alpha]];
-            core::array::from_fn(|i| m[i] - (h[i][0] * g[0] + h[i][1] * g[1] + h[i][2] * g[2]))
-        });
-        (h, q)
+        let at = CORNER.map(|a| nodes[a] as usize);
+        let get = |p: usize| u.get(at[p]).ok_or(KernelFault::BadIndex);
+        let u = [
+            get(0)?,
+            get(1)?,
+            get(2)?,
+            get(3)?,
+            get(4)?,
+            get(5)?,
+            get(6)?,
+            get(7)?,
+        ];
+        Ok(Global { u, f, at })
+    }
+}
+
+impl<T: Real> Corners<T> for Global<'_, T> {
+    #[inline(always)]
+    fn get(&self, p: usize, i: usize) -> T {
+        self.u[p][i]
+    }
+    #[inline(always)]
+    fn add(&mut self, p: usize, i: usize, v: T) {
+        // Always in range (see `Global::new`).
+        if let Some(d) = self.f.get_mut(self.at[p]) {
+            d[i] += v;
+        }
+    }
+}
+
+/// The corner moments of the displacements, per component (`c[i][k]`).
+#[inline(always)]
+fn moments_of<T: Real>(c: &impl Corners<T>) -> [[T; 8]; 3] {
+    core::array::from_fn(|i| transform8(core::array::from_fn(|p| c.get(p, i))))
+}
+
+/// Adds the nodal vectors of moments `m` (`m[k][i]`) to the corners, one component at a time.
+#[inline(always)]
+fn add_synthesis<T: Real>(c: &mut impl Corners<T>, m: &[[T; 3]; 8]) {
+    for i in 0..3 {
+        let v = synthesis8(core::array::from_fn(|k| m[k][i]));
+        for (p, x) in v.into_iter().enumerate() {
+            c.add(p, i, x);
+        }
     }
 }
 
@@ -499,18 +608,62 @@ fn plus_identity<T: Real>(mut h: Mat3<T>) -> Mat3<T> {
     h
 }
 
-impl<T: Real> HexElement<T> for HexReduced<T> {
+/// The corner masks 1..=7 (`c_0` of a gradient is zero: gradients sum to zero).
+const MASKS: [usize; 7] = [1, 2, 3, 4, 5, 6, 7];
+
+/// One-point (reduced) element with hourglass control, any hexahedron (the general kernel),
+/// in the corner basis.
+///
+/// The gradients are kept as their corner moments `β_k = (1/8) Σ_a (Π_{j∈k} ξ_aj) B_a`, so
+/// `B_a = Σ_k (Π ξ_a) β_k` and, with the displacement moments `c_k` ([`transform8`]),
+/// `H = Σ_a u_a ⊗ B_a = Σ_k c_k ⊗ β_k` (`F = I + H`). The hourglass displacements are
+/// `q_α = Σ_a Γ_aα u_a = c_α − H γ_α` (`c_α` the hourglass moments, `γ_α = Σ_b h_bα X_b`),
+/// and the forces `f_a = Σ_k (Π ξ_a) m_k`: the synthesis of the moments
+/// `m_k = (V₀ P − M) β_k (+ Q_α on the hourglass masks)`, with `Q_α = k q_α` and
+/// `M = Σ_α Q_α ⊗ γ_α`. Gathering, the transforms and scattering are fused
+/// ([`HexElement::accumulate`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HexReduced<T> {
+    pub connectivity: Connectivity,
+    pub volume: T,
+    /// `β_k` for the masks 1..=7 (1/m).
+    pub gradient_moments: [[T; 3]; 7],
+    /// `γ_α = Σ_b h_bα X_b` (m), see [`ReferenceHex::hourglass_geometry`].
+    pub hourglass_geometry: [[T; 3]; 4],
+    pub hourglass_stiffness: T,
+}
+
+impl<T: Real> HexReduced<T> {
+    /// `H` and the hourglass displacements `q_α` from the displacement moments.
     #[inline(always)]
-    fn connectivity(&self) -> &Connectivity {
-        &self.connectivity
+    fn strain_and_modes(&self, c: &[[T; 8]; 3]) -> (Mat3<T>, [[T; 3]; 4]) {
+        let beta = &self.gradient_moments;
+        let h: Mat3<T> = core::array::from_fn(|i| {
+            core::array::from_fn(|j| {
+                let mut s = c[i][MASKS[0]] * beta[0][j];
+                for k in 1..7 {
+                    s += c[i][MASKS[k]] * beta[k][j];
+                }
+                s
+            })
+        });
+        let q = core::array::from_fn(|alpha| {
+            let g = &self.hourglass_geometry[alpha];
+            core::array::from_fn(|i| {
+                c[i][HOURGLASS[alpha]] - (h[i][0] * g[0] + h[i][1] * g[1] + h[i][2] * g[2])
+            })
+        });
+        (h, q)
     }
-    #[inline]
-    fn internal_forces(
+
+    #[inline(always)]
+    fn kernel(
         &self,
         law: &MaterialLaw<T>,
-        u: &[[T; 3]; 8],
-    ) -> Result<[[T; 3]; 8], NonPositiveJacobian> {
-        let (h, q) = self.strain_and_modes(u);
+        corners: &mut impl Corners<T>,
+    ) -> Result<(), NonPositiveJacobian> {
+        let c = moments_of(corners);
+        let (h, q) = self.strain_and_modes(&c);
         let p = law.first_piola_kirchhoff(&plus_identity(h))?;
         let k = self.hourglass_stiffness;
         let big_q: [[T; 3]; 4] = core::array::from_fn(|alpha| q[alpha].map(|v| k * v));
@@ -524,38 +677,72 @@ impl<T: Real> HexElement<T> for HexReduced<T> {
                 m
             })
         });
-        let mut moments = [[T::ZERO; 3]; 8];
-        for alpha in 0..4 {
-            moments[HOURGLASS[alpha]] = big_q[alpha];
+        let mut m = [[T::ZERO; 3]; 8];
+        for (k, b) in self.gradient_moments.iter().enumerate() {
+            m[MASKS[k]] =
+                core::array::from_fn(|i| pm[i][0] * b[0] + pm[i][1] * b[1] + pm[i][2] * b[2]);
         }
-        let mut out = corner_synthesis(moments);
-        for a in 0..8 {
-            let g = &self.gradients[a];
+        for alpha in 0..4 {
+            let mk = &mut m[HOURGLASS[alpha]];
             for i in 0..3 {
-                out[a][i] += pm[i][0] * g[0] + pm[i][1] * g[1] + pm[i][2] * g[2];
+                mk[i] += big_q[alpha][i];
             }
         }
-        Ok(out)
+        add_synthesis(corners, &m);
+        Ok(())
+    }
+}
+
+impl<T: Real> HexElement<T> for HexReduced<T> {
+    #[inline(always)]
+    fn connectivity(&self) -> &Connectivity {
+        &self.connectivity
+    }
+    #[inline]
+    fn internal_forces(
+        &self,
+        law: &MaterialLaw<T>,
+        u: &[[T; 3]; 8],
+    ) -> Result<[[T; 3]; 8], NonPositiveJacobian> {
+        let mut local = Local {
+            u,
+            f: [[T::ZERO; 3]; 8],
+        };
+        self.kernel(law, &mut local)?;
+        Ok(local.f)
     }
     fn energy(&self, law: &MaterialLaw<T>, u: &[[T; 3]; 8]) -> Result<T, NonPositiveJacobian> {
-        let (h, q) = self.strain_and_modes(u);
+        let c = moments_of(&Local {
+            u,
+            f: [[T::ZERO; 3]; 8],
+        });
+        let (h, q) = self.strain_and_modes(&c);
         let w = law.strain_energy_density(&plus_identity(h))? * self.volume;
         let qq: T = q.iter().flatten().fold(T::ZERO, |s, v| s + *v * *v);
         Ok(w + T::from_f64(0.5) * self.hourglass_stiffness * qq)
     }
+    #[inline(always)]
+    fn accumulate(
+        &self,
+        law: &MaterialLaw<T>,
+        u: &[[T; 3]],
+        f: &mut [[T; 3]],
+    ) -> Result<(), KernelFault> {
+        let mut g = Global::new(self.nodes(), u, f)?;
+        self.kernel(law, &mut g).map_err(KernelFault::Inverted)
+    }
 }
 
 /// One-point element on a parallelepiped (an affine image of the cube: the seed's
-/// undistorted element), the cheap kernel. There `B_a = Σ_j ξ_aj b_j` and `Γ = h`, so with
-/// the moments `c = ` [`corner_transform`]`(u)`:
-/// `F = I + Σ_j c_j ⊗ b_j` (27 products instead of 72),
-/// `f = ` [`corner_synthesis`] of `(P V₀ b_j)` on the linear moments and `k c_α` on the
-/// hourglass ones: the gradients and the hourglass vectors cost additions only.
-/// To round-off it gives the general kernel's forces ([`HexReduced`]) on the same cell.
+/// undistorted element), the cheap kernel: the general kernel ([`HexReduced`]) where the
+/// hourglass geometry `γ` and the gradient moments off the linear masks vanish, so
+/// `F = I + Σ_j c_j ⊗ b_j` (27 products instead of 63), `Γ = h` (`q_α = c_α`), and the
+/// forces are the synthesis of `(P V₀ b_j)` on the linear masks and `k c_α` on the
+/// hourglass ones. To round-off it gives the general kernel's forces on the same cell.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HexBox<T> {
     pub connectivity: Connectivity,
-    /// `b_j` (1/m), see [`ReferenceHex::gradient_basis`].
+    /// `b_j = β_LINEAR[j]` (1/m), see [`ReferenceHex::gradient_basis`].
     pub basis: [[T; 3]; 3],
     /// `V₀ b_j` (m²).
     pub basis_volume: [[T; 3]; 3],
@@ -564,16 +751,36 @@ pub struct HexBox<T> {
 }
 
 impl<T: Real> HexBox<T> {
-    /// `F = I + Σ_j c_j ⊗ b_j` and the moments.
+    /// `F = I + Σ_j c_j ⊗ b_j`.
     #[inline(always)]
-    fn deformation(&self, u: &[[T; 3]; 8]) -> (Mat3<T>, [[T; 3]; 8]) {
-        let c = corner_transform(u);
+    fn deformation(&self, c: &[[T; 8]; 3]) -> Mat3<T> {
         let b = &self.basis;
-        let (c0, c1, c2) = (&c[LINEAR[0]], &c[LINEAR[1]], &c[LINEAR[2]]);
         let h: Mat3<T> = core::array::from_fn(|i| {
-            core::array::from_fn(|j| c0[i] * b[0][j] + c1[i] * b[1][j] + c2[i] * b[2][j])
+            let (c0, c1, c2) = (c[i][LINEAR[0]], c[i][LINEAR[1]], c[i][LINEAR[2]]);
+            core::array::from_fn(|j| c0 * b[0][j] + c1 * b[1][j] + c2 * b[2][j])
         });
-        (plus_identity(h), c)
+        plus_identity(h)
+    }
+
+    #[inline(always)]
+    fn kernel(
+        &self,
+        law: &MaterialLaw<T>,
+        corners: &mut impl Corners<T>,
+    ) -> Result<(), NonPositiveJacobian> {
+        let c = moments_of(corners);
+        let p = law.first_piola_kirchhoff(&self.deformation(&c))?;
+        let k = self.hourglass_stiffness;
+        let mut m = [[T::ZERO; 3]; 8];
+        for (j, bv) in self.basis_volume.iter().enumerate() {
+            m[LINEAR[j]] =
+                core::array::from_fn(|i| p[i][0] * bv[0] + p[i][1] * bv[1] + p[i][2] * bv[2]);
+        }
+        for mask in HOURGLASS {
+            m[mask] = core::array::from_fn(|i| k * c[i][mask]);
+        }
+        add_synthesis(corners, &m);
+        Ok(())
     }
 }
 
@@ -588,27 +795,34 @@ impl<T: Real> HexElement<T> for HexBox<T> {
         law: &MaterialLaw<T>,
         u: &[[T; 3]; 8],
     ) -> Result<[[T; 3]; 8], NonPositiveJacobian> {
-        let (f, c) = self.deformation(u);
-        let p = law.first_piola_kirchhoff(&f)?;
-        let k = self.hourglass_stiffness;
-        let mut moments = [[T::ZERO; 3]; 8];
-        for (j, bv) in self.basis_volume.iter().enumerate() {
-            moments[LINEAR[j]] =
-                core::array::from_fn(|i| p[i][0] * bv[0] + p[i][1] * bv[1] + p[i][2] * bv[2]);
-        }
-        for m in HOURGLASS {
-            moments[m] = c[m].map(|v| k * v);
-        }
-        Ok(corner_synthesis(moments))
+        let mut local = Local {
+            u,
+            f: [[T::ZERO; 3]; 8],
+        };
+        self.kernel(law, &mut local)?;
+        Ok(local.f)
     }
     fn energy(&self, law: &MaterialLaw<T>, u: &[[T; 3]; 8]) -> Result<T, NonPositiveJacobian> {
-        let (f, c) = self.deformation(u);
-        let w = law.strain_energy_density(&f)? * self.volume;
+        let c = moments_of(&Local {
+            u,
+            f: [[T::ZERO; 3]; 8],
+        });
+        let w = law.strain_energy_density(&self.deformation(&c))? * self.volume;
         let qq: T = HOURGLASS
             .iter()
-            .flat_map(|&m| c[m])
+            .flat_map(|&m| c.iter().map(move |ci| ci[m]))
             .fold(T::ZERO, |s, v| s + v * v);
         Ok(w + T::from_f64(0.5) * self.hourglass_stiffness * qq)
+    }
+    #[inline(always)]
+    fn accumulate(
+        &self,
+        law: &MaterialLaw<T>,
+        u: &[[T; 3]],
+        f: &mut [[T; 3]],
+    ) -> Result<(), KernelFault> {
+        let mut g = Global::new(self.nodes(), u, f)?;
+        self.kernel(law, &mut g).map_err(KernelFault::Inverted)
     }
 }
 

@@ -296,7 +296,7 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             max,
         };
         let len = b
-            .emit(&mut self.io.tx[PACKET_HEADER_LEN..])
+            .emit(&mut self.st.tx[PACKET_HEADER_LEN..])
             .map_err(|error| self.fault(FaultKind::BadPacket { error }))?;
         let dst = self.contact.boards[k];
         let sent = self.send_global(links, dst, PacketKind::BoundingBox, len)?;
@@ -364,7 +364,7 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             count: count as u16,
         };
         let mut len = 0;
-        let payload = &mut self.io.tx[PACKET_HEADER_LEN..];
+        let payload = &mut self.st.tx[PACKET_HEADER_LEN..];
         let mut ok = h.emit(payload).map(|l| len = l);
         let cs = &self.st.contact;
         for j in 0..count {
@@ -398,7 +398,7 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             force,
         };
         let len = pl
-            .emit(&mut self.io.tx[PACKET_HEADER_LEN..])
+            .emit(&mut self.st.tx[PACKET_HEADER_LEN..])
             .map_err(|error| self.fault(FaultKind::BadPacket { error }))?;
         let host = link_proto::packet::ADDR_HOST;
         let sent = self.send_global(links, host, PacketKind::ToolForce, len)?;
@@ -412,12 +412,12 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
     /// next (a partner runs at most one step ahead: it waits for this board's nodes).
     fn receive_contact(&mut self, links: &mut impl Links) -> Result<(), Fault> {
         loop {
-            let len = match links.try_recv_global(&mut self.io.rx) {
+            let len = match links.try_recv_global(self.st.rx) {
                 Ok(Some(len)) => len,
                 Ok(None) => return Ok(()),
                 Err(error) => return Err(self.fault(FaultKind::GlobalError { error })),
             };
-            let repr = PacketRepr::parse_bytes(&self.io.rx[..len.min(self.io.rx.len())])
+            let repr = PacketRepr::parse_bytes(&self.st.rx[..len.min(self.st.rx.len())])
                 .map_err(|error| self.fault(FaultKind::BadPacket { error }))?;
             let (src, kind, payload) = (repr.src, repr.kind, repr.payload);
             let n_boards = self.header.counts.contact_boards as usize;

@@ -26,7 +26,7 @@ pub(super) struct Exchange<T> {
     /// The image's lists (axis, round, face), kept for the ranges below.
     pub lists: [ExchangeList; LISTS_MAX],
     rounds: [[RoundRanges; ROUNDS_PER_AXIS_MAX]; 3],
-    scratch: [T; link_proto::VALUES_PER_FRAME_MAX],
+    _scalar: core::marker::PhantomData<T>,
 }
 
 impl<T: WireReal> Exchange<T> {
@@ -34,7 +34,7 @@ impl<T: WireReal> Exchange<T> {
         Exchange {
             lists: [ExchangeList::default(); LISTS_MAX],
             rounds: [[RoundRanges::default(); ROUNDS_PER_AXIS_MAX]; 3],
-            scratch: [T::ZERO; link_proto::VALUES_PER_FRAME_MAX],
+            _scalar: core::marker::PhantomData,
         }
     }
 
@@ -73,14 +73,14 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
         let mut m = 0;
         for &k in &self.st.sends[s as usize..e as usize] {
             let v = self.st.force[k as usize];
-            self.exchange.scratch[m..m + 3].copy_from_slice(&v);
+            self.st.scratch[m..m + 3].copy_from_slice(&v);
             m += 3;
         }
         let len = emit_values(
             FrameKind::Forces,
             self.step as u32,
-            T::wire(&self.exchange.scratch[..m]),
-            &mut self.io.tx,
+            T::wire(&self.st.scratch[..m]),
+            self.st.tx,
         )
         .map_err(|_| {
             self.fault(FaultKind::SendFailed {
@@ -88,7 +88,7 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                 error: link_proto::SendError::TooLong,
             })
         })?;
-        match links.try_send(face, &self.io.tx[..len]) {
+        match links.try_send(face, &self.st.tx[..len]) {
             Ok(()) => {
                 self.stats.frames_sent[face.index()] += 1;
                 self.stats.bytes_sent[face.index()] += len as u64;
@@ -111,13 +111,13 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             return Ok(true);
         }
         let face = face_of(axis, f);
-        let len = match links.try_recv(face, &mut self.io.rx) {
+        let len = match links.try_recv(face, self.st.rx) {
             Ok(Some(len)) => len,
             Ok(None) => return Ok(false),
             Err(error) => return Err(self.fault(FaultKind::LinkError { face, error })),
         };
         self.stats.frames_received[face.index()] += 1;
-        let repr = FrameRepr::parse_bytes(&self.io.rx[..len.min(self.io.rx.len())])
+        let repr = FrameRepr::parse_bytes(&self.st.rx[..len.min(self.st.rx.len())])
             .map_err(|error| self.fault(FaultKind::BadFrame { face, error }))?;
         let expected = 3 * (e - s) as usize;
         if repr.kind != FrameKind::Forces

@@ -43,7 +43,7 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
         len: usize,
     ) -> Result<bool, Fault> {
         let total = PACKET_HEADER_LEN + len + link_proto::CRC_LEN;
-        let Some(buf) = self.io.tx.get_mut(..total) else {
+        let Some(buf) = self.st.tx.get_mut(..total) else {
             return Err(self.fault(FaultKind::GlobalSendFailed {
                 dst,
                 error: link_proto::SendError::TooLong,
@@ -57,7 +57,7 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
         p.set_version(link_proto::packet::PACKET_VERSION);
         p.set_payload_len(len as u16);
         p.fill_crc();
-        match links.try_send_global(&self.io.tx[..total]) {
+        match links.try_send_global(&self.st.tx[..total]) {
             Ok(()) => {
                 self.port.msg_id = self.port.msg_id.wrapping_add(1);
                 self.port.stats.packets_sent += 1;

@@ -30,7 +30,7 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                 count: count as u16,
             };
             let mut plen = 0;
-            let payload = &mut self.io.tx[PACKET_HEADER_LEN..];
+            let payload = &mut self.st.tx[PACKET_HEADER_LEN..];
             let mut ok = h.emit(payload).map(|l| plen = l);
             for e in 0..count {
                 let l = self.st.contact.graphics[from + e] as usize;

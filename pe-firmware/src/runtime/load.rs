@@ -2,14 +2,13 @@
 //! ([`crate::image::read_image`]), then the runtime's own indexes (exchange ranges, contact
 //! map, this board's contact slot, the step program).
 
-use link_proto::FRAME_LEN_MAX;
+use link_proto::{FRAME_LEN_MAX, VALUES_PER_FRAME_MAX};
 
 use super::contact::ContactState;
 use super::exchange::{Exchange, LISTS_MAX};
 use super::storage::SmallTables;
 use super::{
-    global, FrameBuffers, LinkStats, Program, Runtime, RuntimeConfig, Storage, WireReal,
-    ROUNDS_PER_AXIS_MAX,
+    global, LinkStats, Program, Runtime, RuntimeConfig, Storage, WireReal, ROUNDS_PER_AXIS_MAX,
 };
 use crate::image::{read_image, ElementRecord, ImageError};
 use crate::physics::CentralDifference;
@@ -48,6 +47,20 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
             e => e,
         })?;
         let c = header.counts;
+        // The frame buffers live in the storage (a runtime on the stack stays small).
+        for (len, max) in [
+            (st.tx.len(), FRAME_LEN_MAX),
+            (st.rx.len(), FRAME_LEN_MAX),
+            (st.scratch.len(), VALUES_PER_FRAME_MAX),
+        ] {
+            if len < max {
+                return Err(ImageError::Capacity {
+                    what: "frame buffers",
+                    count: max as u32,
+                    max: len as u32,
+                });
+            }
+        }
         for &n in &c.rounds {
             if n as usize > ROUNDS_PER_AXIS_MAX {
                 return Err(ImageError::Capacity {
@@ -79,10 +92,6 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
             pc: 0,
             waiting_since: None,
             exchange,
-            io: FrameBuffers {
-                tx: [0; FRAME_LEN_MAX],
-                rx: [0; FRAME_LEN_MAX],
-            },
             cd: CentralDifference::new(header.params.dt_s, header.params.damping_per_s),
             step: 0,
             config,

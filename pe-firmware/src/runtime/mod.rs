@@ -22,11 +22,11 @@ mod load;
 pub mod program;
 pub mod storage;
 
-use link_proto::{Face, Links, Values, FRAME_LEN_MAX};
+use link_proto::{Face, Links, Values};
 
 use crate::image::*;
 use crate::physics::explicit::{accumulate_internal_forces, update_node, NodeMove};
-use crate::physics::{CentralDifference, HexFull, HexReduced, MaterialLaw};
+use crate::physics::{CentralDifference, HexBox, HexFull, HexReduced, MaterialLaw};
 
 pub use contact::{ContactState, BOARDS_MAX, PAIRS_MAX, TOOLS_MAX};
 pub use fault::{Fault, FaultKind};
@@ -84,12 +84,6 @@ pub struct LinkStats {
     pub wait_ns: u64,
 }
 
-/// The frame (and packet) being sent and the one being received.
-struct FrameBuffers {
-    tx: [u8; FRAME_LEN_MAX],
-    rx: [u8; FRAME_LEN_MAX],
-}
-
 /// One board running its schedule image. `E` is the element type (reduced or full).
 pub struct Runtime<'a, T, E> {
     pub header: ImageHeader,
@@ -100,7 +94,6 @@ pub struct Runtime<'a, T, E> {
     waiting_since: Option<u64>,
     st: Storage<'a, T, E>,
     exchange: exchange::Exchange<T>,
-    io: FrameBuffers,
     cd: CentralDifference<T>,
     step: u64,
     config: RuntimeConfig,
@@ -146,6 +139,11 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         )
     }
 
+    /// The loaded parallelepipeds (batch order).
+    pub fn boxes(&self) -> &[HexBox<T>] {
+        &self.st.boxes[..self.header.counts.boxes as usize]
+    }
+
     /// Global-network traffic of this board.
     pub fn global_stats(&self) -> GlobalStats {
         self.port.stats
@@ -177,19 +175,33 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         }
     }
 
+    /// Batch `b`: its general elements, then its parallelepipeds (numbered after all the
+    /// general ones in faults).
     fn batch(&mut self, b: usize) -> Result<(), Fault> {
-        let ends = self.header.counts.batch_ends;
-        let start = if b == 0 { 0 } else { ends[b - 1] as usize };
-        let end = ends[b] as usize;
+        let c = self.header.counts;
+        let range = |ends: [u32; 4]| {
+            let start = if b == 0 { 0 } else { ends[b - 1] as usize };
+            start..ends[b] as usize
+        };
+        let (general, boxes) = (range(c.batch_ends), range(c.box_batch_ends));
         let st = &mut self.st;
-        let n = self.header.counts.nodes as usize;
+        let n = c.nodes as usize;
         accumulate_internal_forces(
-            &st.elements[start..end],
-            start as u32,
+            &st.elements[general.clone()],
+            general.start as u32,
             st.laws,
             &st.u[..n],
             &mut st.force[..n],
         )
+        .and_then(|()| {
+            accumulate_internal_forces(
+                &st.boxes[boxes.clone()],
+                c.elements + boxes.start as u32,
+                st.laws,
+                &st.u[..n],
+                &mut st.force[..n],
+            )
+        })
         .map_err(|e| self.fault(FaultKind::Physics(e)))
     }
 

@@ -7,12 +7,15 @@
 
 use core::mem::size_of;
 
+use link_proto::{FRAME_LEN_MAX, VALUES_PER_FRAME_MAX};
+
 use crate::image::{
     zero_record, ContactFace, ContactNode, ContactNodePlace, Counts, ImageParts, LoadRecord,
     NodeRecord, PathPoint, RecvEntry,
 };
+use crate::image::{ElementRecord, Integration};
 use crate::physics::contact::Candidate;
-use crate::physics::MaterialLaw;
+use crate::physics::{HexBox, MaterialLaw};
 use crate::profile::BoardProfile;
 
 /// The link buffers a board keeps in a static beside its storage (the firmware's
@@ -26,7 +29,10 @@ pub type RemoteSlot = [(u32, [f64; 3]); 2];
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Capacities {
     pub materials: usize,
+    /// General-kernel elements (the integration's record).
     pub elements: usize,
+    /// Parallelepipeds ([`HexBox`]; none with full integration).
+    pub boxes: usize,
     pub nodes: usize,
     /// Send entries and receive entries (each) over all rounds and faces.
     pub exchange: usize,
@@ -52,6 +58,7 @@ impl Capacities {
         Capacities {
             materials: c.materials as usize,
             elements: c.elements as usize,
+            boxes: c.boxes as usize,
             nodes: c.nodes as usize,
             exchange: c.sends.max(c.recvs) as usize,
             path_points: c.path_points as usize,
@@ -70,13 +77,21 @@ impl Capacities {
     }
 
     /// What a board of profile `p` holds for scalar `T` and element `E`: the profile's
-    /// table, and as many elements as the RAM allows after the reserve (stack, the
-    /// runtime), the link buffers ([`LinkBuffers`]) and the rest of the storage.
-    pub const fn for_board<T, E>(p: &BoardProfile) -> Capacities {
+    /// table, as many parallelepipeds as nodes with reduced integration (a board's block of
+    /// cells has fewer cells than nodes), and as many general elements as the RAM allows
+    /// after the reserve (stack, the runtime), the link buffers ([`LinkBuffers`]) and the
+    /// rest of the storage.
+    pub const fn for_board<T: crate::physics::Real, E: ElementRecord<T>>(
+        p: &BoardProfile,
+    ) -> Capacities {
         let nodes = link_proto::NODES_PER_BOARD_MAX;
         let mut c = Capacities {
             materials: p.materials_max as usize,
             elements: 0,
+            boxes: match E::INTEGRATION {
+                Integration::Reduced => nodes,
+                Integration::Full => 0,
+            },
             nodes,
             exchange: p.exchange_max as usize,
             path_points: p.path_points_max as usize,
@@ -98,6 +113,7 @@ impl Capacities {
     pub const fn bytes<T, E>(&self) -> usize {
         self.materials * size_of::<MaterialLaw<T>>()
             + self.elements * size_of::<E>()
+            + self.boxes * size_of::<HexBox<T>>()
             + self.nodes * (size_of::<NodeRecord<T>>() + 3 * size_of::<[T; 3]>())
             + self.exchange * (size_of::<u16>() + size_of::<RecvEntry>())
             + self.path_points * size_of::<PathPoint>()
@@ -112,6 +128,8 @@ impl Capacities {
             + self.contact_sends * size_of::<u32>()
             + self.contact_map * size_of::<u32>()
             + self.graphics_nodes * size_of::<u16>()
+            + 2 * FRAME_LEN_MAX
+            + VALUES_PER_FRAME_MAX * size_of::<T>()
     }
 
     /// Every table of `c` that exceeds these capacities: (what, needed, held), in the
@@ -121,6 +139,7 @@ impl Capacities {
         [
             ("materials", c.materials as usize, self.materials),
             ("elements", c.elements as usize, self.elements),
+            ("parallelepipeds", c.boxes as usize, self.boxes),
             ("nodes", c.nodes as usize, self.nodes),
             ("exchange sends", c.sends as usize, self.exchange),
             ("exchange receives", c.recvs as usize, self.exchange),
@@ -152,6 +171,7 @@ impl Capacities {
 pub struct Storage<'a, T, E> {
     pub laws: &'a mut [MaterialLaw<T>],
     pub elements: &'a mut [E],
+    pub boxes: &'a mut [HexBox<T>],
     pub nodes: &'a mut [NodeRecord<T>],
     pub u: &'a mut [[T; 3]],
     pub u_prev: &'a mut [[T; 3]],
@@ -161,6 +181,12 @@ pub struct Storage<'a, T, E> {
     pub path_points: &'a mut [PathPoint],
     pub loads: &'a mut [LoadRecord],
     pub contact: ContactStorage<'a>,
+    /// The link frame (or global packet) being sent and the one being received, and the
+    /// values of a frame: [`FRAME_LEN_MAX`] bytes each and [`VALUES_PER_FRAME_MAX`] values,
+    /// in the storage so that the runtime itself stays small on the stack.
+    pub tx: &'a mut [u8],
+    pub rx: &'a mut [u8],
+    pub scratch: &'a mut [T],
 }
 
 /// The contact and graphics part of [`Storage`] (empty slices when a scene has neither).
@@ -189,6 +215,7 @@ impl<'a, T, E> Storage<'a, T, E> {
         ImageParts {
             laws: self.laws,
             elements: self.elements,
+            boxes: self.boxes,
             nodes: self.nodes,
             lists: small.lists,
             sends: self.sends,
@@ -238,7 +265,8 @@ impl Shelf for Heapless {
     }
 }
 
-/// The owner of a board's arrays. Capacities: `NM` materials, `NE` elements, `NN` nodes,
+/// The owner of a board's arrays. Capacities: `NM` materials, `NE` elements, `NB`
+/// parallelepipeds, `NN` nodes,
 /// `NX` exchange entries, `NP` path points, `NL` loads, `NC` contact nodes, `NF` contact
 /// faces, `NK` candidates, `NS` contact sends (a growable [`Shelf`] ignores them).
 pub struct StorageBuf<
@@ -247,6 +275,7 @@ pub struct StorageBuf<
     E: Copy,
     const NM: usize,
     const NE: usize,
+    const NB: usize,
     const NN: usize,
     const NX: usize,
     const NP: usize,
@@ -258,6 +287,7 @@ pub struct StorageBuf<
 > {
     laws: S::Of<MaterialLaw<T>, NM>,
     elements: S::Of<E, NE>,
+    boxes: S::Of<HexBox<T>, NB>,
     nodes: S::Of<NodeRecord<T>, NN>,
     u: S::Of<[T; 3], NN>,
     u_prev: S::Of<[T; 3], NN>,
@@ -276,6 +306,9 @@ pub struct StorageBuf<
     send_list: S::Of<u32, NS>,
     contact_of: S::Of<u32, NN>,
     graphics: S::Of<u16, NN>,
+    tx: S::Of<u8, FRAME_LEN_MAX>,
+    rx: S::Of<u8, FRAME_LEN_MAX>,
+    scratch: S::Of<T, VALUES_PER_FRAME_MAX>,
 }
 
 impl<
@@ -284,6 +317,7 @@ impl<
         E: Copy + serde::de::DeserializeOwned,
         const NM: usize,
         const NE: usize,
+        const NB: usize,
         const NN: usize,
         const NX: usize,
         const NP: usize,
@@ -292,7 +326,7 @@ impl<
         const NF: usize,
         const NK: usize,
         const NS: usize,
-    > StorageBuf<S, T, E, NM, NE, NN, NX, NP, NL, NC, NF, NK, NS>
+    > StorageBuf<S, T, E, NM, NE, NB, NN, NX, NP, NL, NC, NF, NK, NS>
 {
     /// Empty storage. (The firmware's, 4 MiB of fixed-capacity vectors on the emulated
     /// board, is a zeroed static instead: an all-zero `heapless::Vec` is empty.)
@@ -300,6 +334,7 @@ impl<
         StorageBuf {
             laws: S::empty(),
             elements: S::empty(),
+            boxes: S::empty(),
             nodes: S::empty(),
             u: S::empty(),
             u_prev: S::empty(),
@@ -318,6 +353,9 @@ impl<
             send_list: S::empty(),
             contact_of: S::empty(),
             graphics: S::empty(),
+            tx: S::empty(),
+            rx: S::empty(),
+            scratch: S::empty(),
         }
     }
 
@@ -333,6 +371,7 @@ impl<
         }
         put::<S, _, NM>(&mut self.laws, caps.materials)?;
         put::<S, _, NE>(&mut self.elements, caps.elements)?;
+        put::<S, _, NB>(&mut self.boxes, caps.boxes)?;
         put::<S, _, NN>(&mut self.nodes, caps.nodes)?;
         put::<S, _, NN>(&mut self.u, caps.nodes)?;
         put::<S, _, NN>(&mut self.u_prev, caps.nodes)?;
@@ -351,9 +390,13 @@ impl<
         put::<S, _, NS>(&mut self.send_list, caps.contact_sends)?;
         put::<S, _, NN>(&mut self.contact_of, caps.contact_map)?;
         put::<S, _, NN>(&mut self.graphics, caps.graphics_nodes)?;
+        put::<S, _, FRAME_LEN_MAX>(&mut self.tx, FRAME_LEN_MAX)?;
+        put::<S, _, FRAME_LEN_MAX>(&mut self.rx, FRAME_LEN_MAX)?;
+        put::<S, _, VALUES_PER_FRAME_MAX>(&mut self.scratch, VALUES_PER_FRAME_MAX)?;
         Some(Storage {
             laws: &mut self.laws,
             elements: &mut self.elements,
+            boxes: &mut self.boxes,
             nodes: &mut self.nodes,
             u: &mut self.u,
             u_prev: &mut self.u_prev,
@@ -374,6 +417,9 @@ impl<
                 contact_of: &mut self.contact_of,
                 graphics: &mut self.graphics,
             },
+            tx: &mut self.tx,
+            rx: &mut self.rx,
+            scratch: &mut self.scratch,
         })
     }
 }
