@@ -211,18 +211,20 @@ fn blocks(cells: &[[usize; 3]]) -> String {
 
 #[test]
 fn elements_and_materials_at_their_limits() {
-    // Elements (PE board, f64 full): one block of exactly the capacity (a x b x 1 cells),
-    // then a second block of one cell beside it.
+    // Elements (PE board, f64 full): blocks of exactly the capacity (a q x q x 1 square
+    // and a row of the rest), then one cell more in a block of its own.
     const { assert!(CAP_FULL.elements > 100 && CAP_FULL.elements < 400) };
     let n = CAP_FULL.elements;
-    let a = (1..=n)
-        .rev()
-        .find(|a| n.is_multiple_of(*a) && a * a <= n)
-        .unwrap();
-    let main = [a, n / a, 1];
+    let q = (1..=n).rev().find(|q| q * q <= n).unwrap();
+    let mut at_blocks = vec![[q, q, 1]];
+    if n > q * q {
+        at_blocks.push([n - q * q, 1, 1]);
+    }
+    let mut over_blocks = at_blocks.clone();
+    over_blocks.push([1, 1, 1]);
     let full = "integration = \"full\"";
-    let at = scene_with(&blocks(&[main]), MATERIAL, full);
-    let over = scene_with(&blocks(&[main, [1, 1, 1]]), MATERIAL, full);
+    let at = scene_with(&blocks(&at_blocks), MATERIAL, full);
+    let over = scene_with(&blocks(&over_blocks), MATERIAL, full);
     assert_eq!((at.mesh.cells.len(), over.mesh.cells.len()), (n, n + 1));
     assert!(
         over.mesh.nodes.len() <= 1024,
