@@ -516,7 +516,9 @@ fn synthesis8<T: Real>(mut w: [T; 8]) -> [T; 8] {
 /// same values, so both give the same bits.
 trait Corners<T> {
     fn get(&self, p: usize, i: usize) -> T;
-    fn add(&mut self, p: usize, i: usize, v: T);
+    /// Adds `v` to the force at corner `p` (all three components at once: one lookup of
+    /// the node per corner).
+    fn add(&mut self, p: usize, v: [T; 3]);
 }
 
 /// An element's own arrays (Gmsh order).
@@ -531,8 +533,11 @@ impl<T: Real> Corners<T> for Local<'_, T> {
         self.u[CORNER[p]][i]
     }
     #[inline(always)]
-    fn add(&mut self, p: usize, i: usize, v: T) {
-        self.f[CORNER[p]][i] += v;
+    fn add(&mut self, p: usize, v: [T; 3]) {
+        let d = &mut self.f[CORNER[p]];
+        for i in 0..3 {
+            d[i] += v[i];
+        }
     }
 }
 
@@ -574,28 +579,28 @@ impl<T: Real> Corners<T> for Global<'_, T> {
         self.u[p][i]
     }
     #[inline(always)]
-    fn add(&mut self, p: usize, i: usize, v: T) {
+    fn add(&mut self, p: usize, v: [T; 3]) {
         // Always in range (see `Global::new`).
         if let Some(d) = self.f.get_mut(self.at[p]) {
-            d[i] += v;
+            for i in 0..3 {
+                d[i] += v[i];
+            }
         }
     }
 }
 
-/// The corner moments of the displacements, per component (`c[i][k]`).
+/// The corner moments of component `i` of the displacements ([`transform8`]).
 #[inline(always)]
-fn moments_of<T: Real>(c: &impl Corners<T>) -> [[T; 8]; 3] {
-    core::array::from_fn(|i| transform8(core::array::from_fn(|p| c.get(p, i))))
+fn moments_of<T: Real>(c: &impl Corners<T>, i: usize) -> [T; 8] {
+    transform8(core::array::from_fn(|p| c.get(p, i)))
 }
 
-/// Adds the nodal vectors of moments `m` (`m[k][i]`) to the corners, one component at a time.
+/// Adds the nodal vectors of the moments `m[i]` (component `i`) to the corners.
 #[inline(always)]
-fn add_synthesis<T: Real>(c: &mut impl Corners<T>, m: &[[T; 3]; 8]) {
-    for i in 0..3 {
-        let v = synthesis8(core::array::from_fn(|k| m[k][i]));
-        for (p, x) in v.into_iter().enumerate() {
-            c.add(p, i, x);
-        }
+fn add_synthesis<T: Real>(c: &mut impl Corners<T>, m: [[T; 8]; 3]) {
+    let v = m.map(synthesis8);
+    for p in 0..8 {
+        c.add(p, [v[0][p], v[1][p], v[2][p]]);
     }
 }
 
@@ -634,23 +639,28 @@ pub struct HexReduced<T> {
 }
 
 impl<T: Real> HexReduced<T> {
-    /// `H` and the hourglass displacements `q_α` from the displacement moments.
+    /// `H` and the hourglass displacements `q_α`, one displacement component (row of `H`)
+    /// at a time.
     #[inline(always)]
-    fn strain_and_modes(&self, c: &[[T; 8]; 3]) -> (Mat3<T>, [[T; 3]; 4]) {
+    fn strain_and_modes(&self, corners: &impl Corners<T>) -> (Mat3<T>, [[T; 3]; 4]) {
         let beta = &self.gradient_moments;
-        let h: Mat3<T> = core::array::from_fn(|i| {
-            core::array::from_fn(|j| {
-                let mut s = c[i][MASKS[0]] * beta[0][j];
+        let mut h = [[T::ZERO; 3]; 3];
+        let mut hg = [[T::ZERO; 4]; 3];
+        for i in 0..3 {
+            let c = moments_of(corners, i);
+            h[i] = core::array::from_fn(|j| {
+                let mut s = c[MASKS[0]] * beta[0][j];
                 for k in 1..7 {
-                    s += c[i][MASKS[k]] * beta[k][j];
+                    s += c[MASKS[k]] * beta[k][j];
                 }
                 s
-            })
-        });
+            });
+            hg[i] = HOURGLASS.map(|m| c[m]);
+        }
         let q = core::array::from_fn(|alpha| {
             let g = &self.hourglass_geometry[alpha];
             core::array::from_fn(|i| {
-                c[i][HOURGLASS[alpha]] - (h[i][0] * g[0] + h[i][1] * g[1] + h[i][2] * g[2])
+                hg[i][alpha] - (h[i][0] * g[0] + h[i][1] * g[1] + h[i][2] * g[2])
             })
         });
         (h, q)
@@ -662,8 +672,7 @@ impl<T: Real> HexReduced<T> {
         law: &MaterialLaw<T>,
         corners: &mut impl Corners<T>,
     ) -> Result<(), NonPositiveJacobian> {
-        let c = moments_of(corners);
-        let (h, q) = self.strain_and_modes(&c);
+        let (h, q) = self.strain_and_modes(corners);
         let p = law.first_piola_kirchhoff(&plus_identity(h))?;
         let k = self.hourglass_stiffness;
         let big_q: [[T; 3]; 4] = core::array::from_fn(|alpha| q[alpha].map(|v| k * v));
@@ -677,18 +686,18 @@ impl<T: Real> HexReduced<T> {
                 m
             })
         });
-        let mut m = [[T::ZERO; 3]; 8];
-        for (k, b) in self.gradient_moments.iter().enumerate() {
-            m[MASKS[k]] =
-                core::array::from_fn(|i| pm[i][0] * b[0] + pm[i][1] * b[1] + pm[i][2] * b[2]);
-        }
-        for alpha in 0..4 {
-            let mk = &mut m[HOURGLASS[alpha]];
-            for i in 0..3 {
-                mk[i] += big_q[alpha][i];
+        let m = core::array::from_fn(|i| {
+            let row = &pm[i];
+            let mut m = [T::ZERO; 8];
+            for (k, b) in self.gradient_moments.iter().enumerate() {
+                m[MASKS[k]] = row[0] * b[0] + row[1] * b[1] + row[2] * b[2];
             }
-        }
-        add_synthesis(corners, &m);
+            for alpha in 0..4 {
+                m[HOURGLASS[alpha]] += big_q[alpha][i];
+            }
+            m
+        });
+        add_synthesis(corners, m);
         Ok(())
     }
 }
@@ -712,11 +721,10 @@ impl<T: Real> HexElement<T> for HexReduced<T> {
         Ok(local.f)
     }
     fn energy(&self, law: &MaterialLaw<T>, u: &[[T; 3]; 8]) -> Result<T, NonPositiveJacobian> {
-        let c = moments_of(&Local {
+        let (h, q) = self.strain_and_modes(&Local {
             u,
             f: [[T::ZERO; 3]; 8],
         });
-        let (h, q) = self.strain_and_modes(&c);
         let w = law.strain_energy_density(&plus_identity(h))? * self.volume;
         let qq: T = q.iter().flatten().fold(T::ZERO, |s, v| s + *v * *v);
         Ok(w + T::from_f64(0.5) * self.hourglass_stiffness * qq)
@@ -751,15 +759,20 @@ pub struct HexBox<T> {
 }
 
 impl<T: Real> HexBox<T> {
-    /// `F = I + Σ_j c_j ⊗ b_j`.
+    /// `F = I + Σ_j c_j ⊗ b_j` and the hourglass moments `c_α` (`hg[i][α]`), one
+    /// displacement component (row of `F`) at a time.
     #[inline(always)]
-    fn deformation(&self, c: &[[T; 8]; 3]) -> Mat3<T> {
+    fn deformation(&self, corners: &impl Corners<T>) -> (Mat3<T>, [[T; 4]; 3]) {
         let b = &self.basis;
-        let h: Mat3<T> = core::array::from_fn(|i| {
-            let (c0, c1, c2) = (c[i][LINEAR[0]], c[i][LINEAR[1]], c[i][LINEAR[2]]);
-            core::array::from_fn(|j| c0 * b[0][j] + c1 * b[1][j] + c2 * b[2][j])
-        });
-        plus_identity(h)
+        let mut h = [[T::ZERO; 3]; 3];
+        let mut hg = [[T::ZERO; 4]; 3];
+        for i in 0..3 {
+            let c = moments_of(corners, i);
+            let (c0, c1, c2) = (c[LINEAR[0]], c[LINEAR[1]], c[LINEAR[2]]);
+            h[i] = core::array::from_fn(|j| c0 * b[0][j] + c1 * b[1][j] + c2 * b[2][j]);
+            hg[i] = HOURGLASS.map(|m| c[m]);
+        }
+        (plus_identity(h), hg)
     }
 
     #[inline(always)]
@@ -768,18 +781,21 @@ impl<T: Real> HexBox<T> {
         law: &MaterialLaw<T>,
         corners: &mut impl Corners<T>,
     ) -> Result<(), NonPositiveJacobian> {
-        let c = moments_of(corners);
-        let p = law.first_piola_kirchhoff(&self.deformation(&c))?;
+        let (f, hg) = self.deformation(corners);
+        let p = law.first_piola_kirchhoff(&f)?;
         let k = self.hourglass_stiffness;
-        let mut m = [[T::ZERO; 3]; 8];
-        for (j, bv) in self.basis_volume.iter().enumerate() {
-            m[LINEAR[j]] =
-                core::array::from_fn(|i| p[i][0] * bv[0] + p[i][1] * bv[1] + p[i][2] * bv[2]);
-        }
-        for mask in HOURGLASS {
-            m[mask] = core::array::from_fn(|i| k * c[i][mask]);
-        }
-        add_synthesis(corners, &m);
+        let m = core::array::from_fn(|i| {
+            let row = &p[i];
+            let mut m = [T::ZERO; 8];
+            for (j, bv) in self.basis_volume.iter().enumerate() {
+                m[LINEAR[j]] = row[0] * bv[0] + row[1] * bv[1] + row[2] * bv[2];
+            }
+            for alpha in 0..4 {
+                m[HOURGLASS[alpha]] = k * hg[i][alpha];
+            }
+            m
+        });
+        add_synthesis(corners, m);
         Ok(())
     }
 }
@@ -803,15 +819,12 @@ impl<T: Real> HexElement<T> for HexBox<T> {
         Ok(local.f)
     }
     fn energy(&self, law: &MaterialLaw<T>, u: &[[T; 3]; 8]) -> Result<T, NonPositiveJacobian> {
-        let c = moments_of(&Local {
+        let (f, hg) = self.deformation(&Local {
             u,
             f: [[T::ZERO; 3]; 8],
         });
-        let w = law.strain_energy_density(&self.deformation(&c))? * self.volume;
-        let qq: T = HOURGLASS
-            .iter()
-            .flat_map(|&m| c.iter().map(move |ci| ci[m]))
-            .fold(T::ZERO, |s, v| s + v * v);
+        let w = law.strain_energy_density(&f)? * self.volume;
+        let qq: T = hg.iter().flatten().fold(T::ZERO, |s, v| s + *v * *v);
         Ok(w + T::from_f64(0.5) * self.hourglass_stiffness * qq)
     }
     #[inline(always)]
