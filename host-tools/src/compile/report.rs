@@ -32,7 +32,9 @@ pub struct CompileReport {
     /// Node copies beyond one per node (replicas), in all.
     pub replicated_nodes: usize,
     pub border_nodes_per_face_max: [usize; 6],
-    /// Force vectors sent per step, all links, both directions.
+    /// Force vectors sent per step, all links, both directions: one vector is one node's
+    /// partial or summed force one board sends to a neighbour over one link in one exchange
+    /// round (every round counted).
     pub force_vectors_per_step: usize,
     /// Force vectors per step on the busiest link direction.
     pub force_vectors_per_link_max: usize,
@@ -408,6 +410,12 @@ pub fn summary(r: &CompileReport) -> String {
     s += &format!(
         "  force vectors per step: {} in all, {} on the busiest link direction\n",
         r.force_vectors_per_step, r.force_vectors_per_link_max
+    );
+    s += "  (a force vector: one node's partial or summed force that one board sends to a neighbour over one link in one exchange round; every round and both directions counted)\n";
+    s += &format!(
+        "  partition: slabs refined by simulated annealing (seed {}) within {:.2} x the mean elements per board\n",
+        crate::compile::partition::refine::ANNEAL_SEED,
+        crate::compile::partition::BALANCE_MAX
     );
     s += &format!("  bytes per step: {} in all, {} on the busiest link; at dt = {:.3e} s ({:.0} steps/s): {:.3} GB/s in all, {:.1} MB/s on the busiest link ({:.0}% of its {:.0} MB/s)\n",
         r.bytes_per_step_total, r.bytes_per_step_per_link_max, r.dt_s, r.steps_per_s, r.bandwidth_total_bytes_per_s / 1e9,
