@@ -17,9 +17,11 @@ pub struct BoardProfile {
     pub flash_bytes: u64,
     /// Flash region that holds the schedule image (bytes).
     pub image_flash_bytes: u64,
-    /// Point-to-point link bandwidth, each direction (bytes/s).
+    /// Point-to-point link bandwidth, each direction (bytes/s): payload bits on the wire,
+    /// the frame's header and CRC included (the compile report adds them per frame).
     pub link_bytes_per_s: u64,
-    /// One-way latency of a link frame (ns).
+    /// Fixed cost of one link frame (ns): from the send being started to the receiver
+    /// holding the last byte, beyond the bytes' time on the wire.
     pub link_latency_ns: u64,
     /// Global network bandwidth into one board (bytes/s).
     pub global_bytes_per_s: u64,
@@ -44,9 +46,31 @@ pub struct BoardProfile {
     pub contact_sends_max: u32,
 }
 
-/// The custom PE board: STM32H7-class Cortex-M7 at 480 MHz with a double-precision FPU,
+/// The custom PE board: STM32H743 (Cortex-M7 at 480 MHz with a double-precision FPU),
 /// 1 MiB RAM (TCM plus AXI SRAM), 2 MiB flash (the upper 1 MiB holds the schedule image),
-/// six point-to-point links (LVDS, 200 Mbit/s each way) and a global network port.
+/// six point-to-point links and a global network port.
+///
+/// The links of a prototype built from the MCU alone (no LVDS serialiser): one SPI per
+/// face, SPI1 to SPI6 (the STM32H743 has six), full duplex (MOSI one way, MISO the other),
+/// the lower board of each pair the master; the frames go by DMA. Rate: 25 Mbit/s each
+/// way, `3_125_000` bytes/s. Where it comes from (ST: DS12110, the STM32H742xI/G and
+/// STM32H743xI/G datasheet, and RM0433, the reference manual):
+/// - RM0433, SPI: SCK is the SPI kernel clock divided by a power of two (2 to 256); the
+///   kernel clock of SPI1/2/3 (pll1_q, pll2_p, pll3_p, ...) is taken as 200 MHz here, and
+///   200 MHz / 8 = 25 MHz.
+/// - DS12110, SPI dynamic characteristics: the master-mode and slave-receiver SCK maxima
+///   are far above 25 MHz (of the order of 100 MHz; the exact figures, per SPI group and
+///   supply, are not checked here: an assumption), but in full duplex the slave must drive
+///   MISO, and its data output valid time tv(SO) (tens of ns), plus the cable between two
+///   boards both ways, limits a full-duplex link to well under that: 25 MHz is assumed.
+///   A simplex link per direction would need twelve SPIs, the MCU has six; the USARTs
+///   (about 12.5 Mbit/s at most, with start and stop bits) are slower.
+/// - Per frame, besides its header and CRC bytes (counted as bytes): 2 us to start the
+///   DMA on both sides, assert NSS, and take the end-of-transfer interrupt (an assumption,
+///   about a thousand cycles at 480 MHz).
+///
+/// Measure these on the prototype and update them here (one home: the compile report and
+/// board-sim's link timing model read them).
 pub const PE_BOARD: BoardProfile = BoardProfile {
     name: "pe-board",
     clock_hz: 480_000_000,
@@ -54,7 +78,7 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
     ram_reserved_bytes: 128 * 1024,
     flash_bytes: 2 * 1024 * 1024,
     image_flash_bytes: 1024 * 1024,
-    link_bytes_per_s: 25_000_000,
+    link_bytes_per_s: 3_125_000,
     link_latency_ns: 2_000,
     global_bytes_per_s: 12_500_000,
     image_origin: 0x0810_0000,
@@ -70,7 +94,8 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
 };
 
 /// QEMU's `mps2-an500` (Cortex-M7, FLASH at 0x0 and RAM at 0x20000000, 4 MiB each), the
-/// emulation profile used in CI. The clock is nominal (QEMU does not model time).
+/// emulation profile used in CI. The clock and the link figures are nominal (QEMU does not
+/// model time).
 pub const QEMU_MPS2_AN500: BoardProfile = BoardProfile {
     name: "qemu-mps2-an500",
     clock_hz: 25_000_000,

@@ -42,6 +42,7 @@ pub use inspect::inspect;
 pub use manifest::{compile_to_dir, read_manifest, Manifest, ManifestBoard};
 pub use plan::{line_rounds, plan, BoardPlan, Plan, RoundPlan, FACE_NAMES};
 pub use report::{
-    report, summary, BoardSummary, Capacity, CompileReport, ContactCompileReport, GraphicsReport,
+    link_time_s, report, summary, verdict, BoardSummary, Capacity, CompileReport,
+    ContactCompileReport, GraphicsReport, LinkLoad, RealTimeVerdict, COMPUTE_MARGIN,
 };
 pub use tables::ImageTables;

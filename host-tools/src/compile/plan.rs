@@ -100,6 +100,21 @@ pub fn line_rounds(m: usize) -> usize {
     }
 }
 
+/// Force vectors one node's summation tree sends along a line of `m + 1` boards
+/// ([`line_transfers`]): `m` towards the middle board and `m` back (two boards: one each way).
+pub fn line_vectors(m: usize) -> usize {
+    2 * m
+}
+
+/// Force vectors per step of a node held by a box of boards spanning `span[a] + 1` boards
+/// along each axis: every line of the box along an axis runs that axis's tree, and the
+/// box has `(span[b] + 1) (span[c] + 1)` lines along axis `a` (`b`, `c` the other axes).
+pub fn box_vectors(span: [usize; 3]) -> usize {
+    (0..3)
+        .map(|a| line_vectors(span[a]) * (span[(a + 1) % 3] + 1) * (span[(a + 2) % 3] + 1))
+        .sum()
+}
+
 /// The whole machine's schedule for `problem` on `machine`.
 pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
     let mesh = &problem.mesh;
@@ -283,4 +298,22 @@ fn order_board(problem: &Problem, bp: &mut BoardPlan) {
             }
         })
         .collect();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The vector count the partitioner minimises is what the summation trees send.
+    #[test]
+    fn line_vectors_counts_the_trees_transfers() {
+        for m in 0..16 {
+            assert_eq!(
+                line_transfers(m).len(),
+                line_vectors(m),
+                "line of {} boards",
+                m + 1
+            );
+        }
+    }
 }

@@ -8,7 +8,7 @@ use serde::Serialize;
 
 use super::image::BoardImage;
 use super::image::{contact_tables, graphics_params, image_file_name};
-use super::plan::Plan;
+use super::plan::{Plan, FACE_NAMES};
 use crate::problem::elements::is_box;
 use crate::problem::Problem;
 
@@ -33,7 +33,9 @@ pub struct CompileReport {
     /// Node copies beyond one per node (replicas), in all.
     pub replicated_nodes: usize,
     pub border_nodes_per_face_max: [usize; 6],
-    /// Force vectors sent per step, all links, both directions.
+    /// Force vectors sent per step, all links, both directions: one vector is one node's
+    /// partial or summed force one board sends to a neighbour over one link in one exchange
+    /// round (every round counted).
     pub force_vectors_per_step: usize,
     /// Force vectors per step on the busiest link direction.
     pub force_vectors_per_link_max: usize,
@@ -45,6 +47,10 @@ pub struct CompileReport {
     pub link_bandwidth_bytes_per_s: u64,
     /// Fraction of a step the busiest link is busy at the scene's step rate.
     pub link_utilisation_max: f64,
+    /// Per-frame cost of a link (s), beside `link_bandwidth_bytes_per_s`.
+    pub link_frame_latency_s: f64,
+    /// Whether the array keeps the scene's step: compute and every link.
+    pub real_time: RealTimeVerdict,
     pub image_bytes_max: usize,
     pub ram_bytes_max: u64,
     /// Board compute capacity from the firmware's measured instruction counts
@@ -177,8 +183,9 @@ pub struct Capacity {
     /// Elements of the scene that take the parallelepiped kernel.
     pub parallelepipeds: usize,
     pub instructions_per_node_update: u32,
-    /// Instructions of one step on the busiest board (no exchange).
+    /// Instructions of one step on the busiest board (no exchange), and that board.
     pub step_instructions_max: f64,
+    pub busiest_board: [usize; 3],
     /// That step's time at one instruction per cycle (s), against the scene's `dt_s`.
     pub step_compute_s_max: f64,
     pub compute_keeps_real_time: bool,
@@ -218,6 +225,8 @@ pub fn report(
     let rate = 1.0 / dt;
     let frame_bytes_max = links.bytes.iter().copied().max().unwrap_or(0);
     let bytes_total: usize = links.bytes.iter().sum();
+    let capacity = capacity_report(problem, plan, profile, dt);
+    let real_time = verdict(&capacity, &links.loads(plan, profile), dt);
     Ok(CompileReport {
         graphics: graphics_report(problem, plan, dt),
         contact: contact_report(problem, plan, dt, rate)?,
@@ -250,9 +259,11 @@ pub fn report(
         bandwidth_per_link_max_bytes_per_s: frame_bytes_max as f64 * rate,
         link_bandwidth_bytes_per_s: profile.link_bytes_per_s,
         link_utilisation_max: frame_bytes_max as f64 * rate / profile.link_bytes_per_s as f64,
+        link_frame_latency_s: profile.link_latency_ns as f64 * 1e-9,
+        real_time,
         image_bytes_max: images.iter().map(|i| i.bytes.len()).max().unwrap_or(0),
         ram_bytes_max: images.iter().map(|i| i.ram_bytes).max().unwrap_or(0),
-        capacity: capacity_report(problem, plan, profile, dt),
+        capacity,
         boards: board_summaries(plan, images),
     })
 }
@@ -262,6 +273,7 @@ pub fn report(
 struct LinkTraffic {
     vectors: Vec<usize>,
     bytes: Vec<usize>,
+    frames: Vec<usize>,
 }
 
 impl LinkTraffic {
@@ -271,6 +283,7 @@ impl LinkTraffic {
         let mut t = LinkTraffic {
             vectors: Vec::new(),
             bytes: Vec::new(),
+            frames: Vec::new(),
         };
         for b in &plan.boards {
             for f in 0..6 {
@@ -279,9 +292,132 @@ impl LinkTraffic {
                 let frames = rounds.iter().filter(|r| !r.send[f % 2].is_empty()).count();
                 t.vectors.push(n);
                 t.bytes.push(3 * w * n + frames * overhead);
+                t.frames.push(frames);
             }
         }
         t
+    }
+
+    /// Every link direction that sends, with its time per step on `profile`'s links.
+    fn loads(&self, plan: &Plan, profile: &BoardProfile) -> Vec<LinkLoad> {
+        (0..self.bytes.len())
+            .filter(|&i| self.frames[i] > 0)
+            .map(|i| {
+                let (bytes, frames) = (self.bytes[i], self.frames[i]);
+                LinkLoad {
+                    board: plan.boards[i / 6].coords,
+                    face: FACE_NAMES[i % 6].to_string(),
+                    bytes_per_step: bytes,
+                    frames_per_step: frames,
+                    time_per_step_s: link_time_s(bytes, frames, profile),
+                }
+            })
+            .collect()
+    }
+}
+
+/// Time one link direction needs per step for `bytes` in `frames` frames: the bytes at the
+/// link's rate plus each frame's fixed cost.
+pub fn link_time_s(bytes: usize, frames: usize, profile: &BoardProfile) -> f64 {
+    bytes as f64 / profile.link_bytes_per_s as f64
+        + frames as f64 * profile.link_latency_ns as f64 * 1e-9
+}
+
+/// One link direction (a board's face) and what it sends per step.
+#[derive(Clone, Debug, Serialize)]
+pub struct LinkLoad {
+    pub board: [usize; 3],
+    pub face: String,
+    pub bytes_per_step: usize,
+    pub frames_per_step: usize,
+    /// Bytes at the link's rate plus the frames' fixed cost (s).
+    pub time_per_step_s: f64,
+}
+
+/// Whether the board array keeps the scene's step: the busiest board's compute within
+/// `dt / COMPUTE_MARGIN` and every link direction's time per step within `dt`.
+#[derive(Clone, Debug, Serialize)]
+pub struct RealTimeVerdict {
+    pub keeps_real_time: bool,
+    /// The step (s) and the compute budget, the step over [`COMPUTE_MARGIN`] (s).
+    pub dt_s: f64,
+    pub compute_budget_s: f64,
+    /// The busiest board's compute per step (s, from [`Capacity`]) and that board.
+    pub compute_s_max: f64,
+    pub compute_board: [usize; 3],
+    pub compute_fits: bool,
+    /// The busiest link direction, if any link sends.
+    pub link_busiest: Option<LinkLoad>,
+    pub links: usize,
+    /// Link directions whose time per step exceeds `dt_s`, the worst first (at most
+    /// [`LINKS_OVER_LISTED`] listed; `links_over_count` counts them all).
+    pub links_over_count: usize,
+    pub links_over: Vec<LinkLoad>,
+    /// Why not, one line each (empty when it keeps real time).
+    pub reasons: Vec<String>,
+}
+
+/// Compute may take at most the step over this (room for the exchange, interrupts, jitter).
+pub const COMPUTE_MARGIN: f64 = 2.0;
+
+/// Links over their rate listed in the report (the count covers all).
+pub const LINKS_OVER_LISTED: usize = 8;
+
+/// The real-time verdict from the compute figure and the links' loads.
+pub fn verdict(capacity: &Capacity, links: &[LinkLoad], dt_s: f64) -> RealTimeVerdict {
+    let budget = dt_s / COMPUTE_MARGIN;
+    let compute_fits = capacity.step_compute_s_max <= budget;
+    // Slowest first; equal times keep board and face order.
+    let mut sorted: Vec<&LinkLoad> = links.iter().collect();
+    sorted.sort_by(|a, b| b.time_per_step_s.total_cmp(&a.time_per_step_s));
+    let link_busiest = sorted.first().map(|l| (*l).clone());
+    let over: Vec<LinkLoad> = sorted
+        .into_iter()
+        .take_while(|l| l.time_per_step_s > dt_s)
+        .cloned()
+        .collect();
+    let mut reasons = Vec::new();
+    if !compute_fits {
+        let [x, y, z] = capacity.busiest_board;
+        reasons.push(format!(
+            "board ({x},{y},{z}) computes {:.1} us per step, over the {:.1} us budget (dt / {COMPUTE_MARGIN}) by {:.1} us ({:.2}x)",
+            capacity.step_compute_s_max * 1e6,
+            budget * 1e6,
+            (capacity.step_compute_s_max - budget) * 1e6,
+            capacity.step_compute_s_max / budget
+        ));
+    }
+    for l in over.iter().take(LINKS_OVER_LISTED) {
+        let [x, y, z] = l.board;
+        reasons.push(format!(
+            "link ({x},{y},{z}) {} needs {:.1} us per step ({} bytes in {} frames), over dt = {:.1} us by {:.1} us ({:.2}x)",
+            l.face,
+            l.time_per_step_s * 1e6,
+            l.bytes_per_step,
+            l.frames_per_step,
+            dt_s * 1e6,
+            (l.time_per_step_s - dt_s) * 1e6,
+            l.time_per_step_s / dt_s
+        ));
+    }
+    if over.len() > LINKS_OVER_LISTED {
+        reasons.push(format!(
+            "and {} more links over dt",
+            over.len() - LINKS_OVER_LISTED
+        ));
+    }
+    RealTimeVerdict {
+        keeps_real_time: compute_fits && over.is_empty(),
+        dt_s,
+        compute_budget_s: budget,
+        compute_s_max: capacity.step_compute_s_max,
+        compute_board: capacity.busiest_board,
+        compute_fits,
+        link_busiest,
+        links: links.len(),
+        links_over_count: over.len(),
+        links_over: over.into_iter().take(LINKS_OVER_LISTED).collect(),
+        reasons,
     }
 }
 
@@ -296,14 +432,17 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
             .filter(|&&e| is_box(problem, e as usize))
             .count()
     };
-    let busiest = plan
+    let (busiest, busiest_board) = plan
         .boards
         .iter()
         .map(|b| {
             let nb = boxes(b);
-            cost.step_instructions(b.elements.len() - nb, nb, b.nodes.len())
+            (
+                cost.step_instructions(b.elements.len() - nb, nb, b.nodes.len()),
+                b.coords,
+            )
         })
-        .fold(0.0f64, f64::max);
+        .fold((0.0f64, [0; 3]), |m, b| if b.0 > m.0 { b } else { m });
     let npe = plan
         .boards
         .iter()
@@ -320,6 +459,7 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
         parallelepipeds: (box_fraction * n as f64).round() as usize,
         instructions_per_node_update: cost.per_node_update,
         step_instructions_max: busiest,
+        busiest_board,
         step_compute_s_max: busiest / profile.clock_hz as f64,
         compute_keeps_real_time: busiest / profile.clock_hz as f64 <= dt,
         elements_per_board_at_scene_rate: cost.elements_per_board(
@@ -432,7 +572,13 @@ pub fn summary(r: &CompileReport) -> String {
         "  force vectors per step: {} in all, {} on the busiest link direction\n",
         r.force_vectors_per_step, r.force_vectors_per_link_max
     );
-    s += &format!("  bytes per step: {} in all, {} on the busiest link; at dt = {:.3e} s ({:.0} steps/s): {:.3} GB/s in all, {:.1} MB/s on the busiest link ({:.0}% of its {:.0} MB/s)\n",
+    s += "  (a force vector: one node's partial or summed force that one board sends to a neighbour over one link in one exchange round; every round and both directions counted)\n";
+    s += &format!(
+        "  partition: slabs refined by simulated annealing (seed {}) within {:.2} x the mean elements per board\n",
+        crate::compile::partition::refine::ANNEAL_SEED,
+        crate::compile::partition::BALANCE_MAX
+    );
+    s += &format!("  bytes per step: {} in all, {} on the busiest link; at dt = {:.3e} s ({:.0} steps/s): {:.3} GB/s in all, {:.1} MB/s on the busiest link ({:.0}% of its {:.3} MB/s)\n",
         r.bytes_per_step_total, r.bytes_per_step_per_link_max, r.dt_s, r.steps_per_s, r.bandwidth_total_bytes_per_s / 1e9,
         r.bandwidth_per_link_max_bytes_per_s / 1e6, 100.0 * r.link_utilisation_max, r.link_bandwidth_bytes_per_s as f64 / 1e6);
     s += &format!(
@@ -445,7 +591,7 @@ pub fn summary(r: &CompileReport) -> String {
         c.parallelepipeds, r.elements - c.parallelepipeds,
         r.profile, c.clock_hz as f64 / 1e6, c.instructions_per_element_step, c.instructions_per_box_element_step, c.instructions_per_node_update,
         c.step_compute_s_max * 1e6, r.dt_s * 1e6,
-        if c.compute_keeps_real_time { "keeps real time" } else { "does NOT keep real time" },
+        if c.compute_keeps_real_time { "within dt" } else { "over dt" },
         c.elements_per_board_at_scene_rate, c.elements_per_board_at_10_khz, c.boards_needed_at_10_khz
     );
     let g = &r.graphics;
@@ -460,11 +606,49 @@ pub fn summary(r: &CompileReport) -> String {
             c.channels_at_rest, c.vectors_per_step_at_rest, c.bytes_per_s_at_rest / 1e6
         );
     }
+    s += &real_time_lines(r);
     s += "  seed's reference case: 2000 elements on 4x4x4 boards at dt = 100 us: 5600 force vectors per step, 1.35 GB/s in all\n";
     s += &format!(
         "  this scene at dt = 100 us: {} force vectors per step, {:.3} GB/s in all\n",
         r.force_vectors_per_step,
         r.bytes_per_step_total as f64 * 1e4 / 1e9
     );
+    s
+}
+
+/// The links against the step and the verdict, for the summary.
+fn real_time_lines(r: &CompileReport) -> String {
+    let v = &r.real_time;
+    let mut s = String::new();
+    match &v.link_busiest {
+        Some(l) => {
+            let [x, y, z] = l.board;
+            s += &format!(
+                "  links ({:.3} MB/s each way, {:.1} us per frame): busiest ({x},{y},{z}) {}: {} bytes in {} frames per step, {:.1} us against dt = {:.1} us; {} of {} link directions over dt\n",
+                r.link_bandwidth_bytes_per_s as f64 / 1e6,
+                r.link_frame_latency_s * 1e6,
+                l.face,
+                l.bytes_per_step,
+                l.frames_per_step,
+                l.time_per_step_s * 1e6,
+                v.dt_s * 1e6,
+                v.links_over_count,
+                v.links
+            );
+        }
+        None => s += "  links: nothing exchanged\n",
+    }
+    if v.keeps_real_time {
+        s += &format!(
+            "  verdict: keeps real time (busiest board's compute {:.1} us within dt / {COMPUTE_MARGIN} = {:.1} us, every link within dt)\n",
+            v.compute_s_max * 1e6,
+            v.compute_budget_s * 1e6
+        );
+    } else {
+        s += "  verdict: does NOT keep real time:\n";
+        for why in &v.reasons {
+            s += &format!("    {why}\n");
+        }
+    }
     s
 }

@@ -1,18 +1,27 @@
 //! Partitioning the elements onto a logical X×Y×Z board mesh.
 //!
-//! Board coordinates are logical (the seed's Fig. 2): elements are sorted by centroid into
-//! X slabs along x with equal counts, each slab into Y columns along y, each column into Z
-//! boards along z, so every board gets the same number of elements (±1) and neighbouring
-//! boards hold neighbouring tissue.
+//! Board coordinates are logical (the seed's Fig. 2). The start is geometric ([`slabs`]):
+//! elements sorted by centroid into X slabs along x with equal counts, each slab into Y
+//! columns along y, each column into Z boards along z (±1 element), so neighbouring boards
+//! hold neighbouring tissue. With few elements per board those boards are thinner than an
+//! element in places, so a node may touch boards more than one apart along an axis (relays,
+//! extra exchange rounds) and the cut surfaces are ragged.
 //!
-//! With few elements per board, boards can be thinner than an element, so a node may touch
-//! boards more than one apart along an axis; the schedule compiler handles that with relay
-//! replicas and extra exchange rounds (see [`crate::compile`]), so the partition stays
-//! balanced to ±1 element.
+//! [`refine`] then moves single elements between boards holding face neighbours to
+//! minimise the force vectors the exchange rounds send (the exact count of
+//! [`crate::compile::plan`]'s scheme) and the relays, keeping every board at most
+//! [`BALANCE_MAX`] times the mean number of elements, non-empty, and its pieces as
+//! connected as they were: simulated annealing from a fixed seed, then greedy passes. The
+//! result is the same on every machine.
 
 use anyhow::{bail, Result};
 
 use crate::mesh::Mesh;
+
+pub mod refine;
+
+/// Most elements a board may hold, over the mean (the load balance the partition keeps).
+pub const BALANCE_MAX: f64 = 1.05;
 
 /// Machine size (boards per axis).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -70,8 +79,20 @@ fn centroid(mesh: &Mesh, e: usize) -> [f64; 3] {
     c
 }
 
-/// Board (linear index) of every element.
+/// Board (linear index) of every element: the slab partition, refined (see [`refine`]).
 pub fn partition(mesh: &Mesh, machine: Machine) -> Result<Vec<u32>> {
+    let mut board = slabs(mesh, machine)?;
+    let around = node_elements(mesh);
+    let adj = refine::Adjacency::new(&mesh.cells, &around);
+    let mean = mesh.cells.len() as f64 / machine.count() as f64;
+    let cap = ((BALANCE_MAX * mean).floor() as usize).max(mean.ceil() as usize);
+    refine::refine(&adj, machine, &mut board, cap);
+    Ok(board)
+}
+
+/// Elements sorted by centroid into X slabs along x with equal counts, each slab into Y
+/// columns along y, each column into Z boards along z (±1 element).
+pub fn slabs(mesh: &Mesh, machine: Machine) -> Result<Vec<u32>> {
     let n = mesh.cells.len();
     if n < machine.count() {
         bail!(

@@ -1,0 +1,163 @@
+//! The partitioner: its exchange count against an independent count from the element ->
+//! board map alone, its load balance, and the seed's reference case.
+
+use std::path::{Path, PathBuf};
+
+use host_tools::compile::partition::{slabs, Machine, BALANCE_MAX};
+use host_tools::compile::{compile_images, plan, report};
+use host_tools::problem::Problem;
+use host_tools::scene::Scene;
+use pe_firmware::profile::PE_BOARD;
+use system_tests::*;
+
+/// A scene of the repository's `scenes/` folder.
+fn repo_scene(name: &str) -> Problem {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes")
+        .join(name);
+    let sc = Scene::from_file(&path).expect("scene parses");
+    Problem::from_scene(&sc, path.parent().unwrap_or(Path::new("."))).expect("scene resolves")
+}
+
+/// Force vectors per step that the x, then y, then z exchange rounds send, computed from
+/// the element -> board map alone (not from the compiler's exchange lists).
+///
+/// A node is held by every board of the box spanned by the boards whose elements touch it;
+/// say it spans `m_a + 1` boards along axis `a`. The exchange along `a` runs on every line
+/// of that box along `a`, `(m_b + 1)(m_c + 1)` lines (`b`, `c` the other axes). On a line
+/// of `m + 1` boards the partial sums are reduced towards one board and the total is sent
+/// back: each of the `m` links between neighbours carries the node once each way, `2m`
+/// vectors (for two boards, `m = 1`: the symmetric exchange, one vector each way). So a node
+/// costs `sum_a 2 m_a (m_b + 1)(m_c + 1)` vectors per step.
+fn independent_vectors(problem: &Problem, machine: Machine, element_board: &[u32]) -> usize {
+    let mesh = &problem.mesh;
+    assert_eq!(element_board.len(), mesh.cells.len());
+    let coords = |b: u32| -> [usize; 3] {
+        let b = b as usize;
+        let [dx, dy, _] = machine.dims;
+        [b % dx, (b / dx) % dy, b / (dx * dy)]
+    };
+    let mut lo = vec![[usize::MAX; 3]; mesh.nodes.len()];
+    let mut hi = vec![[0usize; 3]; mesh.nodes.len()];
+    for (cell, &b) in mesh.cells.iter().zip(element_board) {
+        let c = coords(b);
+        for &n in cell {
+            for a in 0..3 {
+                lo[n as usize][a] = lo[n as usize][a].min(c[a]);
+                hi[n as usize][a] = hi[n as usize][a].max(c[a]);
+            }
+        }
+    }
+    lo.iter()
+        .zip(&hi)
+        .map(|(l, h)| {
+            let m = [h[0] - l[0], h[1] - l[1], h[2] - l[2]];
+            2 * m[0] * (m[1] + 1) * (m[2] + 1)
+                + 2 * m[1] * (m[0] + 1) * (m[2] + 1)
+                + 2 * m[2] * (m[0] + 1) * (m[1] + 1)
+        })
+        .sum()
+}
+
+/// Max over mean elements per board, checking every board holds at least one.
+fn balance(machine: Machine, element_board: &[u32]) -> f64 {
+    let mut count = vec![0usize; machine.count()];
+    for &b in element_board {
+        count[b as usize] += 1;
+    }
+    assert!(count.iter().all(|&c| c > 0), "an empty board: {count:?}");
+    let mean = element_board.len() as f64 / count.len() as f64;
+    *count.iter().max().unwrap_or(&0) as f64 / mean
+}
+
+/// The compiler's count (the report's, from the exchange lists of every round) for
+/// `problem` on `machine`, with the plan's element -> board map.
+fn compiled(problem: &Problem, machine: Machine, name: &str) -> (usize, Vec<u32>, [usize; 3]) {
+    let plan = plan(problem, machine).expect("plans");
+    let images = compile_images(problem, &plan).expect("images");
+    let rep = report(name, problem, &plan, &images, &PE_BOARD).expect("report");
+    // The report counts what the rounds' send lists hold.
+    let sends: usize = plan
+        .boards
+        .iter()
+        .flat_map(|b| b.rounds.iter().flatten())
+        .map(|r| r.send[0].len() + r.send[1].len())
+        .sum();
+    assert_eq!(rep.force_vectors_per_step, sends, "{name}");
+    (rep.force_vectors_per_step, plan.element_board, rep.rounds)
+}
+
+/// The built-in scene and a shared mesh (the liver) on 4x4x4, and the built-in scene on two
+/// other machines: the compiler's count equals the independent one exactly (tolerance 0:
+/// both count whole vectors of the same scheme), every board holds elements and the
+/// balance is within the partitioner's bound, 1.05 (the stated goal). The counts compared
+/// are far from zero (over 300 vectors: hundreds of nodes are exchanged), and the refined partition sends fewer
+/// vectors than the slab partition it starts from (counted the same independent way).
+#[test]
+fn exchange_count_matches_an_independent_count() {
+    shared_meshes_dir();
+    let cases = [
+        (
+            "builtin medium 4x4x4",
+            builtin_problem("medium", 10),
+            "4x4x4",
+        ),
+        ("liver 4x4x4", repo_scene("liver.toml"), "4x4x4"),
+        (
+            "builtin medium 4x2x2",
+            builtin_problem("medium", 10),
+            "4x2x2",
+        ),
+        (
+            "builtin coarse 2x3x2",
+            builtin_problem("coarse", 10),
+            "2x3x2",
+        ),
+    ];
+    for (name, p, m) in cases {
+        let machine = Machine::parse(m).expect("machine");
+        let (count, element_board, rounds) = compiled(&p, machine, name);
+        let independent = independent_vectors(&p, machine, &element_board);
+        assert!(count > 300, "{name}: {count} vectors is too few to compare");
+        assert_eq!(count, independent, "{name}");
+        let b = balance(machine, &element_board);
+        assert!(b <= BALANCE_MAX, "{name}: imbalance {b}");
+        let start = slabs(&p.mesh, machine).expect("slabs");
+        let before = independent_vectors(&p, machine, &start);
+        println!("{name}: {before} -> {count} vectors, balance {b:.3}, rounds {rounds:?}");
+        assert!(count < before, "{name}: {count} vs the slabs' {before}");
+    }
+}
+
+/// The seed's reference case (2000 elements, 20x10x10 box, 4x4x4 boards): the seed counts
+/// 5600 force vectors per step. With this exchange scheme and the balance bound 1.05 (at
+/// most 32 elements per board) the partitioner gets 5834, one exchange round per axis.
+/// 5600 is not reached: simulated annealing runs of 2e8 moves from other seeds found 5816
+/// at best (with the bound lifted, flat cuts 2/3/2/3 elements thick give 5208). The bound
+/// here, 5850, is the measured count plus 0.3% so that a change of the annealing's
+/// parameters that loses ground is caught; rounds must stay at one per axis (no relays).
+#[test]
+fn seed_box_on_4x4x4() {
+    let p = repo_scene("seed-box.toml");
+    assert_eq!(p.mesh.cells.len(), 2000);
+    let machine = Machine::parse("4x4x4").expect("machine");
+    let (count, element_board, rounds) = compiled(&p, machine, "seed-box");
+    assert_eq!(count, independent_vectors(&p, machine, &element_board));
+    let b = balance(machine, &element_board);
+    println!("seed box: {count} vectors, balance {b:.3}, rounds {rounds:?}");
+    assert!(b <= BALANCE_MAX, "imbalance {b}");
+    assert!(count > 4000 && count <= 5850, "{count} vectors");
+    assert_eq!(rounds, [1, 1, 1]);
+}
+
+/// The partition is the same on every run (the annealing's seed is fixed).
+#[test]
+fn partition_is_deterministic() {
+    let p = builtin_problem("coarse", 10);
+    let machine = Machine::parse("2x2x2").expect("machine");
+    let a = host_tools::compile::partition::partition(&p.mesh, machine).expect("partition");
+    let b = host_tools::compile::partition::partition(&p.mesh, machine).expect("partition");
+    assert_eq!(a.len(), p.mesh.cells.len());
+    assert!(a.iter().any(|&x| x != a[0]), "more than one board used");
+    assert_eq!(a, b);
+}
