@@ -150,8 +150,19 @@ fn verdict_matches_an_independent_computation() {
             .boards
             .iter()
             .map(|b| {
-                (b.elements.len() as f64 * cost.per_element_step as f64
-                    + b.nodes.len() as f64 * cost.per_node_update as f64)
+                // Each element at its kernel's cost (parallelepipeds are cheaper).
+                let elements: f64 = b
+                    .elements
+                    .iter()
+                    .map(|&e| {
+                        if host_tools::problem::elements::is_box(&p, e as usize) {
+                            cost.box_per_element_step as f64
+                        } else {
+                            cost.per_element_step as f64
+                        }
+                    })
+                    .sum();
+                (elements + b.nodes.len() as f64 * cost.per_node_update as f64)
                     / profile.clock_hz as f64
             })
             .fold(0.0, f64::max);
