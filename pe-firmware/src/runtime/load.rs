@@ -65,12 +65,6 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
             u.iter_mut().take(nn).for_each(|x| *x = [T::ZERO; 3]);
         }
         clear_contact(&mut st, nc)?;
-        let mut external_stages = [(0u32, 0u32); STAGES];
-        let mut end = 0;
-        for (range, &n) in external_stages.iter_mut().zip(&c.external) {
-            *range = (end, end + n as u32);
-            end += n as u32;
-        }
         let address =
             link_proto::link::board_at(board[0] as usize, board[1] as usize, board[2] as usize)
                 .unwrap_or(u8::MAX);
@@ -101,13 +95,22 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
             contact,
             graphics_cursor: 0,
             stats: LinkStats::default(),
-            external_stages,
+            external_stages: stage_ranges(&c.external),
             reaction_prescribed: [0.0; 3],
             reaction_fixed: [0.0; 3],
             kinetic_energy: 0.0,
             st,
         })
     }
+}
+
+/// Each stage's range in the external-force records (grouped by stage).
+fn stage_ranges(counts: &[u16; STAGES]) -> [(u32, u32); STAGES] {
+    let mut end = 0;
+    counts.map(|n| {
+        end += n as u32;
+        (end - n as u32, end)
+    })
 }
 
 /// Clears the contact buffers.
