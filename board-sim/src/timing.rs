@@ -145,7 +145,7 @@ pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::R
                     let from = sent[index(d)][a][r][1 - f];
                     now[b] = now[b].max(from + frame_s(&t, 3 * n_recv, width));
                 }
-                Op::Begin | Op::Graphics | Op::Contact | Op::External(_) => {}
+                Op::Graphics | Op::Contact | Op::External(_) => {}
             }
         }
     }

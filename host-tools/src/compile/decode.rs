@@ -20,6 +20,8 @@ pub struct DecodedImage {
     /// Element node lists (local indices).
     pub element_nodes: Vec<[u32; 8]>,
     pub nodes: Vec<NodeRecord<f64>>,
+    /// External forces per stage (0/1/2 before the x/y/z exchange, 3 before the update).
+    pub external: [Vec<ExternalRecord<f64>>; STAGES],
     /// Exchange rounds per axis: per face (+axis, −axis) the sends and receives.
     pub rounds: [Vec<DecodedRound>; 3],
     pub path_points: Vec<PathPoint>,
@@ -53,6 +55,16 @@ fn decode_typed<T: ImageReal, E: ElementRecord<T>>(
             rounds[a].push(round);
         }
     }
+    let mut records = t.external.iter().map(|x| ExternalRecord {
+        node: x.node,
+        gravity: x.gravity.map(|g| g.to_f64()),
+        first_load: x.first_load,
+        loads: x.loads,
+        contact: x.contact,
+    });
+    let external = c
+        .external
+        .map(|n| records.by_ref().take(n as usize).collect());
     Ok(DecodedImage {
         header,
         element_nodes: t
@@ -67,12 +79,12 @@ fn decode_typed<T: ImageReal, E: ElementRecord<T>>(
             .map(|n| NodeRecord {
                 global: n.global,
                 gain: n.gain.to_f64(),
+                half_mass_kg: n.half_mass_kg,
                 motion: n.motion,
                 owner: n.owner,
-                gravity: n.gravity.map(|g| g.to_f64()),
-                stage: n.stage,
             })
             .collect(),
+        external,
         rounds,
         path_points: t.path_points,
         loads: t.loads,

@@ -139,8 +139,8 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
     }
     t.nodes = node_records(problem, bp, shared.dt_s);
     exchange_tables(bp, &local, &mut t)?;
-    load_tables(problem, plan, b, &local, &mut t)?;
     contact_tables_of_board(shared, plan, b, &local, &mut t);
+    let external_counts = external_tables(problem, bp, &mut t)?;
     t.graphics_nodes = bp
         .nodes
         .iter()
@@ -160,6 +160,7 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
             box_batch_ends,
             core::array::from_fn(|f| bp.exchange[f].len() as u16),
             plan.rounds.map(|r| r as u8),
+            external_counts,
         ),
         params: SceneParams {
             dt_s: dt,
@@ -190,9 +191,11 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
     })
 }
 
-/// The board's nodes: central-difference gain, motion, owner, gravity (owner only), stage.
+/// The board's nodes: central-difference gain, half inertial mass (owner only), motion,
+/// owner.
 fn node_records<T: ImageReal>(problem: &Problem, bp: &BoardPlan, dt: f64) -> Vec<NodeRecord<T>> {
     let cd = CentralDifference::<T>::new(dt, problem.solver.damping);
+    let ms = problem.solver.mass_scaling;
     bp.nodes
         .iter()
         .enumerate()
@@ -201,19 +204,15 @@ fn node_records<T: ImageReal>(problem: &Problem, bp: &BoardPlan, dt: f64) -> Vec
             let own = bp.owner[k];
             NodeRecord::<T> {
                 global: n,
-                gain: cd.gain(mass * problem.solver.mass_scaling),
+                gain: cd.gain(mass * ms),
+                // The serial solver's kinetic-energy factor, `0.5 * m * ms`.
+                half_mass_kg: if own { 0.5 * mass * ms } else { 0.0 },
                 motion: match problem.node_kind[n as usize] {
                     NodeKind::Free => NodeMotion::Free,
                     NodeKind::Fixed => NodeMotion::Fixed,
                     NodeKind::Prescribed(p) => NodeMotion::Prescribed(p as u16),
                 },
                 owner: own,
-                gravity: if own {
-                    problem.gravity.map(|g| T::from_f64(g * mass))
-                } else {
-                    [T::ZERO; 3]
-                },
-                stage: bp.ext_stage[k],
             }
         })
         .collect()
@@ -241,30 +240,78 @@ fn exchange_tables<T, E>(bp: &BoardPlan, local: &Local, t: &mut ImageTables<T, E
     Ok(())
 }
 
-/// The path table (every board has all paths) and the loads of the nodes board `b` owns.
-fn load_tables<T, E>(
+/// The path table (every board has all paths) and the external forces of the nodes the
+/// board owns: one record per owned node with non-zero gravity, a load or a contact node
+/// (the board's contact places must be filled), grouped by stage, and the loads in record
+/// order (each node's in the scene's order). Returns the records per stage.
+fn external_tables<T: ImageReal, E>(
     problem: &Problem,
-    plan: &Plan,
-    b: usize,
-    local: &Local,
+    bp: &BoardPlan,
     t: &mut ImageTables<T, E>,
-) -> Result<()> {
+) -> Result<[u16; STAGES]> {
     let (points, load_ramp) = path_table(problem);
     t.path_points = points;
-    t.loads = problem
-        .loads
-        .iter()
-        .zip(&load_ramp)
-        .filter(|(l, _)| plan.node_owner[l.node as usize] as usize == b)
-        .map(|(l, r)| {
-            Ok(LoadRecord {
-                node: local.of(l.node)?,
+    let mut loads_of: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
+    for (j, l) in problem.loads.iter().enumerate() {
+        loads_of.entry(l.node).or_default().push(j);
+    }
+    let mut contact_of = BTreeMap::new();
+    for (c, pl) in t.places.iter().enumerate() {
+        if let (true, Some(l)) = (pl.owned, pl.local) {
+            contact_of.insert(l, c as u32);
+        }
+    }
+    let mut staged = Vec::new();
+    for (k, &n) in bp.nodes.iter().enumerate() {
+        if !bp.owner[k] {
+            continue;
+        }
+        let mass = problem.mass[n as usize];
+        let gravity = problem.gravity.map(|g| T::from_f64(g * mass));
+        let loads = loads_of.get(&n).map_or(&[][..], |v| &v[..]);
+        let contact = contact_of.get(&(k as u16)).copied();
+        let zero = gravity.iter().all(|g| g.to_f64().to_bits() == 0);
+        if zero && loads.is_empty() && contact.is_none() {
+            continue;
+        }
+        let stage = bp.ext_stage[k] as usize;
+        if stage >= STAGES {
+            bail!(
+                "internal: owned node {n} has no stage on board {:?}",
+                bp.coords
+            );
+        }
+        staged.push((stage, k as u16, gravity, loads, contact));
+    }
+    // Stage order; within a stage, local order.
+    staged.sort_by_key(|r| (r.0, r.1));
+    let mut counts = [0u16; STAGES];
+    for (stage, node, gravity, loads, contact) in staged {
+        counts[stage] += 1;
+        t.external.push(ExternalRecord {
+            node,
+            gravity,
+            first_load: t.loads.len() as u16,
+            loads: loads.len() as u16,
+            contact,
+        });
+        for &j in loads {
+            let l = &problem.loads[j];
+            t.loads.push(LoadRecord {
+                node,
                 force: l.force,
-                ramp: *r,
-            })
-        })
-        .collect::<Result<_>>()?;
-    Ok(())
+                ramp: load_ramp[j],
+            });
+        }
+    }
+    if t.loads.len() > u16::MAX as usize {
+        bail!(
+            "board {:?} owns {} loaded nodes' loads, more than an image can index",
+            bp.coords,
+            t.loads.len()
+        );
+    }
+    Ok(counts)
 }
 
 /// The contact tables (the same on every board) and where each contact node lives on

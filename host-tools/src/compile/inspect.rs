@@ -51,6 +51,15 @@ pub fn inspect(dir: &Path, board: [usize; 3]) -> Result<String> {
         c.path_points,
         c.loads
     );
+    let e = c.external;
+    s += &format!(
+        "  {} external forces (owned nodes with gravity, loads or contact) by stage: x {}, y {}, z {}, update {}\n",
+        c.external_records(),
+        e[0],
+        e[1],
+        e[2],
+        e[3]
+    );
     s += "  schedule: recover x | send ±x | recover y | add ±x | send ±y | recover z | add ±y | send ±z | recover inner | add ±z | update\n";
     let g = |l: u16| {
         d.nodes

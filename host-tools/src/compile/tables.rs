@@ -16,6 +16,7 @@ pub struct ImageTables<T, E> {
     pub recvs: Vec<RecvEntry>,
     pub path_points: Vec<PathPoint>,
     pub loads: Vec<LoadRecord>,
+    pub external: Vec<ExternalRecord<T>>,
     pub contact_nodes: Vec<ContactNode>,
     pub places: Vec<ContactNodePlace>,
     pub faces: Vec<ContactFace>,
@@ -46,6 +47,7 @@ impl<T: ImageReal, E: ElementRecord<T>> ImageTables<T, E> {
             recvs: zeros(c.recvs as usize)?,
             path_points: zeros(c.path_points as usize)?,
             loads: zeros(c.loads as usize)?,
+            external: zeros(c.external_records())?,
             contact_nodes: zeros(c.contact_nodes as usize)?,
             places: zeros(c.contact_nodes as usize)?,
             faces: zeros(c.contact_faces as usize)?,
@@ -57,13 +59,15 @@ impl<T: ImageReal, E: ElementRecord<T>> ImageTables<T, E> {
     }
 
     /// The counts of what the tables hold (batch ends of each kernel, exchanged nodes per
-    /// face and rounds come from the plan).
+    /// face and rounds come from the plan, the external records per stage from their
+    /// grouping).
     pub fn counts(
         &self,
         batch_ends: [u32; 4],
         box_batch_ends: [u32; 4],
         exchange: [u16; 6],
         rounds: [u8; 3],
+        external: [u16; STAGES],
     ) -> Counts {
         Counts {
             materials: self.laws.len() as u16,
@@ -78,6 +82,7 @@ impl<T: ImageReal, E: ElementRecord<T>> ImageTables<T, E> {
             recvs: self.recvs.len() as u32,
             path_points: self.path_points.len() as u16,
             loads: self.loads.len() as u16,
+            external,
             contact_nodes: self.contact_nodes.len() as u32,
             contact_faces: self.faces.len() as u32,
             pairs: self.pairs.len() as u8,
@@ -99,6 +104,7 @@ impl<T: ImageReal, E: ElementRecord<T>> ImageTables<T, E> {
             recvs: &mut self.recvs,
             path_points: &mut self.path_points,
             loads: &mut self.loads,
+            external: &mut self.external,
             contact_nodes: &mut self.contact_nodes,
             contact_places: &mut self.places,
             contact_faces: &mut self.faces,

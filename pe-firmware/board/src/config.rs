@@ -55,8 +55,8 @@ pub type BoardStorage = StorageBuf<
     { CAPACITIES.contact_sends },
 >;
 
-// The table's per-node arrays (contact map, graphics nodes) take the node capacity.
-const _: () = assert!(CAPACITIES.contact_map == CAPACITIES.nodes);
+// The table's per-node arrays (external forces, graphics nodes) take the node capacity.
+const _: () = assert!(CAPACITIES.external == CAPACITIES.nodes);
 const _: () = assert!(CAPACITIES.graphics_nodes == CAPACITIES.nodes);
 
 // The link buffers are what `Capacities::for_board` counts for them (the streams add a few

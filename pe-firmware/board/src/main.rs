@@ -40,21 +40,21 @@ fn main() -> ! {
     let Some(store) = storage::take() else {
         report::fault(board, format_args!("storage taken twice"));
     };
-    let rt = Runtime::<Scalar, Element>::load(image, board, store, RuntimeConfig::default());
-    let mut rt = match rt {
-        Ok(rt) => rt,
-        Err(e) => report::fault(
-            board,
-            format_args!(
-                "{}",
-                Fault {
-                    board,
-                    step: 0,
-                    kind: FaultKind::Image(e)
-                }
-            ),
-        ),
-    };
+    // Straight into its place (the runtime is about 48 KiB: every copy on the way is stack).
+    let mut rt = Runtime::<Scalar, Element>::load(image, board, store, RuntimeConfig::default())
+        .unwrap_or_else(|e| {
+            report::fault(
+                board,
+                format_args!(
+                    "{}",
+                    Fault {
+                        board,
+                        step: 0,
+                        kind: FaultKind::Image(e)
+                    }
+                ),
+            )
+        });
     // Every face the schedule exchanges over needs a driver.
     let machine = rt.header.machine;
     for face in link_proto::Face::ALL {

@@ -6,7 +6,8 @@
 //! Sections (counts from the header's [`Counts`]): materials × [`MaterialLaw<T>`], elements
 //! × `E` (batch order x, y, z, inner), parallelepipeds × [`HexBox<T>`] (batch order), nodes × [`NodeRecord<T>`], exchange lists ×
 //! [`ExchangeList`] (axis, round, face), sends × `u16` (local nodes), receives ×
-//! [`RecvEntry`], path points × [`PathPoint`], loads × [`LoadRecord`], contact nodes ×
+//! [`RecvEntry`], path points × [`PathPoint`], loads × [`LoadRecord`] (in external-record
+//! order), external forces × [`ExternalRecord<T>`] (stage order), contact nodes ×
 //! [`ContactNode`], contact-node places × [`ContactNodePlace`], contact faces ×
 //! [`ContactFace`], pairs × [`ContactPair`], tools × [`Tool`], contact boards × `u8`
 //! (global-network addresses of the boards that own a pair-surface node), graphics nodes ×
@@ -59,6 +60,7 @@ pub struct ImageParts<'a, T, E> {
     pub recvs: &'a mut [RecvEntry],
     pub path_points: &'a mut [PathPoint],
     pub loads: &'a mut [LoadRecord],
+    pub external: &'a mut [ExternalRecord<T>],
     pub contact_nodes: &'a mut [ContactNode],
     pub contact_places: &'a mut [ContactNodePlace],
     pub contact_faces: &'a mut [ContactFace],
@@ -111,6 +113,7 @@ pub fn transcode<T: ImageReal, E: ElementRecord<T>, C: Codec>(
     section(codec, "exchange receives", c.recvs as usize, p.recvs)?;
     section(codec, "path points", c.path_points as usize, p.path_points)?;
     section(codec, "loads", c.loads as usize, p.loads)?;
+    section(codec, "external forces", c.external_records(), p.external)?;
     let nc = c.contact_nodes as usize;
     section(codec, "contact nodes", nc, p.contact_nodes)?;
     section(codec, "contact nodes", nc, p.contact_places)?;
@@ -208,6 +211,53 @@ pub fn validate<T: ImageReal, E: ElementRecord<T>>(
     }
     for (k, l) in p.loads[..c.loads as usize].iter().enumerate() {
         index_ok("node of load", k, (l.node as usize) < nn)?;
+    }
+    // External records: owned nodes; their loads one run each, in order, covering the
+    // loads section; their contact node held here, by them, and owned.
+    let mut next_load = 0usize;
+    for (k, x) in p.external[..c.external_records()].iter().enumerate() {
+        let node = x.node as usize;
+        index_ok(
+            "node of external force",
+            k,
+            p.nodes[..nn].get(node).is_some_and(|n| n.owner),
+        )?;
+        let (first, end) = (
+            x.first_load as usize,
+            x.first_load as usize + x.loads as usize,
+        );
+        index_ok(
+            "loads of external force",
+            k,
+            first == next_load
+                && p.loads[..c.loads as usize]
+                    .get(first..end)
+                    .is_some_and(|ls| ls.iter().all(|l| l.node == x.node)),
+        )?;
+        next_load = end;
+        index_ok(
+            "contact node of external force",
+            k,
+            x.contact.is_none_or(|cn| {
+                p.contact_places[..nc]
+                    .get(cn as usize)
+                    .is_some_and(|pl| pl.owned && pl.local == Some(x.node))
+            }),
+        )?;
+    }
+    if next_load != c.loads as usize {
+        return Err(ImageError::Malformed {
+            record: "loads outside the external forces",
+        });
+    }
+    let with_contact = p.external[..c.external_records()]
+        .iter()
+        .filter(|x| x.contact.is_some())
+        .count();
+    if with_contact != p.contact_places[..nc].iter().filter(|pl| pl.owned).count() {
+        return Err(ImageError::Malformed {
+            record: "owned contact nodes without an external force",
+        });
     }
     for (k, pl) in p.contact_places[..nc].iter().enumerate() {
         index_ok(

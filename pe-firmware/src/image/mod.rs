@@ -102,6 +102,9 @@ pub struct Counts {
     pub recvs: u32,
     pub path_points: u16,
     pub loads: u16,
+    /// External-force records ([`ExternalRecord`]) per stage: 0/1/2 before the x/y/z
+    /// exchange, 3 before the update.
+    pub external: [u16; 4],
     pub contact_nodes: u32,
     pub contact_faces: u32,
     pub pairs: u8,
@@ -114,6 +117,11 @@ impl Counts {
     /// Send/receive lists ([`ExchangeList`]): two faces per round of every axis.
     pub fn exchange_lists(&self) -> usize {
         2 * self.rounds.iter().map(|&r| r as usize).sum::<usize>()
+    }
+
+    /// External-force records over all stages.
+    pub fn external_records(&self) -> usize {
+        self.external.iter().map(|&n| n as usize).sum()
     }
 }
 
@@ -201,17 +209,41 @@ pub struct NodeRecord<T> {
     pub global: u32,
     /// `C / m_inertial` of the central-difference update, from the node's full mass.
     pub gain: T,
+    /// Half the inertial mass, `(0.5 m) · mass_scaling` (kg), for the kinetic energy (the
+    /// serial solver's factor, so each node's term is the same bits); zero on replicas,
+    /// whose energy their owner counts.
+    pub half_mass_kg: f64,
     pub motion: NodeMotion,
-    /// The owner applies gravity and external loads (once for the whole machine).
+    /// The owner applies gravity and external loads (once for the whole machine) and
+    /// counts the node's reaction and kinetic energy.
     pub owner: bool,
-    /// Gravity force (true mass), N; zero on replicas.
-    pub gravity: [T; 3],
-    /// When an owned node's external force is added: 0/1/2 before the x/y/z exchange, 3
-    /// before the update ([`STAGE_NOT_OWNED`] on replicas).
-    pub stage: u8,
 }
 
-/// [`NodeRecord::stage`] of a replica: its external force is added by its owner.
+/// The external force of one owned node, subtracted from its force at its stage: gravity,
+/// then its loads in the scene's order, then its contact force (the serial solver's order
+/// of additions). Only owned nodes whose external force is not identically zero have one
+/// (non-zero gravity, a load, or a contact surface); for the others `f − 0 = f`, so
+/// skipping them changes no bit. The records come grouped by stage ([`Counts::external`]);
+/// the loads section is in record order, each record's loads one run of it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ExternalRecord<T> {
+    /// Local node index.
+    pub node: u16,
+    /// Gravity force (true mass), N.
+    pub gravity: [T; 3],
+    /// The node's loads: `loads[first_load..first_load + loads]`.
+    pub first_load: u16,
+    pub loads: u16,
+    /// The node's contact-node index, if it is on a contact surface.
+    pub contact: Option<u32>,
+}
+
+/// The stage of an owned node's external force: 0/1/2 before the x/y/z exchange, 3 before
+/// the update.
+pub const STAGES: usize = 4;
+
+/// The compiler's stage of a replica: its external force is added by its owner (replicas
+/// have no [`ExternalRecord`]).
 pub const STAGE_NOT_OWNED: u8 = 255;
 
 /// One send/receive list of an exchange round: how many entries of the flat `sends` and

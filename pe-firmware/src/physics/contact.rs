@@ -165,6 +165,21 @@ fn shallower(d: f64, best: f64) -> bool {
     d < best - DEPTH_TIE_M
 }
 
+/// Whether `d · n` is positive by far more than its round-off (`1e-9` of `Σ |dᵢ nᵢ|`, where
+/// the round-off is below `1e-15` of it): then the signed distance `d · (n / |n|)` that
+/// [`triangle_penetration`] computes is positive too, and it returns `None` without the
+/// square root. Most candidates are above their face (not in contact), so this decides
+/// them; the others (and any NaN) take the full test, whose result is unchanged.
+#[inline(always)]
+fn clearly_above(d: V3, n: V3) -> bool {
+    let p = [d[0] * n[0], d[1] * n[1], d[2] * n[2]];
+    let (g, s) = (
+        p[0] + p[1] + p[2],
+        libm::fabs(p[0]) + libm::fabs(p[1]) + libm::fabs(p[2]),
+    );
+    g > 1e-9 * s
+}
+
 /// Penetration of point `x` into the triangle `t` (outward normal `(t1 − t0) × (t2 − t0)`)
 /// if `0 < depth ≤ depth_max` and its projection lies inside, or outside an edge by at most
 /// [`EDGE_TOLERANCE`].
@@ -172,6 +187,9 @@ fn triangle_penetration(x: V3, t: [V3; 3], depth_max: f64) -> Option<(f64, V3, [
     let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
     let n2 = dot(n, n);
     if !(n2 > 0.0) {
+        return None;
+    }
+    if clearly_above(sub(x, t[0]), n) {
         return None;
     }
     let inv = 1.0 / libm::sqrt(n2);
@@ -310,23 +328,26 @@ impl ContactModel<'_> {
         })
     }
 
+    /// The positions of face `f`'s nodes into `q`: `Ok(false)` if one is unknown. (Into
+    /// the caller's array: a returned one is copied out through memory.)
+    #[inline(always)]
     fn face_points(
         &self,
         f: usize,
         pos: &impl Fn(usize) -> Option<V3>,
-    ) -> Result<Option<[V3; 4]>, PhysicsError> {
+        q: &mut [V3; 4],
+    ) -> Result<bool, PhysicsError> {
         let face = self.faces.get(f).ok_or(bad(f))?;
-        let mut q = [[0.0; 3]; 4];
         for (k, &c) in face.nodes.iter().enumerate() {
             if c as usize >= self.nodes.len() {
                 return Err(bad(c as usize));
             }
             match pos(c as usize) {
                 Some(x) => q[k] = x,
-                None => return Ok(None),
+                None => return Ok(false),
             }
         }
-        Ok(Some(q))
+        Ok(true)
     }
 }
 
@@ -356,9 +377,10 @@ pub fn build_candidates(
                 if face.surface != master || face.nodes.contains(&(s as u32)) {
                     continue;
                 }
-                let Ok(Some(q)) = m.face_points(f, &pos) else {
+                let mut q = [[0.0; 3]; 4];
+                if m.face_points(f, &pos, &mut q) != Ok(true) {
                     continue;
-                };
+                }
                 let inside = (0..3).all(|i| {
                     let lo = q.iter().map(|p| p[i]).fold(f64::INFINITY, f64::min);
                     let hi = q.iter().map(|p| p[i]).fold(f64::NEG_INFINITY, f64::max);
@@ -418,9 +440,10 @@ pub fn evaluate_pairs(
         let Some(x) = pos(s) else { continue };
         let mut best: Option<(usize, FacePenetration)> = None;
         for c in group {
-            let Some(q) = m.face_points(c.face as usize, &pos)? else {
+            let mut q = [[0.0; 3]; 4];
+            if !m.face_points(c.face as usize, &pos, &mut q)? {
                 continue;
-            };
+            }
             if let Some(p) = quad_penetration(x, &q, depth_max) {
                 if best.is_none_or(|(_, b)| shallower(p.depth_m, b.depth_m)) {
                     best = Some((c.face as usize, p));

@@ -191,7 +191,11 @@ pub enum NodeMove<T> {
 /// otherwise; then `u⁻ := u`, `u := u⁺`. Refuses a non-finite `u⁺` and a half-step speed
 /// `|u⁺ − u⁻| / 2Δt` above `speed_limit_m_per_s`, naming `node`. Returns the squared speed
 /// (m²/s², for the kinetic energy).
-#[inline]
+///
+/// One comparison decides the common case: a squared speed below the squared limit is
+/// finite, so `u⁺` is (`u⁻` is, from the step before); anything else goes through the
+/// checks one by one, in their order ([`check_node`]).
+#[inline(always)]
 pub fn update_node<T: Real>(
     cd: &CentralDifference<T>,
     u: &mut [T; 3],
@@ -201,25 +205,47 @@ pub fn update_node<T: Real>(
     speed_limit_m_per_s: f64,
     node: u32,
 ) -> Result<f64, PhysicsError> {
-    let next = match step {
-        NodeMove::Free { gain, residual } => {
-            let next = cd.advance(u, u_prev, gain, &residual);
-            if !next.iter().all(|v| v.is_finite()) {
-                return Err(PhysicsError::NonFinite { node });
-            }
-            next
-        }
-        NodeMove::Held(next) => next,
+    let (cur, prev) = (*u, *u_prev);
+    let (next, free) = match step {
+        NodeMove::Free { gain, residual } => (cd.advance(&cur, &prev, gain, &residual), true),
+        NodeMove::Held(next) => (next, false),
     };
-    let v: [f64; 3] = core::array::from_fn(|i| (next[i] - u_prev[i]).to_f64() * inv_2dt_per_s);
+    let v: [f64; 3] = core::array::from_fn(|i| (next[i] - prev[i]).to_f64() * inv_2dt_per_s);
     let v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    if !(v2 < speed_limit_m_per_s * speed_limit_m_per_s) {
+        // Components, not the array: they stay in registers on the common path.
+        let [x, y, z] = next;
+        check_node(
+            [x, y, z].iter().all(|v| v.is_finite()) || !free,
+            v2,
+            speed_limit_m_per_s,
+            node,
+        )?;
+    }
+    *u_prev = cur;
+    *u = next;
+    Ok(v2)
+}
+
+/// The checks of [`update_node`] one by one: a free node's `u⁺` must be finite
+/// (`finite`: it is, or the node is held, whose `u⁺` is the path's), and the squared speed
+/// `v2` must not exceed the squared limit.
+#[cold]
+#[inline(never)]
+fn check_node(
+    finite: bool,
+    v2: f64,
+    speed_limit_m_per_s: f64,
+    node: u32,
+) -> Result<(), PhysicsError> {
+    if !finite {
+        return Err(PhysicsError::NonFinite { node });
+    }
     if v2 > speed_limit_m_per_s * speed_limit_m_per_s {
         return Err(PhysicsError::SpeedLimit {
             node,
             speed_m_per_s: libm::sqrt(v2),
         });
     }
-    *u_prev = *u;
-    *u = next;
-    Ok(v2)
+    Ok(())
 }

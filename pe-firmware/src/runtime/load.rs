@@ -1,6 +1,6 @@
 //! Loading: an image into a board's storage through the image codec
-//! ([`crate::image::read_image`]), then the runtime's own indexes (exchange ranges, contact
-//! map, this board's contact slot, the step program).
+//! ([`crate::image::read_image`]), then the runtime's own indexes (exchange ranges, the
+//! external-force stages, this board's contact slot, the step program).
 
 use link_proto::{FRAME_LEN_MAX, VALUES_PER_FRAME_MAX};
 
@@ -10,7 +10,7 @@ use super::storage::SmallTables;
 use super::{
     global, LinkStats, Program, Runtime, RuntimeConfig, Storage, WireReal, ROUNDS_PER_AXIS_MAX,
 };
-use crate::image::{read_image, ElementRecord, ImageError};
+use crate::image::{read_image, ElementRecord, ImageError, STAGES};
 use crate::physics::CentralDifference;
 
 impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
@@ -73,10 +73,11 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         debug_assert!(c.exchange_lists() <= LISTS_MAX);
         exchange.index(&c.rounds);
         let (nn, nc) = (c.nodes as usize, c.contact_nodes as usize);
-        for u in [&mut st.u, &mut st.u_prev] {
+        // The update leaves the forces zero for the next step; the first starts from here.
+        for u in [&mut st.u, &mut st.u_prev, &mut st.force] {
             u.iter_mut().take(nn).for_each(|x| *x = [T::ZERO; 3]);
         }
-        index_contact(&mut st, nn, nc)?;
+        clear_contact(&mut st, nc)?;
         let address =
             link_proto::link::board_at(board[0] as usize, board[1] as usize, board[2] as usize)
                 .unwrap_or(u8::MAX);
@@ -103,6 +104,7 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
             contact,
             graphics_cursor: 0,
             stats: LinkStats::default(),
+            external_stages: stage_ranges(&c.external),
             reaction_prescribed: [0.0; 3],
             reaction_fixed: [0.0; 3],
             kinetic_energy: 0.0,
@@ -111,16 +113,18 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
     }
 }
 
-/// Maps local nodes to contact nodes and clears the contact buffers.
-fn index_contact<T, E>(st: &mut Storage<'_, T, E>, nn: usize, nc: usize) -> Result<(), ImageError> {
+/// Each stage's range in the external-force records (grouped by stage).
+fn stage_ranges(counts: &[u16; STAGES]) -> [(u32, u32); STAGES] {
+    let mut end = 0;
+    counts.map(|n| {
+        end += n as u32;
+        (end - n as u32, end)
+    })
+}
+
+/// Clears the contact buffers.
+fn clear_contact<T, E>(st: &mut Storage<'_, T, E>, nc: usize) -> Result<(), ImageError> {
     let cs = &mut st.contact;
-    if nc > 0 && cs.contact_of.len() < nn {
-        return Err(ImageError::Capacity {
-            what: "nodes (contact map)",
-            count: nn as u32,
-            max: cs.contact_of.len() as u32,
-        });
-    }
     for (what, len) in [
         ("contact nodes", cs.at_check.len()),
         ("contact nodes", cs.force.len()),
@@ -132,15 +136,6 @@ fn index_contact<T, E>(st: &mut Storage<'_, T, E>, nn: usize, nc: usize) -> Resu
                 count: nc as u32,
                 max: len as u32,
             });
-        }
-    }
-    cs.contact_of
-        .iter_mut()
-        .take(nn)
-        .for_each(|v| *v = u32::MAX);
-    for (k, place) in cs.places[..nc].iter().enumerate() {
-        if let Some(l) = place.local {
-            cs.contact_of[l as usize] = k as u32;
         }
     }
     cs.force[..nc].fill([0.0; 3]);

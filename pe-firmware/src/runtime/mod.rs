@@ -26,7 +26,7 @@ use link_proto::{Face, Links, Values};
 
 use crate::image::*;
 use crate::physics::explicit::{accumulate_internal_forces, update_node, NodeMove};
-use crate::physics::{CentralDifference, HexBox, HexFull, HexReduced, MaterialLaw};
+use crate::physics::{CentralDifference, HexBox, HexFull, HexReduced, MaterialLaw, Real};
 
 pub use contact::{ContactState, BOARDS_MAX, PAIRS_MAX, TOOLS_MAX};
 pub use fault::{Fault, FaultKind};
@@ -100,6 +100,8 @@ pub struct Runtime<'a, T, E> {
     port: global::GlobalPort,
     contact: ContactState,
     graphics_cursor: usize,
+    /// Range of each stage's records in the external-force list.
+    external_stages: [(u32, u32); STAGES],
     pub stats: LinkStats,
     /// Sum of `f_int − f_ext` over owned prescribed and fixed nodes at the last step (N).
     pub reaction_prescribed: [f64; 3],
@@ -205,32 +207,36 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         .map_err(|e| self.fault(FaultKind::Physics(e)))
     }
 
-    /// Subtracts the external force (gravity, loads, contact) of owned nodes whose stage
-    /// is `stage`.
+    /// Subtracts the external force of the owned nodes of `stage`: their records' gravity,
+    /// loads and contact force, added in the serial solver's order. Nodes without a record
+    /// have none (`f − 0 = f`), so they cost nothing here.
     fn external(&mut self, stage: u8, t: f64) {
+        let Some(&(start, end)) = self.external_stages.get(stage as usize) else {
+            return;
+        };
         let c = self.header.counts;
         let st = &mut self.st;
         let points = &st.path_points[..c.path_points as usize];
         let loads = &st.loads[..c.loads as usize];
-        for k in 0..c.nodes as usize {
-            if st.nodes[k].stage != stage {
-                continue;
-            }
-            let mut fe = st.nodes[k].gravity;
-            for l in loads.iter().filter(|l| l.node as usize == k) {
+        let records = st.external.get(start as usize..end as usize).unwrap_or(&[]);
+        for x in records {
+            let mut fe = x.gravity;
+            let first = x.first_load as usize;
+            for l in loads.get(first..first + x.loads as usize).unwrap_or(&[]) {
                 let s = l.ramp.map_or(1.0, |p| path_value(points, p, t)[0]);
                 for i in 0..3 {
                     fe[i] += T::from_f64(l.force[i] * s);
                 }
             }
-            let cn = st.contact.contact_of.get(k).copied().unwrap_or(u32::MAX);
-            if let Some(f) = st.contact.force.get(cn as usize) {
+            if let Some(f) = x.contact.and_then(|cn| st.contact.force.get(cn as usize)) {
                 for i in 0..3 {
                     fe[i] += T::from_f64(f[i]);
                 }
             }
-            for i in 0..3 {
-                st.force[k][i] -= fe[i];
+            if let Some(f) = st.force.get_mut(x.node as usize) {
+                for i in 0..3 {
+                    f[i] -= fe[i];
+                }
             }
         }
     }
@@ -243,16 +249,9 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         links: &mut impl Links,
         env: &mut impl Environment,
     ) -> Result<bool, Fault> {
-        let n = self.header.counts.nodes as usize;
         let t = self.step as f64 * self.header.params.dt_s;
         while let Some(op) = self.program.get(self.pc) {
             let done = match op {
-                Op::Begin => {
-                    for f in self.st.force[..n].iter_mut() {
-                        *f = [T::ZERO; 3];
-                    }
-                    true
-                }
                 Op::Graphics => self.graphics_poll(links)?,
                 Op::Contact => self.contact_poll(links)?,
                 Op::Batch(k) => {
@@ -318,51 +317,60 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
 
     /// Central-difference update of every held node from its total force
     /// ([`update_node`], the serial solver's function), so replicas and the serial run
-    /// agree.
+    /// agree; clears the forces for the next step on the way. A free node takes the short
+    /// path (its gain and force); an owned fixed or prescribed node adds its force to the
+    /// reaction. Out of line: its loop keeps its values in registers.
+    #[inline(never)]
     fn update(&mut self, t_next: f64) -> Result<(), Fault> {
-        let n = self.header.counts.nodes as usize;
+        let c = self.header.counts;
         let inv_2dt = 1.0 / (2.0 * self.header.params.dt_s);
         let limit = self.header.params.speed_limit_m_per_s;
         let (mut rp, mut rf, mut ke) = ([0.0; 3], [0.0; 3], 0.0);
-        let points = &self.st.path_points[..self.header.counts.path_points as usize];
-        for k in 0..n {
-            let rec = self.st.nodes[k];
-            let total = self.st.force[k];
+        let cd = self.cd;
+        let (board, step) = (self.header.board, self.step);
+        let Storage {
+            nodes,
+            u,
+            u_prev,
+            force,
+            path_points,
+            ..
+        } = &mut self.st;
+        let points = &path_points[..c.path_points as usize];
+        let n = c.nodes as usize;
+        // Each array cut to the nodes (the loader checked they hold them): one count.
+        let all = (nodes.get(..n).unwrap_or(&[]).iter())
+            .zip(u.get_mut(..n).unwrap_or(&mut []))
+            .zip(u_prev.get_mut(..n).unwrap_or(&mut []))
+            .zip(force.get_mut(..n).unwrap_or(&mut []));
+        for (((rec, u), u_prev), f) in all {
+            let total = *f;
+            *f = [T::ZERO; 3];
             let mv = match rec.motion {
                 NodeMotion::Free => NodeMove::Free {
                     gain: rec.gain,
                     residual: [-total[0], -total[1], -total[2]],
                 },
-                NodeMotion::Fixed => NodeMove::Held([T::ZERO; 3]),
+                NodeMotion::Fixed => {
+                    if rec.owner {
+                        add_reaction(&mut rf, total);
+                    }
+                    NodeMove::Held([T::ZERO; 3])
+                }
                 NodeMotion::Prescribed(p) => {
-                    NodeMove::Held(path_value(points, p, t_next).map(T::from_f64))
+                    if rec.owner {
+                        add_reaction(&mut rp, total);
+                    }
+                    NodeMove::Held(prescribed(points, p, t_next))
                 }
             };
-            if rec.owner {
-                let r = match rec.motion {
-                    NodeMotion::Free => None,
-                    NodeMotion::Fixed => Some(&mut rf),
-                    NodeMotion::Prescribed(_) => Some(&mut rp),
-                };
-                if let Some(r) = r {
-                    for i in 0..3 {
-                        r[i] += total[i].to_f64();
-                    }
-                }
-            }
-            let (u, u_prev) = (&mut self.st.u[k], &mut self.st.u_prev[k]);
             let v2 =
-                update_node(&self.cd, u, u_prev, mv, inv_2dt, limit, rec.global).map_err(|e| {
-                    Fault {
-                        board: self.header.board,
-                        step: self.step,
-                        kind: FaultKind::Physics(e),
-                    }
+                update_node(&cd, u, u_prev, mv, inv_2dt, limit, rec.global).map_err(|e| Fault {
+                    board,
+                    step,
+                    kind: FaultKind::Physics(e),
                 })?;
-            if rec.owner {
-                // m_inertial = C / gain
-                ke += 0.5 * (self.cd.c.to_f64() / rec.gain.to_f64()) * v2;
-            }
+            ke += rec.half_mass_kg * v2;
         }
         self.reaction_prescribed = rp;
         self.reaction_fixed = rf;
@@ -370,6 +378,20 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         self.step += 1;
         Ok(())
     }
+}
+
+/// `r += total` (in f64).
+#[inline(always)]
+fn add_reaction<T: Real>(r: &mut [f64; 3], total: [T; 3]) {
+    for i in 0..3 {
+        r[i] += total[i].to_f64();
+    }
+}
+
+/// Prescribed path `p` at `t_next`, in the node's precision.
+#[inline(never)]
+fn prescribed<T: Real>(points: &[PathPoint], p: u16, t_next: f64) -> [T; 3] {
+    path_value(points, p, t_next).map(T::from_f64)
 }
 
 /// The two element kinds a runtime can be built for.

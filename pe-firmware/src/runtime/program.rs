@@ -10,8 +10,6 @@ pub const ROUNDS_PER_AXIS_MAX: usize = 8;
 /// One operation of a step.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Op {
-    /// Zero the nodal forces.
-    Begin,
     /// Surface nodes to the graphics engine (on the steps of a graphics update).
     Graphics,
     /// Contact: bounding boxes (every check interval), node exchange with the partners,
@@ -26,11 +24,12 @@ pub enum Op {
     Send(u8, u8, u8),
     /// Receive and combine (axis, round, face).
     Recv(u8, u8, u8),
-    /// Central-difference update of every held node.
+    /// Central-difference update of every held node; leaves the nodal forces zero for the
+    /// next step (the loader zeroes them for the first).
     Update,
 }
 
-/// Most operations in a step: begin, graphics, contact, 4 batches, 4 external stages,
+/// Most operations in a step: graphics, contact, 4 batches, 4 external stages,
 /// 3 axes × rounds × 2 faces × (send + receive), update.
 pub const OPS_MAX: usize = 12 + 3 * ROUNDS_PER_AXIS_MAX * 4;
 
@@ -51,7 +50,6 @@ impl Program {
             ops: [Op::Update; OPS_MAX],
             len: 0,
         };
-        p.push(Op::Begin);
         if graphics {
             p.push(Op::Graphics);
         }

@@ -10,8 +10,8 @@ use core::mem::size_of;
 use link_proto::{FRAME_LEN_MAX, VALUES_PER_FRAME_MAX};
 
 use crate::image::{
-    zero_record, ContactFace, ContactNode, ContactNodePlace, Counts, ImageParts, LoadRecord,
-    NodeRecord, PathPoint, RecvEntry,
+    zero_record, ContactFace, ContactNode, ContactNodePlace, Counts, ExternalRecord, ImageParts,
+    LoadRecord, NodeRecord, PathPoint, RecvEntry,
 };
 use crate::image::{ElementRecord, Integration};
 use crate::physics::contact::Candidate;
@@ -38,14 +38,14 @@ pub struct Capacities {
     pub exchange: usize,
     pub path_points: usize,
     pub loads: usize,
+    /// External-force records (at most one per node).
+    pub external: usize,
     pub contact_nodes: usize,
     pub contact_faces: usize,
     /// Contact candidates (slave node, master face) found at a check.
     pub contact_candidates: usize,
     /// Contact-node displacements sent to partners until the next check.
     pub contact_sends: usize,
-    /// Nodes mapped to contact nodes (as many as nodes when the scene has contact).
-    pub contact_map: usize,
     pub graphics_nodes: usize,
 }
 
@@ -63,6 +63,7 @@ impl Capacities {
             exchange: c.sends.max(c.recvs) as usize,
             path_points: c.path_points as usize,
             loads: c.loads as usize,
+            external: c.external_records(),
             contact_nodes: nc,
             contact_faces: c.contact_faces as usize,
             contact_candidates: if pairs { 64 * nc.max(16) } else { 0 },
@@ -71,7 +72,6 @@ impl Capacities {
             } else {
                 0
             },
-            contact_map: if nc > 0 { c.nodes as usize } else { 0 },
             graphics_nodes: c.graphics_nodes as usize,
         }
     }
@@ -96,11 +96,11 @@ impl Capacities {
             exchange: p.exchange_max as usize,
             path_points: p.path_points_max as usize,
             loads: p.loads_max as usize,
+            external: nodes,
             contact_nodes: p.contact_nodes_max as usize,
             contact_faces: p.contact_faces_max as usize,
             contact_candidates: p.contact_candidates_max as usize,
             contact_sends: p.contact_sends_max as usize,
-            contact_map: nodes,
             graphics_nodes: nodes,
         };
         let ram = (p.ram_bytes.saturating_sub(p.ram_reserved_bytes) as usize)
@@ -118,6 +118,7 @@ impl Capacities {
             + self.exchange * (size_of::<u16>() + size_of::<RecvEntry>())
             + self.path_points * size_of::<PathPoint>()
             + self.loads * size_of::<LoadRecord>()
+            + self.external * size_of::<ExternalRecord<T>>()
             + self.contact_nodes
                 * (size_of::<ContactNode>()
                     + size_of::<ContactNodePlace>()
@@ -126,7 +127,6 @@ impl Capacities {
             + self.contact_faces * size_of::<ContactFace>()
             + self.contact_candidates * size_of::<Candidate>()
             + self.contact_sends * size_of::<u32>()
-            + self.contact_map * size_of::<u32>()
             + self.graphics_nodes * size_of::<u16>()
             + 2 * FRAME_LEN_MAX
             + VALUES_PER_FRAME_MAX * size_of::<T>()
@@ -145,16 +145,12 @@ impl Capacities {
             ("exchange receives", c.recvs as usize, self.exchange),
             ("path points", c.path_points as usize, self.path_points),
             ("loads", c.loads as usize, self.loads),
+            ("external forces", c.external_records(), self.external),
             ("contact nodes", nc, self.contact_nodes),
             (
                 "contact faces",
                 c.contact_faces as usize,
                 self.contact_faces,
-            ),
-            (
-                "nodes (contact map)",
-                if nc > 0 { c.nodes as usize } else { 0 },
-                self.contact_map,
             ),
             (
                 "graphics nodes",
@@ -180,6 +176,8 @@ pub struct Storage<'a, T, E> {
     pub recvs: &'a mut [RecvEntry],
     pub path_points: &'a mut [PathPoint],
     pub loads: &'a mut [LoadRecord],
+    /// External-force records by stage; the runtime's stage ranges index them.
+    pub external: &'a mut [ExternalRecord<T>],
     pub contact: ContactStorage<'a>,
     /// The link frame (or global packet) being sent and the one being received, and the
     /// values of a frame: [`FRAME_LEN_MAX`] bytes each and [`VALUES_PER_FRAME_MAX`] values,
@@ -202,8 +200,6 @@ pub struct ContactStorage<'a> {
     pub candidates: &'a mut [Candidate],
     /// Contact-node indices sent to the partners until the next check (flat).
     pub send_list: &'a mut [u32],
-    /// Per local node: its contact-node index, or `u32::MAX`.
-    pub contact_of: &'a mut [u32],
     /// Local indices of the owned surface nodes sent to the graphics engine.
     pub graphics: &'a mut [u16],
 }
@@ -222,6 +218,7 @@ impl<'a, T, E> Storage<'a, T, E> {
             recvs: self.recvs,
             path_points: self.path_points,
             loads: self.loads,
+            external: self.external,
             contact_nodes: self.contact.nodes,
             contact_places: self.contact.places,
             contact_faces: self.contact.faces,
@@ -296,6 +293,7 @@ pub struct StorageBuf<
     recvs: S::Of<RecvEntry, NX>,
     path_points: S::Of<PathPoint, NP>,
     loads: S::Of<LoadRecord, NL>,
+    external: S::Of<ExternalRecord<T>, NN>,
     contact_nodes: S::Of<ContactNode, NC>,
     places: S::Of<ContactNodePlace, NC>,
     faces: S::Of<ContactFace, NF>,
@@ -304,7 +302,6 @@ pub struct StorageBuf<
     remote: S::Of<RemoteSlot, NC>,
     candidates: S::Of<Candidate, NK>,
     send_list: S::Of<u32, NS>,
-    contact_of: S::Of<u32, NN>,
     graphics: S::Of<u16, NN>,
     tx: S::Of<u8, FRAME_LEN_MAX>,
     rx: S::Of<u8, FRAME_LEN_MAX>,
@@ -343,6 +340,7 @@ impl<
             recvs: S::empty(),
             path_points: S::empty(),
             loads: S::empty(),
+            external: S::empty(),
             contact_nodes: S::empty(),
             places: S::empty(),
             faces: S::empty(),
@@ -351,7 +349,6 @@ impl<
             remote: S::empty(),
             candidates: S::empty(),
             send_list: S::empty(),
-            contact_of: S::empty(),
             graphics: S::empty(),
             tx: S::empty(),
             rx: S::empty(),
@@ -380,6 +377,7 @@ impl<
         put::<S, _, NX>(&mut self.recvs, caps.exchange)?;
         put::<S, _, NP>(&mut self.path_points, caps.path_points)?;
         put::<S, _, NL>(&mut self.loads, caps.loads)?;
+        put::<S, _, NN>(&mut self.external, caps.external)?;
         put::<S, _, NC>(&mut self.contact_nodes, caps.contact_nodes)?;
         put::<S, _, NC>(&mut self.places, caps.contact_nodes)?;
         put::<S, _, NF>(&mut self.faces, caps.contact_faces)?;
@@ -388,7 +386,6 @@ impl<
         put::<S, _, NC>(&mut self.remote, caps.contact_nodes)?;
         put::<S, _, NK>(&mut self.candidates, caps.contact_candidates)?;
         put::<S, _, NS>(&mut self.send_list, caps.contact_sends)?;
-        put::<S, _, NN>(&mut self.contact_of, caps.contact_map)?;
         put::<S, _, NN>(&mut self.graphics, caps.graphics_nodes)?;
         put::<S, _, FRAME_LEN_MAX>(&mut self.tx, FRAME_LEN_MAX)?;
         put::<S, _, FRAME_LEN_MAX>(&mut self.rx, FRAME_LEN_MAX)?;
@@ -405,6 +402,7 @@ impl<
             recvs: &mut self.recvs,
             path_points: &mut self.path_points,
             loads: &mut self.loads,
+            external: &mut self.external,
             contact: ContactStorage {
                 nodes: &mut self.contact_nodes,
                 places: &mut self.places,
@@ -414,7 +412,6 @@ impl<
                 remote: &mut self.remote,
                 candidates: &mut self.candidates,
                 send_list: &mut self.send_list,
-                contact_of: &mut self.contact_of,
                 graphics: &mut self.graphics,
             },
             tx: &mut self.tx,
