@@ -44,7 +44,7 @@ grep -q 'cells = \[10, 5, 5\]' "$OUT/regular-box.toml"
 
 printf "%-12s %-8s %8s %6s %6s %10s %12s %10s %12s %12s %12s\n" variant scene elements boxes nodes \
     "kernel/gen" "elem-step/gen" "kernel/box" "elem-step/box" "step/elem" "update/node"
-echo "variant,scene,elements,boxes,nodes,kernel_general,element_step_general,kernel_box,element_step_box,step_per_element,per_node_update" >"$OUT/board-cost.csv"
+echo "variant,scene,elements,boxes,nodes,contact_nodes,kernel_general,element_step_general,kernel_box,element_step_box,step_per_element,per_node_update" >"$OUT/board-cost.csv"
 for SCENE in builtin regular; do
   for PREC in f64 f32; do
     for INTEG in reduced full; do
@@ -77,15 +77,15 @@ PY
             -plugin "$OUT/libinsncount.so,mark=$MARK" -d plugin -D "$D/insn.log" \
             -kernel "$ELF" -device loader,file="$D/board-0-0-0.sched",addr=0x00200000 \
             >"$D/bench.txt"
-        # bench,VARIANT,ELEMENTS,BOXES,NODES,SAMPLES,BOX_SAMPLES,MAX_ABS_U; marks 0..11
-        # (see pe-firmware/board/src/bin/bench.rs)
-        awk -F, '/^bench,/ { print $3, $4, $5, $6, $7, $8 }' "$D/bench.txt" >"$D/meta"
-        read -r NE NB NN K KB UMAX <"$D/meta"
+        # bench,VARIANT,ELEMENTS,BOXES,NODES,CONTACT_NODES,SAMPLES,BOX_SAMPLES,MAX_ABS_U;
+        # marks 0..11 (see pe-firmware/board/src/bin/bench.rs)
+        awk -F, '/^bench,/ { print $3, $4, $5, $6, $7, $8, $9 }' "$D/bench.txt" >"$D/meta"
+        read -r NE NB NN NC K KB UMAX <"$D/meta"
         if ! awk -v u="${UMAX:-0}" 'BEGIN { exit !(u + 0 > 1e-6) }'; then
             echo "board-cost: $SCENE $V measured on an undeformed state (max |u| = ${UMAX:-?} m): raise STEPS" >&2
             exit 1
         fi
-        awk -v v="$V" -v sc="$SCENE" -v ne="$NE" -v nb="$NB" -v nn="$NN" -v k="$K" -v kb="$KB" '
+        awk -v v="$V" -v sc="$SCENE" -v ne="$NE" -v nb="$NB" -v nn="$NN" -v nc="$NC" -v k="$K" -v kb="$KB" '
             /insncount: mark/ { d[$3] = substr($7, 1, length($7) - 1) + 0 }
             END {
                 o = d[1]
@@ -94,7 +94,7 @@ PY
                 step = (d[7] - o) / (ne + nb)
                 upd = (d[7] - o - ne * elem - nb * ebox) / nn
                 printf "%-12s %-8s %8d %6d %6d %10.0f %12.0f %10.0f %12.0f %12.0f %12.0f\n", v, sc, ne + nb, nb, nn, kern, elem, kbox, ebox, step, upd
-                printf "%s,%s,%d,%d,%d,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f\n", v, sc, ne + nb, nb, nn, kern, elem, kbox, ebox, step, upd >>csv
+                printf "%s,%s,%d,%d,%d,%d,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f\n", v, sc, ne + nb, nb, nn, nc, kern, elem, kbox, ebox, step, upd >>csv
             }' csv="$OUT/board-cost.csv" "$D/insn.log" | tee -a "$OUT/table.txt"
     done
   done
@@ -110,7 +110,7 @@ awk '
     BEGIN { clock = 480e6; rate = 1e4; cycles = clock / rate
             seed = 300e6 / rate / 700
             printf "Capacity at 10 kHz on the PE board (480 MHz, one instruction per cycle: %d cycles per step):\n", cycles }
-    { per = $11; epb = cycles / per; boards = 2000 / epb; if (boards > int(boards)) boards = int(boards) + 1
+    { per = $10; epb = cycles / per; boards = 2000 / epb; if (boards > int(boards)) boards = int(boards) + 1
       printf "  %-12s %-8s %6.0f instructions per element-step (whole step) -> %5.1f elements per board; 2000 elements need %4d boards\n", $1, $2, per, epb, boards }
     END { printf "Seed: 700 flops per element-step on 300 MFLOPS processors -> %.1f elements per processor at 10 kHz; 2000 elements need %d processors\n", seed, int(2000 / seed) + 1 }
 ' "$OUT/table.txt"

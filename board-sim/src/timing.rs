@@ -23,6 +23,8 @@ pub struct SimTiming {
     /// A parallelepiped (reduced integration's cheap kernel).
     pub cycles_per_box_element: f64,
     pub cycles_per_node_update: f64,
+    /// Extra per contact-surface node.
+    pub cycles_per_contact_node: f64,
     pub link_bytes_per_s: f64,
     pub link_latency_s: f64,
 }
@@ -45,6 +47,7 @@ impl SimTiming {
             cycles_per_element_full: full.per_element_step as f64,
             cycles_per_box_element: reduced.box_per_element_step as f64,
             cycles_per_node_update: reduced.per_node_update.max(full.per_node_update) as f64,
+            cycles_per_contact_node: reduced.per_contact_node.max(full.per_contact_node) as f64,
             link_bytes_per_s: p.link_bytes_per_s as f64,
             link_latency_s: p.link_latency_ns as f64 * 1e-9,
         }
@@ -124,7 +127,9 @@ pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::R
                     compute[b] += c;
                 }
                 Op::Update => {
-                    let c = im.header.counts.nodes as f64 * t.cycles_per_node_update / t.clock_hz;
+                    let c = (im.header.counts.nodes as f64 * t.cycles_per_node_update
+                        + im.header.counts.contact_nodes as f64 * t.cycles_per_contact_node)
+                        / t.clock_hz;
                     now[b] += c;
                     compute[b] += c;
                 }

@@ -139,19 +139,31 @@ pub struct FirmwareCost {
     /// integration, which has no such kernel).
     pub box_kernel_per_element: u32,
     pub box_per_element_step: u32,
-    /// Per node and step: external forces, central-difference update, checks.
+    /// Per node and step: external forces, central-difference update, checks (a node
+    /// without contact: measured on the regular box).
     pub per_node_update: u32,
+    /// Extra per contact-surface node and step: the contact search, penalties and the
+    /// exchange of contact nodes (measured on the built-in scene, whose probe presses the
+    /// tube, above its plain node updates).
+    pub per_contact_node: u32,
     /// A whole step divided by the elements, on the measured scene.
     pub step_per_element: u32,
 }
 
 impl FirmwareCost {
     /// Instructions of one step of a board holding `general` and `boxes` elements of each
-    /// kernel and `nodes` nodes (no exchange).
-    pub fn step_instructions(&self, general: usize, boxes: usize, nodes: usize) -> f64 {
+    /// kernel, `nodes` nodes of which `contact_nodes` on a contact surface (no exchange).
+    pub fn step_instructions(
+        &self,
+        general: usize,
+        boxes: usize,
+        nodes: usize,
+        contact_nodes: usize,
+    ) -> f64 {
         general as f64 * self.per_element_step as f64
             + boxes as f64 * self.box_per_element_step as f64
             + nodes as f64 * self.per_node_update as f64
+            + contact_nodes as f64 * self.per_contact_node as f64
     }
 
     /// Per element of a mix with a fraction `box_fraction` of parallelepipeds.
@@ -161,19 +173,21 @@ impl FirmwareCost {
     }
 
     /// Elements one board of `profile` computes at `rate_hz` steps per second, with
-    /// `nodes_per_element` nodes per element and a fraction `box_fraction` of
-    /// parallelepipeds, taking one instruction per cycle.
+    /// `nodes_per_element` nodes (`contact_per_element` contact nodes) per element and a
+    /// fraction `box_fraction` of parallelepipeds, taking one instruction per cycle.
     pub fn elements_per_board(
         &self,
         profile: &BoardProfile,
         rate_hz: f64,
         nodes_per_element: f64,
+        contact_per_element: f64,
         box_fraction: f64,
     ) -> f64 {
         profile.clock_hz as f64
             / rate_hz
             / (self.per_element_of_mix(box_fraction)
-                + nodes_per_element * self.per_node_update as f64)
+                + nodes_per_element * self.per_node_update as f64
+                + contact_per_element * self.per_contact_node as f64)
     }
 }
 
@@ -185,12 +199,13 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
         FirmwareCost {
             precision: F64,
             integration: Reduced,
-            kernel_per_element: 1037,
-            per_element_step: 1135,
-            box_kernel_per_element: 617,
-            box_per_element_step: 716,
-            per_node_update: 598,
-            step_per_element: 2380,
+            kernel_per_element: 1030,
+            per_element_step: 1186,
+            box_kernel_per_element: 618,
+            box_per_element_step: 720,
+            per_node_update: 103,
+            per_contact_node: 1193,
+            step_per_element: 1789,
         },
         FirmwareCost {
             precision: F64,
@@ -199,28 +214,31 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             per_element_step: 4878,
             box_kernel_per_element: 0,
             box_per_element_step: 0,
-            per_node_update: 577,
-            step_per_element: 6080,
+            per_node_update: 103,
+            per_contact_node: 1064,
+            step_per_element: 5439,
         },
         FirmwareCost {
             precision: F32,
             integration: Reduced,
-            kernel_per_element: 771,
-            per_element_step: 894,
-            box_kernel_per_element: 463,
-            box_per_element_step: 592,
-            per_node_update: 585,
-            step_per_element: 2112,
+            kernel_per_element: 751,
+            per_element_step: 861,
+            box_kernel_per_element: 455,
+            box_per_element_step: 573,
+            per_node_update: 105,
+            per_contact_node: 1225,
+            step_per_element: 1477,
         },
         FirmwareCost {
             precision: F32,
             integration: Full,
-            kernel_per_element: 3265,
+            kernel_per_element: 3263,
             per_element_step: 3624,
             box_kernel_per_element: 0,
             box_per_element_step: 0,
-            per_node_update: 589,
-            step_per_element: 4852,
+            per_node_update: 105,
+            per_contact_node: 1257,
+            step_per_element: 4250,
         },
     ]
 };

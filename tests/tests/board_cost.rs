@@ -20,14 +20,14 @@ fn measured_cost_table_matches_the_firmware() {
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
-        Some("variant,scene,elements,boxes,nodes,kernel_general,element_step_general,kernel_box,element_step_box,step_per_element,per_node_update"),
+        Some("variant,scene,elements,boxes,nodes,contact_nodes,kernel_general,element_step_general,kernel_box,element_step_box,step_per_element,per_node_update"),
         "{path}: header"
     );
-    let mut stale = Vec::new();
     let mut rows = Vec::new();
+    let mut parsed = Vec::new();
     for line in lines {
         let f: Vec<&str> = line.split(',').collect();
-        assert_eq!(f.len(), 11, "{path}: {line}");
+        assert_eq!(f.len(), 12, "{path}: {line}");
         let (precision, integration) = match f[0] {
             "f64-reduced" => (Precision::F64, Integration::Reduced),
             "f64-full" => (Precision::F64, Integration::Full),
@@ -35,48 +35,66 @@ fn measured_cost_table_matches_the_firmware() {
             "f32-full" => (Precision::F32, Integration::Full),
             v => panic!("{path}: unknown variant {v}"),
         };
-        let n = |k: usize| -> f64 { f[k].parse().expect("a number") };
-        let table = measured_cost(precision, integration);
-        assert!(n(2) > 100.0 && n(4) > 100.0, "{path}: a real scene: {line}");
-        // The built-in anatomy measures the general kernel and the node update (its cells
-        // are all distorted); the regular box the parallelepiped kernel (all boxes).
-        let checks = match f[1] {
-            "builtin" => {
-                assert_eq!(
-                    n(3),
-                    0.0,
-                    "{path}: the built-in has no parallelepipeds: {line}"
-                );
-                vec![
-                    ("kernel_per_element", n(5), table.kernel_per_element),
-                    ("per_element_step", n(6), table.per_element_step),
-                    ("step_per_element", n(9), table.step_per_element),
-                    ("per_node_update", n(10), table.per_node_update),
-                ]
-            }
+        let n: Vec<f64> = f[2..]
+            .iter()
+            .map(|v| v.parse().expect("a number"))
+            .collect();
+        // n: elements, boxes, nodes, contact nodes, kernel/gen, step/gen, kernel/box,
+        // step/box, step per element, update per node.
+        assert!(n[0] > 100.0 && n[2] > 100.0, "{path}: a real scene: {line}");
+        parsed.push((precision, integration, f[1].to_string(), n));
+        rows.push(format!("{}-{}", f[1], f[0]));
+    }
+    let mut stale = Vec::new();
+    for (precision, integration, scene, n) in &parsed {
+        let table = measured_cost(*precision, *integration);
+        // The regular box: parallelepipeds and plain nodes (no contact); the built-in
+        // anatomy: the general kernel (every cell distorted), and what its contact nodes
+        // cost above plain nodes (its per-node figure less the box's, over its contact
+        // nodes).
+        let checks = match scene.as_str() {
             "regular" => {
                 assert_eq!(
-                    n(3),
-                    n(2),
+                    n[1], n[0],
                     "{path}: every cell of the box is a parallelepiped"
                 );
+                assert_eq!(n[3], 0.0, "{path}: the box has no contact");
                 vec![
-                    ("box_kernel_per_element", n(7), table.box_kernel_per_element),
-                    ("box_per_element_step", n(8), table.box_per_element_step),
+                    ("box_kernel_per_element", n[6], table.box_kernel_per_element),
+                    ("box_per_element_step", n[7], table.box_per_element_step),
+                    ("per_node_update", n[9], table.per_node_update),
+                ]
+            }
+            "builtin" => {
+                assert_eq!(n[1], 0.0, "{path}: the built-in has no parallelepipeds");
+                assert!(n[3] > 10.0, "{path}: the built-in has contact nodes");
+                let plain = parsed
+                    .iter()
+                    .find(|r| r.0 == *precision && r.2 == "regular")
+                    .map(|r| r.3[9])
+                    .expect("the regular box of the same precision");
+                let contact = (n[9] - plain) * n[2] / n[3];
+                vec![
+                    ("kernel_per_element", n[4], table.kernel_per_element),
+                    ("per_element_step", n[5], table.per_element_step),
+                    ("step_per_element", n[8], table.step_per_element),
+                    ("per_contact_node", contact, table.per_contact_node),
+                    ("per_node_update", plain, table.per_node_update),
                 ]
             }
             s => panic!("{path}: unknown scene {s}"),
         };
         for (what, measured, held) in checks {
-            assert!(measured > 50.0, "{path}: {what} of {} is {measured}", f[0]);
+            assert!(
+                measured > 50.0,
+                "{path}: {what} of {precision:?} {integration:?} {scene} is {measured}"
+            );
             if (held as f64 - measured).abs() > STALE * measured {
                 stale.push(format!(
-                    "{} {} {what}: table {held}, measured {measured}",
-                    f[0], f[1]
+                    "{precision:?} {integration:?} {scene} {what}: table {held}, measured {measured:.0}"
                 ));
             }
         }
-        rows.push(format!("{}-{}", f[1], f[0]));
     }
     rows.sort();
     assert_eq!(

@@ -162,7 +162,15 @@ fn verdict_matches_an_independent_computation() {
                         }
                     })
                     .sum();
-                (elements + b.nodes.len() as f64 * cost.per_node_update as f64)
+                let contact = p.contact.as_ref().map_or(0, |c| {
+                    b.nodes
+                        .iter()
+                        .filter(|n| c.node_globals.contains(n))
+                        .count()
+                });
+                (elements
+                    + b.nodes.len() as f64 * cost.per_node_update as f64
+                    + contact as f64 * cost.per_contact_node as f64)
                     / profile.clock_hz as f64
             })
             .fold(0.0, f64::max);

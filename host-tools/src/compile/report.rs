@@ -183,6 +183,7 @@ pub struct Capacity {
     /// Elements of the scene that take the parallelepiped kernel.
     pub parallelepipeds: usize,
     pub instructions_per_node_update: u32,
+    pub instructions_per_contact_node: u32,
     /// Instructions of one step on the busiest board (no exchange), and that board.
     pub step_instructions_max: f64,
     pub busiest_board: [usize; 3],
@@ -432,13 +433,20 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
             .filter(|&&e| is_box(problem, e as usize))
             .count()
     };
+    let on_contact: std::collections::HashSet<u32> = problem
+        .contact
+        .as_ref()
+        .map(|c| c.node_globals.iter().copied().collect())
+        .unwrap_or_default();
+    let contact_nodes =
+        |b: &super::plan::BoardPlan| b.nodes.iter().filter(|n| on_contact.contains(n)).count();
     let (busiest, busiest_board) = plan
         .boards
         .iter()
         .map(|b| {
             let nb = boxes(b);
             (
-                cost.step_instructions(b.elements.len() - nb, nb, b.nodes.len()),
+                cost.step_instructions(b.elements.len() - nb, nb, b.nodes.len(), contact_nodes(b)),
                 b.coords,
             )
         })
@@ -449,15 +457,17 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
         .max_by_key(|b| b.elements.len())
         .map(|b| b.nodes.len() as f64 / b.elements.len().max(1) as f64)
         .unwrap_or(2.0);
+    let cpe = on_contact.len() as f64 / problem.mesh.cells.len().max(1) as f64;
     let n = problem.mesh.cells.len();
     let box_fraction = (0..n).filter(|&e| is_box(problem, e)).count() as f64 / n.max(1) as f64;
-    let at_10k = cost.elements_per_board(profile, 1e4, npe, box_fraction);
+    let at_10k = cost.elements_per_board(profile, 1e4, npe, cpe, box_fraction);
     Capacity {
         clock_hz: profile.clock_hz,
         instructions_per_element_step: cost.per_element_step,
         instructions_per_box_element_step: cost.box_per_element_step,
         parallelepipeds: (box_fraction * n as f64).round() as usize,
         instructions_per_node_update: cost.per_node_update,
+        instructions_per_contact_node: cost.per_contact_node,
         step_instructions_max: busiest,
         busiest_board,
         step_compute_s_max: busiest / profile.clock_hz as f64,
@@ -466,6 +476,7 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
             profile,
             1.0 / dt,
             npe,
+            cpe,
             box_fraction,
         ),
         elements_per_board_at_10_khz: at_10k,
@@ -587,9 +598,9 @@ pub fn summary(r: &CompileReport) -> String {
     );
     let c = &r.capacity;
     s += &format!(
-        "  element kernels: {} parallelepipeds, {} general\n  board compute ({} profile, {:.0} MHz, measured {} instructions per element-step (general), {} (parallelepiped) and {} per node update, one instruction per cycle assumed): busiest board {:.1} us per step against dt = {:.1} us ({}); {:.1} elements per board at this scene's rate, {:.1} at 10 kHz, so {} boards for this scene at 10 kHz\n",
+        "  element kernels: {} parallelepipeds, {} general\n  board compute ({} profile, {:.0} MHz, measured {} instructions per element-step (general), {} (parallelepiped), {} per node update and {} more per contact node, one instruction per cycle assumed): busiest board {:.1} us per step against dt = {:.1} us ({}); {:.1} elements per board at this scene's rate, {:.1} at 10 kHz, so {} boards for this scene at 10 kHz\n",
         c.parallelepipeds, r.elements - c.parallelepipeds,
-        r.profile, c.clock_hz as f64 / 1e6, c.instructions_per_element_step, c.instructions_per_box_element_step, c.instructions_per_node_update,
+        r.profile, c.clock_hz as f64 / 1e6, c.instructions_per_element_step, c.instructions_per_box_element_step, c.instructions_per_node_update, c.instructions_per_contact_node,
         c.step_compute_s_max * 1e6, r.dt_s * 1e6,
         if c.compute_keeps_real_time { "within dt" } else { "over dt" },
         c.elements_per_board_at_scene_rate, c.elements_per_board_at_10_khz, c.boards_needed_at_10_khz

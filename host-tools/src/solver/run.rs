@@ -25,6 +25,8 @@ pub struct RunReport {
     /// Elements that take the parallelepiped kernel (reduced integration), as a fraction.
     pub box_fraction: f64,
     pub nodes: usize,
+    /// Nodes on a contact surface.
+    pub contact_nodes: usize,
     pub wall_s: f64,
     pub element_steps_per_s: f64,
     pub real_time_factor: f64,
@@ -160,6 +162,7 @@ pub fn run_typed<T: Real>(
         elements,
         box_fraction: model.elements.boxes() as f64 / elements.max(1) as f64,
         nodes: problem.mesh.nodes.len(),
+        contact_nodes: problem.contact.as_ref().map_or(0, |c| c.node_globals.len()),
         wall_s,
         element_steps_per_s: (elements as f64 * steps as f64) / wall_s.max(1e-12),
         real_time_factor: model.time_s() / wall_s.max(1e-12),
