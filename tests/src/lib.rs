@@ -51,6 +51,15 @@ pub fn file_problem(name: &str) -> (Problem, String) {
     )
 }
 
+/// A scene of the repository's `scenes/` folder.
+pub fn repo_scene(name: &str) -> Problem {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes")
+        .join(name);
+    let sc = Scene::from_file(&path).expect("scene parses");
+    Problem::from_scene(&sc, path.parent().unwrap_or(Path::new("."))).expect("scene resolves")
+}
+
 /// Compiles `problem` for `machine` into a fresh directory.
 pub fn compile(problem: &Problem, source: &str, machine: &str, name: &str) -> PathBuf {
     let dir = temp_dir(name);

@@ -1,23 +1,11 @@
 //! The partitioner: its exchange count against an independent count from the element ->
 //! board map alone, its load balance, and the seed's reference case.
 
-use std::path::{Path, PathBuf};
-
 use host_tools::compile::partition::{slabs, Machine, BALANCE_MAX};
 use host_tools::compile::{compile_images, plan, report};
 use host_tools::problem::Problem;
-use host_tools::scene::Scene;
 use pe_firmware::profile::PE_BOARD;
 use system_tests::*;
-
-/// A scene of the repository's `scenes/` folder.
-fn repo_scene(name: &str) -> Problem {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../scenes")
-        .join(name);
-    let sc = Scene::from_file(&path).expect("scene parses");
-    Problem::from_scene(&sc, path.parent().unwrap_or(Path::new("."))).expect("scene resolves")
-}
 
 /// Force vectors per step that the x, then y, then z exchange rounds send, computed from
 /// the element -> board map alone (not from the compiler's exchange lists).

@@ -1,22 +1,12 @@
 //! The compile report's real-time verdict: the busiest board's compute within half the
 //! step and every link direction's exchange within the step.
 
-use std::path::{Path, PathBuf};
-
 use host_tools::compile::partition::Machine;
 use host_tools::compile::{compile_images, plan, report, summary, CompileReport};
 use host_tools::problem::Problem;
-use host_tools::scene::Scene;
 use pe_firmware::image::Precision;
 use pe_firmware::profile::{measured_cost, BoardProfile, PE_BOARD};
-
-fn repo_scene(name: &str) -> Problem {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../scenes")
-        .join(name);
-    let sc = Scene::from_file(&path).expect("scene parses");
-    Problem::from_scene(&sc, path.parent().unwrap_or(Path::new("."))).expect("scene resolves")
-}
+use system_tests::repo_scene;
 
 fn compiled(p: &Problem, machine: &str, profile: &BoardProfile) -> CompileReport {
     let plan = plan(p, Machine::parse(machine).expect("machine")).expect("plans");

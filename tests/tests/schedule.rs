@@ -388,16 +388,9 @@ fn each_cell_gets_the_kernel_its_shape_allows() {
             .fold(0.0, f64::max);
         bent <= 1e-13 * size
     };
-    let seed = Scene::from_file(
-        &std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenes/seed-box.toml"),
-    )
-    .unwrap();
     let cases = [
         (builtin_problem("coarse", 10), "builtin"),
-        (
-            Problem::from_scene(&seed, std::path::Path::new(".")).unwrap(),
-            "seed box",
-        ),
+        (repo_scene("seed-box.toml"), "seed box"),
     ];
     for (p, name) in &cases {
         let n = p.mesh.cells.len();

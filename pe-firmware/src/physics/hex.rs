@@ -527,6 +527,40 @@ struct Local<'a, T> {
     f: [[T; 3]; 8],
 }
 
+impl<'a, T: Real> Local<'a, T> {
+    #[inline(always)]
+    fn new(u: &'a [[T; 3]; 8]) -> Self {
+        Local {
+            u,
+            f: [[T::ZERO; 3]; 8],
+        }
+    }
+}
+
+/// [`HexElement::internal_forces`] of a corner-basis kernel: the kernel on the element's
+/// own arrays.
+#[inline(always)]
+fn local_forces<T: Real>(
+    u: &[[T; 3]; 8],
+    kernel: impl FnOnce(&mut Local<'_, T>) -> Result<(), NonPositiveJacobian>,
+) -> Result<[[T; 3]; 8], NonPositiveJacobian> {
+    let mut local = Local::new(u);
+    kernel(&mut local)?;
+    Ok(local.f)
+}
+
+/// [`HexElement::accumulate`] of a corner-basis kernel: the kernel on the board's arrays.
+#[inline(always)]
+fn global_forces<T: Real>(
+    nodes: &[u32; 8],
+    u: &[[T; 3]],
+    f: &mut [[T; 3]],
+    kernel: impl FnOnce(&mut Global<'_, T>) -> Result<(), NonPositiveJacobian>,
+) -> Result<(), KernelFault> {
+    let mut g = Global::new(nodes, u, f)?;
+    kernel(&mut g).map_err(KernelFault::Inverted)
+}
+
 impl<T: Real> Corners<T> for Local<'_, T> {
     #[inline(always)]
     fn get(&self, p: usize, i: usize) -> T {
@@ -713,18 +747,10 @@ impl<T: Real> HexElement<T> for HexReduced<T> {
         law: &MaterialLaw<T>,
         u: &[[T; 3]; 8],
     ) -> Result<[[T; 3]; 8], NonPositiveJacobian> {
-        let mut local = Local {
-            u,
-            f: [[T::ZERO; 3]; 8],
-        };
-        self.kernel(law, &mut local)?;
-        Ok(local.f)
+        local_forces(u, |c| self.kernel(law, c))
     }
     fn energy(&self, law: &MaterialLaw<T>, u: &[[T; 3]; 8]) -> Result<T, NonPositiveJacobian> {
-        let (h, q) = self.strain_and_modes(&Local {
-            u,
-            f: [[T::ZERO; 3]; 8],
-        });
+        let (h, q) = self.strain_and_modes(&Local::new(u));
         let w = law.strain_energy_density(&plus_identity(h))? * self.volume;
         let qq: T = q.iter().flatten().fold(T::ZERO, |s, v| s + *v * *v);
         Ok(w + T::from_f64(0.5) * self.hourglass_stiffness * qq)
@@ -736,8 +762,7 @@ impl<T: Real> HexElement<T> for HexReduced<T> {
         u: &[[T; 3]],
         f: &mut [[T; 3]],
     ) -> Result<(), KernelFault> {
-        let mut g = Global::new(self.nodes(), u, f)?;
-        self.kernel(law, &mut g).map_err(KernelFault::Inverted)
+        global_forces(self.nodes(), u, f, |c| self.kernel(law, c))
     }
 }
 
@@ -811,18 +836,10 @@ impl<T: Real> HexElement<T> for HexBox<T> {
         law: &MaterialLaw<T>,
         u: &[[T; 3]; 8],
     ) -> Result<[[T; 3]; 8], NonPositiveJacobian> {
-        let mut local = Local {
-            u,
-            f: [[T::ZERO; 3]; 8],
-        };
-        self.kernel(law, &mut local)?;
-        Ok(local.f)
+        local_forces(u, |c| self.kernel(law, c))
     }
     fn energy(&self, law: &MaterialLaw<T>, u: &[[T; 3]; 8]) -> Result<T, NonPositiveJacobian> {
-        let (f, hg) = self.deformation(&Local {
-            u,
-            f: [[T::ZERO; 3]; 8],
-        });
+        let (f, hg) = self.deformation(&Local::new(u));
         let w = law.strain_energy_density(&f)? * self.volume;
         let qq: T = hg.iter().flatten().fold(T::ZERO, |s, v| s + *v * *v);
         Ok(w + T::from_f64(0.5) * self.hourglass_stiffness * qq)
@@ -834,8 +851,7 @@ impl<T: Real> HexElement<T> for HexBox<T> {
         u: &[[T; 3]],
         f: &mut [[T; 3]],
     ) -> Result<(), KernelFault> {
-        let mut g = Global::new(self.nodes(), u, f)?;
-        self.kernel(law, &mut g).map_err(KernelFault::Inverted)
+        global_forces(self.nodes(), u, f, |c| self.kernel(law, c))
     }
 }
 
