@@ -73,7 +73,7 @@ impl<T: Real> Elements<T> {
     }
 
     /// An error naming an element in kernel order, renamed to its mesh cell.
-    fn in_mesh(&self, e: PhysicsError) -> PhysicsError {
+    pub(crate) fn in_mesh(&self, e: PhysicsError) -> PhysicsError {
         let Elements::Reduced { cells, .. } = self else {
             return e;
         };

@@ -12,6 +12,7 @@ use pe_firmware::physics::{CentralDifference, MaterialLaw, PhysicsError, Real};
 use crate::problem::elements::Elements;
 use crate::problem::{NodeKind, Problem};
 
+pub mod batched;
 mod monitor;
 mod run;
 
@@ -19,9 +20,13 @@ pub use monitor::{DtMonitor, Energies};
 pub use run::{describe_step_error, run, run_typed, ContactReport, Observer, RunOutput, RunReport};
 
 /// Serial explicit model in scalar type `T`.
-pub struct Model<'p, T> {
+pub struct Model<'p, T: Real> {
     pub problem: &'p Problem,
     pub elements: Elements<T>,
+    /// The elements packed for the batched kernel ([`batched`]), which computes the
+    /// scalar loop's bits faster; `None` runs the scalar loop (a model whose packing
+    /// failed names the bad element at its first step).
+    pub batched: Option<batched::Batched<T>>,
     pub laws: Vec<MaterialLaw<T>>,
     pub dt_s: f64,
     pub cd: CentralDifference<T>,
@@ -201,10 +206,13 @@ impl<'p, T: Real> Model<'p, T> {
             .iter()
             .map(|m| problem.gravity.map(|g| T::from_f64(g * m)))
             .collect();
+        let elements = Elements::build(problem);
+        let laws: Vec<MaterialLaw<T>> = problem.laws.iter().map(|l| l.cast::<T>()).collect();
         Model {
             problem,
-            elements: Elements::build(problem),
-            laws: problem.laws.iter().map(|l| l.cast::<T>()).collect(),
+            batched: batched::Batched::build(&elements, &laws, batched::Isa::detect()).ok(),
+            elements,
+            laws,
             dt_s,
             cd,
             gain,
@@ -276,9 +284,13 @@ impl<'p, T: Real> Model<'p, T> {
         let t_next = t + self.dt_s;
         let step = self.step;
         self.f_int.iter_mut().for_each(|f| *f = [T::ZERO; 3]);
-        self.elements
-            .internal_forces(&self.laws, &self.u, &mut self.f_int)
-            .map_err(|error| StepError { step, error })?;
+        match &self.batched {
+            Some(b) => b.internal_forces(&self.elements, &self.laws, &self.u, &mut self.f_int),
+            None => self
+                .elements
+                .internal_forces(&self.laws, &self.u, &mut self.f_int),
+        }
+        .map_err(|error| StepError { step, error })?;
         self.external_forces(t)
             .map_err(|error| StepError { step, error })?;
         let inv_2dt = 1.0 / (2.0 * self.dt_s);

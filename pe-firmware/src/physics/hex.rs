@@ -25,8 +25,9 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::lanes::LaneReal;
 use super::material::{MaterialLaw, NonPositiveJacobian};
-use super::real::Real;
+use super::real::{array, Real};
 use super::tensor::{self, Mat3};
 
 /// Natural coordinates of the eight nodes.
@@ -521,6 +522,16 @@ trait Corners<T> {
     fn add(&mut self, p: usize, v: [T; 3]);
 }
 
+/// A kernel in the corner basis: reads the displacements from and adds the forces to
+/// `corners` (each corner's force added once).
+trait CornerKernel<T: Real> {
+    fn kernel(
+        &self,
+        law: &MaterialLaw<T>,
+        corners: &mut impl Corners<T>,
+    ) -> Result<(), NonPositiveJacobian>;
+}
+
 /// An element's own arrays (Gmsh order).
 struct Local<'a, T> {
     u: &'a [[T; 3]; 8],
@@ -626,13 +637,19 @@ impl<T: Real> Corners<T> for Global<'_, T> {
 /// The corner moments of component `i` of the displacements ([`transform8`]).
 #[inline(always)]
 fn moments_of<T: Real>(c: &impl Corners<T>, i: usize) -> [T; 8] {
-    transform8(core::array::from_fn(|p| c.get(p, i)))
+    transform8(array(
+        #[inline(always)]
+        |p| c.get(p, i),
+    ))
 }
 
 /// Adds the nodal vectors of the moments `m[i]` (component `i`) to the corners.
 #[inline(always)]
 fn add_synthesis<T: Real>(c: &mut impl Corners<T>, m: [[T; 8]; 3]) {
-    let v = m.map(synthesis8);
+    let v: [[T; 8]; 3] = array(
+        #[inline(always)]
+        |i| synthesis8(m[i]),
+    );
     for p in 0..8 {
         c.add(p, [v[0][p], v[1][p], v[2][p]]);
     }
@@ -682,24 +699,36 @@ impl<T: Real> HexReduced<T> {
         let mut hg = [[T::ZERO; 4]; 3];
         for i in 0..3 {
             let c = moments_of(corners, i);
-            h[i] = core::array::from_fn(|j| {
-                let mut s = c[MASKS[0]] * beta[0][j];
-                for k in 1..7 {
-                    s += c[MASKS[k]] * beta[k][j];
-                }
-                s
-            });
-            hg[i] = HOURGLASS.map(|m| c[m]);
+            h[i] = array(
+                #[inline(always)]
+                |j| {
+                    let mut s = c[MASKS[0]] * beta[0][j];
+                    for k in 1..7 {
+                        s += c[MASKS[k]] * beta[k][j];
+                    }
+                    s
+                },
+            );
+            hg[i] = array(
+                #[inline(always)]
+                |a| c[HOURGLASS[a]],
+            );
         }
-        let q = core::array::from_fn(|alpha| {
-            let g = &self.hourglass_geometry[alpha];
-            core::array::from_fn(|i| {
-                hg[i][alpha] - (h[i][0] * g[0] + h[i][1] * g[1] + h[i][2] * g[2])
-            })
-        });
+        let q = array(
+            #[inline(always)]
+            |alpha| {
+                let g = &self.hourglass_geometry[alpha];
+                array(
+                    #[inline(always)]
+                    |i| hg[i][alpha] - (h[i][0] * g[0] + h[i][1] * g[1] + h[i][2] * g[2]),
+                )
+            },
+        );
         (h, q)
     }
+}
 
+impl<T: Real> CornerKernel<T> for HexReduced<T> {
     #[inline(always)]
     fn kernel(
         &self,
@@ -709,28 +738,45 @@ impl<T: Real> HexReduced<T> {
         let (h, q) = self.strain_and_modes(corners);
         let p = law.first_piola_kirchhoff(&plus_identity(h))?;
         let k = self.hourglass_stiffness;
-        let big_q: [[T; 3]; 4] = core::array::from_fn(|alpha| q[alpha].map(|v| k * v));
+        let big_q: [[T; 3]; 4] = array(
+            #[inline(always)]
+            |alpha| {
+                array(
+                    #[inline(always)]
+                    |i| k * q[alpha][i],
+                )
+            },
+        );
         // V₀ P − Σ_α Q_α ⊗ γ_α
-        let pm: Mat3<T> = core::array::from_fn(|i| {
-            core::array::from_fn(|j| {
-                let mut m = self.volume * p[i][j];
+        let pm: Mat3<T> = array(
+            #[inline(always)]
+            |i| {
+                array(
+                    #[inline(always)]
+                    |j| {
+                        let mut m = self.volume * p[i][j];
+                        for alpha in 0..4 {
+                            m -= big_q[alpha][i] * self.hourglass_geometry[alpha][j];
+                        }
+                        m
+                    },
+                )
+            },
+        );
+        let m = array(
+            #[inline(always)]
+            |i| {
+                let row = &pm[i];
+                let mut m = [T::ZERO; 8];
+                for (k, b) in self.gradient_moments.iter().enumerate() {
+                    m[MASKS[k]] = row[0] * b[0] + row[1] * b[1] + row[2] * b[2];
+                }
                 for alpha in 0..4 {
-                    m -= big_q[alpha][i] * self.hourglass_geometry[alpha][j];
+                    m[HOURGLASS[alpha]] += big_q[alpha][i];
                 }
                 m
-            })
-        });
-        let m = core::array::from_fn(|i| {
-            let row = &pm[i];
-            let mut m = [T::ZERO; 8];
-            for (k, b) in self.gradient_moments.iter().enumerate() {
-                m[MASKS[k]] = row[0] * b[0] + row[1] * b[1] + row[2] * b[2];
-            }
-            for alpha in 0..4 {
-                m[HOURGLASS[alpha]] += big_q[alpha][i];
-            }
-            m
-        });
+            },
+        );
         add_synthesis(corners, m);
         Ok(())
     }
@@ -794,12 +840,20 @@ impl<T: Real> HexBox<T> {
         for i in 0..3 {
             let c = moments_of(corners, i);
             let (c0, c1, c2) = (c[LINEAR[0]], c[LINEAR[1]], c[LINEAR[2]]);
-            h[i] = core::array::from_fn(|j| c0 * b[0][j] + c1 * b[1][j] + c2 * b[2][j]);
-            hg[i] = HOURGLASS.map(|m| c[m]);
+            h[i] = array(
+                #[inline(always)]
+                |j| c0 * b[0][j] + c1 * b[1][j] + c2 * b[2][j],
+            );
+            hg[i] = array(
+                #[inline(always)]
+                |a| c[HOURGLASS[a]],
+            );
         }
         (plus_identity(h), hg)
     }
+}
 
+impl<T: Real> CornerKernel<T> for HexBox<T> {
     #[inline(always)]
     fn kernel(
         &self,
@@ -809,17 +863,20 @@ impl<T: Real> HexBox<T> {
         let (f, hg) = self.deformation(corners);
         let p = law.first_piola_kirchhoff(&f)?;
         let k = self.hourglass_stiffness;
-        let m = core::array::from_fn(|i| {
-            let row = &p[i];
-            let mut m = [T::ZERO; 8];
-            for (j, bv) in self.basis_volume.iter().enumerate() {
-                m[LINEAR[j]] = row[0] * bv[0] + row[1] * bv[1] + row[2] * bv[2];
-            }
-            for alpha in 0..4 {
-                m[HOURGLASS[alpha]] = k * hg[i][alpha];
-            }
-            m
-        });
+        let m = array(
+            #[inline(always)]
+            |i| {
+                let row = &p[i];
+                let mut m = [T::ZERO; 8];
+                for (j, bv) in self.basis_volume.iter().enumerate() {
+                    m[LINEAR[j]] = row[0] * bv[0] + row[1] * bv[1] + row[2] * bv[2];
+                }
+                for alpha in 0..4 {
+                    m[HOURGLASS[alpha]] = k * hg[i][alpha];
+                }
+                m
+            },
+        );
         add_synthesis(corners, m);
         Ok(())
     }
@@ -875,7 +932,7 @@ impl<T: Real> HexElement<T> for HexFull<T> {
     fn connectivity(&self) -> &Connectivity {
         &self.connectivity
     }
-    #[inline]
+    #[inline(always)]
     fn internal_forces(
         &self,
         law: &MaterialLaw<T>,
@@ -896,5 +953,171 @@ impl<T: Real> HexElement<T> for HexFull<T> {
             w += law.strain_energy_density(&f)? * gp.volume;
         }
         Ok(w)
+    }
+}
+
+/// `N` elements of one kernel run side by side ([`LaneReal`]): the host's batched element
+/// loop. Every lane performs exactly the operations of the scalar kernel on its element,
+/// in the same order, and the forces are handed out in the order the scalar
+/// [`HexElement::accumulate`] adds them, so a caller that adds them in that order gets the
+/// scalar loop's bits.
+pub trait LaneKernel<S: Real, L: LaneReal<S, N>, const N: usize> {
+    /// Internal forces of the batch's elements, whose nodes (Gmsh order) are `nodes[l]`,
+    /// at the displacements `u`: `scatter(l, node, force)` is called for the lanes
+    /// `l < active`, lane by lane, each lane's nodes in the scalar kernel's order.
+    /// [`KernelFault::BadIndex`] when a node of any lane is outside `u`, before any
+    /// computation; [`KernelFault::Inverted`] when `J ≤ 0` in some lane (which one is not
+    /// said: run the scalar kernel on the batch's elements to find it), before any call to
+    /// `scatter`.
+    fn lane_forces(
+        &self,
+        law: &MaterialLaw<L>,
+        nodes: &[[u32; 8]; N],
+        active: usize,
+        u: &[[S; 3]],
+        scatter: impl FnMut(usize, usize, [S; 3]),
+    ) -> Result<(), KernelFault>;
+}
+
+/// The batch's displacements, gathered (Gmsh order) and every index checked.
+#[inline(always)]
+fn gather_lanes<S: Real, L: LaneReal<S, N>, const N: usize>(
+    nodes: &[[u32; 8]; N],
+    u: &[[S; 3]],
+) -> Result<[[L; 3]; 8], KernelFault> {
+    let mut ue = [[[S::ZERO; 3]; 8]; N];
+    for (l, row) in ue.iter_mut().enumerate() {
+        for (a, v) in row.iter_mut().enumerate() {
+            *v = *u.get(nodes[l][a] as usize).ok_or(KernelFault::BadIndex)?;
+        }
+    }
+    Ok(array(
+        #[inline(always)]
+        |a| {
+            array(
+                #[inline(always)]
+                |i| {
+                    L::from_lanes(array(
+                        #[inline(always)]
+                        |l| ue[l][a][i],
+                    ))
+                },
+            )
+        },
+    ))
+}
+
+/// Per corner and component, the lanes as an array.
+#[inline(always)]
+fn lanes_out<S: Real, L: LaneReal<S, N>, const N: usize>(f: &[[L; 3]; 8]) -> [[[S; N]; 3]; 8] {
+    let mut out = [[[S::ZERO; N]; 3]; 8];
+    for (o, v) in out.iter_mut().zip(f) {
+        for (o, v) in o.iter_mut().zip(v) {
+            *o = v.to_lanes();
+        }
+    }
+    out
+}
+
+/// A batch's corners for the corner-basis kernels: the gathered displacements and the
+/// forces the kernel's synthesis produces (each corner written once).
+struct LaneCorners<L> {
+    u: [[L; 3]; 8],
+    f: [[L; 3]; 8],
+}
+
+impl<L: Real> Corners<L> for LaneCorners<L> {
+    #[inline(always)]
+    fn get(&self, p: usize, i: usize) -> L {
+        self.u[CORNER[p]][i]
+    }
+    /// [`add_synthesis`] adds to each corner once: a store, as the scalar kernel's
+    /// addition into a zeroed array gives the same value (`0 + v = v`, up to the sign
+    /// of a zero, which cannot change a later sum that starts from `+0`).
+    #[inline(always)]
+    fn add(&mut self, p: usize, v: [L; 3]) {
+        self.f[p] = v;
+    }
+}
+
+/// [`LaneKernel::lane_forces`] of a corner-basis kernel: gather, kernel, then the forces
+/// lane by lane in binary corner order (the scalar [`Global`] scatter's order).
+#[inline(always)]
+fn lane_corner_forces<S: Real, L: LaneReal<S, N>, const N: usize>(
+    kernel: &impl CornerKernel<L>,
+    law: &MaterialLaw<L>,
+    nodes: &[[u32; 8]; N],
+    active: usize,
+    u: &[[S; 3]],
+    mut scatter: impl FnMut(usize, usize, [S; 3]),
+) -> Result<(), KernelFault> {
+    let mut c = LaneCorners {
+        u: gather_lanes(nodes, u)?,
+        f: [[L::ZERO; 3]; 8],
+    };
+    kernel.kernel(law, &mut c).map_err(KernelFault::Inverted)?;
+    let f = lanes_out::<S, L, N>(&c.f);
+    for (l, at) in nodes.iter().enumerate().take(active) {
+        for p in 0..8 {
+            scatter(
+                l,
+                at[CORNER[p]] as usize,
+                [f[p][0][l], f[p][1][l], f[p][2][l]],
+            );
+        }
+    }
+    Ok(())
+}
+
+impl<S: Real, L: LaneReal<S, N>, const N: usize> LaneKernel<S, L, N> for HexReduced<L> {
+    #[inline(always)]
+    fn lane_forces(
+        &self,
+        law: &MaterialLaw<L>,
+        nodes: &[[u32; 8]; N],
+        active: usize,
+        u: &[[S; 3]],
+        scatter: impl FnMut(usize, usize, [S; 3]),
+    ) -> Result<(), KernelFault> {
+        lane_corner_forces(self, law, nodes, active, u, scatter)
+    }
+}
+
+impl<S: Real, L: LaneReal<S, N>, const N: usize> LaneKernel<S, L, N> for HexBox<L> {
+    #[inline(always)]
+    fn lane_forces(
+        &self,
+        law: &MaterialLaw<L>,
+        nodes: &[[u32; 8]; N],
+        active: usize,
+        u: &[[S; 3]],
+        scatter: impl FnMut(usize, usize, [S; 3]),
+    ) -> Result<(), KernelFault> {
+        lane_corner_forces(self, law, nodes, active, u, scatter)
+    }
+}
+
+impl<S: Real, L: LaneReal<S, N>, const N: usize> LaneKernel<S, L, N> for HexFull<L> {
+    /// Gmsh order, as the default [`HexElement::accumulate`].
+    #[inline(always)]
+    fn lane_forces(
+        &self,
+        law: &MaterialLaw<L>,
+        nodes: &[[u32; 8]; N],
+        active: usize,
+        u: &[[S; 3]],
+        mut scatter: impl FnMut(usize, usize, [S; 3]),
+    ) -> Result<(), KernelFault> {
+        let ue = gather_lanes(nodes, u)?;
+        let fe = self
+            .internal_forces(law, &ue)
+            .map_err(KernelFault::Inverted)?;
+        let fe = lanes_out::<S, L, N>(&fe);
+        for (l, at) in nodes.iter().enumerate().take(active) {
+            for (a, v) in fe.iter().enumerate() {
+                scatter(l, at[a] as usize, [v[0][l], v[1][l], v[2][l]]);
+            }
+        }
+        Ok(())
     }
 }

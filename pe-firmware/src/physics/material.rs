@@ -13,7 +13,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::real::Real;
+use super::real::{array, Real};
 use super::tensor::{self, Mat3};
 
 /// Lamé parameters of small-strain elasticity, in Pa.
@@ -130,7 +130,7 @@ impl MaterialLaw<f64> {
 
 impl<T: Real> MaterialLaw<T> {
     /// Second Piola-Kirchhoff stress `S(F)`.
-    #[inline]
+    #[inline(always)]
     pub fn second_piola_kirchhoff(&self, f: &Mat3<T>) -> Result<Mat3<T>, NonPositiveJacobian> {
         let j = tensor::det(f);
         if !(j > T::ZERO) {
@@ -220,9 +220,15 @@ impl<T: Real> MaterialLaw<T> {
                 (a, b / j, cof)
             }
         };
-        Ok(core::array::from_fn(|i| {
-            core::array::from_fn(|k| a * f[i][k] + b_over_j * cof[i][k])
-        }))
+        Ok(array(
+            #[inline(always)]
+            |i| {
+                array(
+                    #[inline(always)]
+                    |k| a * f[i][k] + b_over_j * cof[i][k],
+                )
+            },
+        ))
     }
 
     /// Strain energy density `W(F)` per unit reference volume (J/m³).

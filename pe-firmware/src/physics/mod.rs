@@ -3,13 +3,16 @@
 pub mod contact;
 pub mod explicit;
 pub mod hex;
+pub mod lanes;
 pub mod material;
 pub mod real;
 pub mod tensor;
 
 pub use explicit::{accumulate_internal_forces, CentralDifference, PhysicsError};
 pub use hex::{
-    Connectivity, GaussPoint, GeometryError, HexBox, HexElement, HexFull, HexReduced, ReferenceHex,
+    Connectivity, GaussPoint, GeometryError, HexBox, HexElement, HexFull, HexReduced, LaneKernel,
+    ReferenceHex,
 };
+pub use lanes::{LaneReal, Lanes, Pack};
 pub use material::{LameParameters, MaterialLaw, Volumetric};
 pub use real::Real;

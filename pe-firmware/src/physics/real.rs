@@ -126,3 +126,16 @@ impl Real for f32 {
         f32::is_finite(self)
     }
 }
+
+/// `[f(0), …, f(N − 1)]` by a plain loop, always inlined: the kernels build their small
+/// arrays with it rather than `core::array::from_fn` or `map`, whose closures the
+/// optimiser may keep out of line when a kernel is inlined into a batched loop (measured:
+/// it then runs several times slower on the host's SIMD lanes).
+#[inline(always)]
+pub fn array<T: Copy + Default, const N: usize>(mut f: impl FnMut(usize) -> T) -> [T; N] {
+    let mut a = [T::default(); N];
+    for (i, v) in a.iter_mut().enumerate() {
+        *v = f(i);
+    }
+    a
+}

@@ -1,6 +1,6 @@
 //! Small dense 3x3 tensors as plain arrays (`m[row][col]`), generic over [`Real`].
 
-use super::real::Real;
+use super::real::{array, Real};
 
 pub type Vec3<T> = [T; 3];
 pub type Mat3<T> = [[T; 3]; 3];
@@ -14,9 +14,15 @@ pub fn identity<T: Real>() -> Mat3<T> {
 /// `a * b`.
 #[inline(always)]
 pub fn mul<T: Real>(a: &Mat3<T>, b: &Mat3<T>) -> Mat3<T> {
-    core::array::from_fn(|i| {
-        core::array::from_fn(|j| a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j])
-    })
+    array(
+        #[inline(always)]
+        |i| {
+            array(
+                #[inline(always)]
+                |j| a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j],
+            )
+        },
+    )
 }
 
 /// `aᵀ * a` (symmetric): the right Cauchy-Green tensor `C = Fᵀ F` when `a = F`.
@@ -35,7 +41,15 @@ pub fn gram<T: Real>(a: &Mat3<T>) -> Mat3<T> {
 
 #[inline(always)]
 pub fn transpose<T: Real>(a: &Mat3<T>) -> Mat3<T> {
-    core::array::from_fn(|i| core::array::from_fn(|j| a[j][i]))
+    array(
+        #[inline(always)]
+        |i| {
+            array(
+                #[inline(always)]
+                |j| a[j][i],
+            )
+        },
+    )
 }
 
 #[inline(always)]
