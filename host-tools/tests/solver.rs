@@ -223,10 +223,10 @@ fn f32_and_f64_agree_on_a_short_run() {
     let mut sc = host_tools::scene::builtin::builtin_scene("coarse").unwrap();
     sc.solver.steps = Some(1200);
     let p = problem(&sc);
-    let a = solver::run_typed::<f64>(&p, "f64", &mut ())
+    let a = solver::run_typed::<f64>(&p, "f64", &mut (), 1)
         .unwrap()
         .displacements;
-    let b = solver::run_typed::<f32>(&p, "f32", &mut ())
+    let b = solver::run_typed::<f32>(&p, "f32", &mut (), 1)
         .unwrap()
         .displacements;
     let umax = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));

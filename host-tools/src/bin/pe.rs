@@ -51,10 +51,14 @@ impl SceneArgs {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run a scene serially on one thread (the reference solver).
+    /// Run a scene on this machine (the reference solver every board run is compared with).
     Solve {
         #[command(flatten)]
         scene: SceneArgs,
+        /// Solver threads (default: all cores). The result is the same, bit for bit,
+        /// whatever the count.
+        #[arg(long)]
+        threads: Option<usize>,
         /// Final nodal positions and displacements: node,x,y,z,ux,uy,uz.
         #[arg(long)]
         output_nodes: Option<PathBuf>,
@@ -214,6 +218,7 @@ struct SolveOutputs {
     report: Option<PathBuf>,
     vtk: Option<PathBuf>,
     quiet: bool,
+    threads: usize,
 }
 
 fn main() -> Result<()> {
@@ -221,6 +226,7 @@ fn main() -> Result<()> {
     match cli.command {
         Command::Solve {
             scene,
+            threads,
             output_nodes,
             report,
             vtk,
@@ -240,6 +246,7 @@ fn main() -> Result<()> {
                 report,
                 vtk,
                 quiet,
+                threads: threads.unwrap_or_else(all_cores).max(1),
             },
         )?,
         Command::Scene { scene } => {
@@ -306,6 +313,11 @@ fn main() -> Result<()> {
     Ok(())
 }
 
+/// The machine's cores (1 when unknown).
+fn all_cores() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
 /// `pe solve`: the serial reference run, with its summary and the asked-for outputs.
 fn solve(scene: &SceneArgs, overrides: &Overrides, outputs: SolveOutputs) -> Result<()> {
     let (mut sc, dir, name) = scene.load()?;
@@ -338,7 +350,7 @@ fn solve(scene: &SceneArgs, overrides: &Overrides, outputs: SolveOutputs) -> Res
         frames,
         error: None,
     };
-    let out = solver::run(&problem, &name, &mut obs)?;
+    let out = solver::run_threads(&problem, &name, &mut obs, outputs.threads)?;
     if let Some(b) = &obs.bar {
         b.finish_and_clear();
     }
@@ -350,8 +362,8 @@ fn solve(scene: &SceneArgs, overrides: &Overrides, outputs: SolveOutputs) -> Res
     }
     let r = &out.report;
     println!(
-        "{} steps in {:.2} s: {:.3e} element-steps/s, real-time factor {:.3}; max |u| = {:.4e} m at node {}; KE = {:.3e} J; probe/prescribed reaction = [{:.4e}, {:.4e}, {:.4e}] N",
-        r.steps, r.wall_s, r.element_steps_per_s, r.real_time_factor, r.max_displacement,
+        "{} steps in {:.2} s on {} thread(s), {} kernel: {:.3e} element-steps/s, real-time factor {:.3}; max |u| = {:.4e} m at node {}; KE = {:.3e} J; probe/prescribed reaction = [{:.4e}, {:.4e}, {:.4e}] N",
+        r.steps, r.wall_s, r.threads, r.kernel, r.element_steps_per_s, r.real_time_factor, r.max_displacement,
         r.max_displacement_node, r.kinetic_energy_final,
         r.prescribed_reaction_n[0], r.prescribed_reaction_n[1], r.prescribed_reaction_n[2]
     );

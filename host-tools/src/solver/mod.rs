@@ -17,7 +17,9 @@ mod monitor;
 mod run;
 
 pub use monitor::{DtMonitor, Energies};
-pub use run::{describe_step_error, run, run_typed, ContactReport, Observer, RunOutput, RunReport};
+pub use run::{
+    describe_step_error, run, run_threads, run_typed, ContactReport, Observer, RunOutput, RunReport,
+};
 
 /// Serial explicit model in scalar type `T`.
 pub struct Model<'p, T: Real> {
@@ -52,6 +54,24 @@ pub struct Model<'p, T: Real> {
     pub reaction_fixed: [f64; 3],
     /// Contact state (None: the scene has no contact).
     pub contact: Option<ContactState>,
+    /// Worker threads of the parallel solver ([`Model::set_threads`]); None: one thread.
+    pool: Option<rayon::ThreadPool>,
+    /// Per-element nodal forces of the parallel element phase (kernel order).
+    element_forces: Vec<[[T; 3]; 8]>,
+}
+
+/// Nodes per block of the node update: the unit of the parallel node phase, and of the
+/// kinetic-energy and reaction sums (summed per block, then block by block), so the
+/// figures are the same whatever the thread count.
+const NODE_BLOCK: usize = 2048;
+
+/// What one block of the node update found.
+#[derive(Default)]
+struct BlockSums {
+    kinetic_energy: f64,
+    reaction_prescribed: [f64; 3],
+    reaction_fixed: [f64; 3],
+    error: Option<PhysicsError>,
 }
 
 /// The serial solver's contact state: the tables, the search and the forces of the last step.
@@ -228,7 +248,72 @@ impl<'p, T: Real> Model<'p, T> {
             reaction_prescribed: [0.0; 3],
             reaction_fixed: [0.0; 3],
             contact: ContactState::new(problem, dt_s),
+            pool: None,
+            element_forces: Vec::new(),
         }
+    }
+
+    /// Runs on `threads` threads (1: this one): elements in blocks of packs, each
+    /// element's forces kept apart and summed per node in the scalar loop's order, then
+    /// the node update in blocks; the bits are those of one thread whatever the count.
+    pub fn set_threads(&mut self, threads: usize) -> Result<()> {
+        self.pool = if threads > 1 {
+            Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .map_err(|e| anyhow!("starting {threads} solver threads: {e}"))?,
+            )
+        } else {
+            None
+        };
+        Ok(())
+    }
+
+    /// The threads the solver runs on.
+    pub fn threads(&self) -> usize {
+        self.pool.as_ref().map_or(1, |p| p.current_num_threads())
+    }
+
+    /// Internal forces at `u` into `f_int`, on the pool when there is one. With a pool
+    /// the per-node sums are left to the node phase (returns true).
+    fn element_phase(&mut self) -> Result<bool, PhysicsError> {
+        if let (Some(pool), Some(b)) = (&self.pool, &self.batched) {
+            let el = b.element_loop();
+            let ranges = el.ranges(4 * pool.current_num_threads());
+            if !ranges.is_empty() {
+                self.element_forces
+                    .resize(self.elements.len(), [[T::ZERO; 3]; 8]);
+                let mut chunks = Vec::with_capacity(ranges.len());
+                let mut rest = self.element_forces.as_mut_slice();
+                let mut at = 0;
+                for r in &ranges {
+                    let (head, tail) = rest.split_at_mut((r.end - at).min(rest.len()));
+                    chunks.push((r.clone(), head));
+                    rest = tail;
+                    at = r.end;
+                }
+                let u = &self.u;
+                let ok = pool.install(|| {
+                    use rayon::prelude::*;
+                    chunks
+                        .into_par_iter()
+                        .map(|(r, out)| el.element_forces(r, u, out))
+                        .collect::<Vec<bool>>()
+                });
+                if ok.iter().all(|&k| k) {
+                    return Ok(true);
+                }
+            }
+        }
+        self.f_int.iter_mut().for_each(|f| *f = [T::ZERO; 3]);
+        match &self.batched {
+            Some(b) => b.internal_forces(&self.elements, &self.laws, &self.u, &mut self.f_int),
+            None => self
+                .elements
+                .internal_forces(&self.laws, &self.u, &mut self.f_int),
+        }?;
+        Ok(false)
     }
 
     pub fn time_s(&self) -> f64 {
@@ -283,47 +368,85 @@ impl<'p, T: Real> Model<'p, T> {
         let t = self.time_s();
         let t_next = t + self.dt_s;
         let step = self.step;
-        self.f_int.iter_mut().for_each(|f| *f = [T::ZERO; 3]);
-        match &self.batched {
-            Some(b) => b.internal_forces(&self.elements, &self.laws, &self.u, &mut self.f_int),
-            None => self
-                .elements
-                .internal_forces(&self.laws, &self.u, &mut self.f_int),
-        }
-        .map_err(|error| StepError { step, error })?;
+        let gather = self
+            .element_phase()
+            .map_err(|error| StepError { step, error })?;
         self.external_forces(t)
             .map_err(|error| StepError { step, error })?;
         let inv_2dt = 1.0 / (2.0 * self.dt_s);
-        let limit = self.problem.solver.speed_limit;
-        let ms = self.problem.solver.mass_scaling;
-        let mut ke = 0.0;
-        let mut rp = [0.0; 3];
-        let mut rf = [0.0; 3];
-        for n in 0..self.u.len() {
-            let (f_ext, f_int) = (self.f_ext[n], self.f_int[n]);
-            let reaction = |r: &mut [f64; 3]| {
-                for i in 0..3 {
-                    r[i] += (f_int[i] - f_ext[i]).to_f64();
+        let problem = self.problem;
+        let (limit, ms) = (problem.solver.speed_limit, problem.solver.mass_scaling);
+        let cd = self.cd;
+        let incidence = match (&self.batched, gather) {
+            (Some(b), true) => Some(b.element_loop().incidence()),
+            _ => None,
+        };
+        let (gain, f_ext, forces) = (&self.gain, &self.f_ext, &self.element_forces);
+        // One block of nodes from `first`: gather (parallel element phase), update, sums.
+        let block = |(k, ((u, u_prev), f_int)): (
+            usize,
+            ((&mut [[T; 3]], &mut [[T; 3]]), &mut [[T; 3]]),
+        )| {
+            let first = k * NODE_BLOCK;
+            let mut sums = BlockSums::default();
+            for (j, (u, u_prev)) in u.iter_mut().zip(u_prev.iter_mut()).enumerate() {
+                let n = first + j;
+                if let Some(inc) = incidence {
+                    f_int[j] = inc.gather(n, forces);
                 }
-            };
-            let mv = match self.problem.node_kind[n] {
-                NodeKind::Free => NodeMove::Free {
-                    gain: self.gain[n],
-                    residual: core::array::from_fn(|i| f_ext[i] - f_int[i]),
-                },
-                NodeKind::Fixed => {
-                    reaction(&mut rf);
-                    NodeMove::Held([T::ZERO; 3])
+                let (f_ext, f_int) = (f_ext[n], f_int[j]);
+                let reaction = |r: &mut [f64; 3]| {
+                    for i in 0..3 {
+                        r[i] += (f_int[i] - f_ext[i]).to_f64();
+                    }
+                };
+                let mv = match problem.node_kind[n] {
+                    NodeKind::Free => NodeMove::Free {
+                        gain: gain[n],
+                        residual: core::array::from_fn(|i| f_ext[i] - f_int[i]),
+                    },
+                    NodeKind::Fixed => {
+                        reaction(&mut sums.reaction_fixed);
+                        NodeMove::Held([T::ZERO; 3])
+                    }
+                    NodeKind::Prescribed(p) => {
+                        reaction(&mut sums.reaction_prescribed);
+                        NodeMove::Held(problem.paths[p as usize].at(t_next).map(T::from_f64))
+                    }
+                };
+                match update_node(&cd, u, u_prev, mv, inv_2dt, limit, n as u32) {
+                    Ok(v2) => sums.kinetic_energy += 0.5 * problem.mass[n] * ms * v2,
+                    Err(e) => {
+                        sums.error = Some(e);
+                        break;
+                    }
                 }
-                NodeKind::Prescribed(k) => {
-                    reaction(&mut rp);
-                    NodeMove::Held(self.problem.paths[k as usize].at(t_next).map(T::from_f64))
-                }
-            };
-            let (u, u_prev) = (&mut self.u[n], &mut self.u_prev[n]);
-            let v2 = update_node(&self.cd, u, u_prev, mv, inv_2dt, limit, n as u32)
-                .map_err(|error| StepError { step, error })?;
-            ke += 0.5 * self.problem.mass[n] * ms * v2;
+            }
+            sums
+        };
+        let parts = self
+            .u
+            .chunks_mut(NODE_BLOCK)
+            .zip(self.u_prev.chunks_mut(NODE_BLOCK))
+            .zip(self.f_int.chunks_mut(NODE_BLOCK));
+        let sums: Vec<BlockSums> = match &self.pool {
+            Some(pool) => {
+                use rayon::prelude::*;
+                let parts: Vec<_> = parts.enumerate().collect();
+                pool.install(|| parts.into_par_iter().map(block).collect())
+            }
+            None => parts.enumerate().map(block).collect(),
+        };
+        let (mut ke, mut rp, mut rf) = (0.0, [0.0; 3], [0.0; 3]);
+        for s in &sums {
+            if let Some(error) = s.error {
+                return Err(StepError { step, error });
+            }
+            ke += s.kinetic_energy;
+            for i in 0..3 {
+                rp[i] += s.reaction_prescribed[i];
+                rf[i] += s.reaction_fixed[i];
+            }
         }
         self.kinetic_energy = ke;
         self.reaction_prescribed = rp;

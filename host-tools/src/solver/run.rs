@@ -28,6 +28,9 @@ pub struct RunReport {
     /// Nodes on a contact surface.
     pub contact_nodes: usize,
     pub wall_s: f64,
+    /// Solver threads, and the element kernel that ran ("f64x4 avx", ...).
+    pub threads: usize,
+    pub kernel: String,
     pub element_steps_per_s: f64,
     pub real_time_factor: f64,
     pub kinetic_energy_final: f64,
@@ -91,11 +94,21 @@ impl Observer for () {
     fn after_step(&mut self, _: u64, _: f64, _: u64, _: &dyn Fn() -> Vec<[f64; 3]>) {}
 }
 
-/// Runs the problem to its end in its scene's precision.
+/// Runs the problem to its end in its scene's precision, on this thread.
 pub fn run(problem: &Problem, name: &str, observer: &mut dyn Observer) -> Result<RunOutput> {
+    run_threads(problem, name, observer, 1)
+}
+
+/// [`run`] on `threads` threads: the same bits whatever the count.
+pub fn run_threads(
+    problem: &Problem,
+    name: &str,
+    observer: &mut dyn Observer,
+    threads: usize,
+) -> Result<RunOutput> {
     match problem.solver.precision {
-        Precision::F32 => run_typed::<f32>(problem, name, observer),
-        Precision::F64 => run_typed::<f64>(problem, name, observer),
+        Precision::F32 => run_typed::<f32>(problem, name, observer, threads),
+        Precision::F64 => run_typed::<f64>(problem, name, observer, threads),
     }
 }
 
@@ -103,6 +116,7 @@ pub fn run_typed<T: Real>(
     problem: &Problem,
     name: &str,
     observer: &mut dyn Observer,
+    threads: usize,
 ) -> Result<RunOutput> {
     let (dt, dt_crit) = (
         problem.time_step.dt_s,
@@ -110,6 +124,7 @@ pub fn run_typed<T: Real>(
     );
     let mut steps = problem.steps(dt);
     let mut model = Model::<T>::new(problem, dt);
+    model.set_threads(threads)?;
     let mut monitor = DtMonitor::new(problem, dt_crit);
     let start = Instant::now();
     let mut tool_force = Vec::new();
@@ -164,6 +179,11 @@ pub fn run_typed<T: Real>(
         nodes: problem.mesh.nodes.len(),
         contact_nodes: problem.contact.as_ref().map_or(0, |c| c.node_globals.len()),
         wall_s,
+        threads: model.threads(),
+        kernel: model
+            .batched
+            .as_ref()
+            .map_or_else(|| format!("{} scalar", T::NAME), |b| b.describe()),
         element_steps_per_s: (elements as f64 * steps as f64) / wall_s.max(1e-12),
         real_time_factor: model.time_s() / wall_s.max(1e-12),
         kinetic_energy_final: model.kinetic_energy,

@@ -962,6 +962,8 @@ impl<T: Real> HexElement<T> for HexFull<T> {
 /// [`HexElement::accumulate`] adds them, so a caller that adds them in that order gets the
 /// scalar loop's bits.
 pub trait LaneKernel<S: Real, L: LaneReal<S, N>, const N: usize> {
+    /// The element's nodes (Gmsh positions) in the order `scatter` receives them.
+    const SCATTER_ORDER: [usize; 8];
     /// Internal forces of the batch's elements, whose nodes (Gmsh order) are `nodes[l]`,
     /// at the displacements `u`: `scatter(l, node, force)` is called for the lanes
     /// `l < active`, lane by lane, each lane's nodes in the scalar kernel's order.
@@ -1070,6 +1072,7 @@ fn lane_corner_forces<S: Real, L: LaneReal<S, N>, const N: usize>(
 }
 
 impl<S: Real, L: LaneReal<S, N>, const N: usize> LaneKernel<S, L, N> for HexReduced<L> {
+    const SCATTER_ORDER: [usize; 8] = CORNER;
     #[inline(always)]
     fn lane_forces(
         &self,
@@ -1084,6 +1087,7 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> LaneKernel<S, L, N> for HexRedu
 }
 
 impl<S: Real, L: LaneReal<S, N>, const N: usize> LaneKernel<S, L, N> for HexBox<L> {
+    const SCATTER_ORDER: [usize; 8] = CORNER;
     #[inline(always)]
     fn lane_forces(
         &self,
@@ -1098,6 +1102,7 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> LaneKernel<S, L, N> for HexBox<
 }
 
 impl<S: Real, L: LaneReal<S, N>, const N: usize> LaneKernel<S, L, N> for HexFull<L> {
+    const SCATTER_ORDER: [usize; 8] = [0, 1, 2, 3, 4, 5, 6, 7];
     /// Gmsh order, as the default [`HexElement::accumulate`].
     #[inline(always)]
     fn lane_forces(

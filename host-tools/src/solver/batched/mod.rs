@@ -18,6 +18,7 @@
 //! the scalar loop would.
 
 use std::any::Any;
+use std::ops::Range;
 
 use multiversion::multiversion;
 use pe_firmware::physics::explicit::accumulate_internal_forces;
@@ -118,7 +119,7 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> Packs<S, L, N> {
 }
 
 /// The batched element loop of a model in scalar type `T`.
-pub trait ElementLoop<T: Real> {
+pub trait ElementLoop<T: Real>: Send + Sync {
     /// Adds the internal forces at `u` into `f` (`f` as long as `u`): the bits of
     /// [`Elements::internal_forces`], and its errors.
     fn internal_forces(
@@ -130,6 +131,68 @@ pub trait ElementLoop<T: Real> {
     ) -> Result<(), PhysicsError>;
     /// What runs: the lane type ("f64x4 avx", ...).
     fn describe(&self) -> String;
+    /// About `parts` ranges of kernel-order elements covering all of them, each a whole
+    /// number of packs.
+    fn ranges(&self, parts: usize) -> Vec<Range<usize>>;
+    /// Each element's nodal forces of the elements `range` (from [`Self::ranges`]) into
+    /// `out` (one entry per element, nodes in [`Incidence`] order); false when a pack
+    /// fails (the caller then runs [`Self::internal_forces`] for the error).
+    fn element_forces(&self, range: Range<usize>, u: &[[T; 3]], out: &mut [[[T; 3]; 8]]) -> bool;
+    /// Which element slots add into each node, in the order the scalar loop adds them.
+    fn incidence(&self) -> &Incidence;
+}
+
+/// For each node, the element slots (`8 · element + slot`, kernel order) whose forces
+/// add into it, in kernel order: summing them from zero in this order gives the scalar
+/// loop's bits (each element adds once to each of its nodes).
+pub struct Incidence {
+    start: Vec<u32>,
+    slots: Vec<u32>,
+}
+
+impl Incidence {
+    /// `nodes[e]` in slot order, for the kernel-order elements.
+    fn build(nodes: impl Iterator<Item = [u32; 8]>, node_count: usize) -> Incidence {
+        let nodes: Vec<[u32; 8]> = nodes.collect();
+        let mut count = vec![0u32; node_count + 1];
+        for e in &nodes {
+            for &n in e {
+                if let Some(c) = count.get_mut(n as usize + 1) {
+                    *c += 1;
+                }
+            }
+        }
+        for k in 1..count.len() {
+            count[k] += count[k - 1];
+        }
+        let start = count.clone();
+        let mut slots = vec![0u32; *count.last().unwrap_or(&0) as usize];
+        for (e, ns) in nodes.iter().enumerate() {
+            for (k, &n) in ns.iter().enumerate() {
+                if let Some(at) = count.get_mut(n as usize) {
+                    if let Some(s) = slots.get_mut(*at as usize) {
+                        *s = (8 * e + k) as u32;
+                    }
+                    *at += 1;
+                }
+            }
+        }
+        Incidence { start, slots }
+    }
+
+    /// Node `n`'s internal force: its slots of `forces` summed from zero in order.
+    #[inline]
+    pub fn gather<T: Real>(&self, n: usize, forces: &[[[T; 3]; 8]]) -> [T; 3] {
+        let mut f = [T::ZERO; 3];
+        let (a, b) = (self.start[n] as usize, self.start[n + 1] as usize);
+        for &s in &self.slots[a..b] {
+            let v = forces[s as usize / 8][s as usize % 8];
+            for i in 0..3 {
+                f[i] += v[i];
+            }
+        }
+        f
+    }
 }
 
 /// Which instruction set a [`Batched`] uses.
@@ -159,6 +222,53 @@ pub struct Batched<T: Real>(Box<dyn ElementLoop<T>>);
 struct Loop<S: Real, L: LaneReal<S, N>, const N: usize> {
     packs: Packs<S, L, N>,
     isa: Isa,
+    incidence: Incidence,
+    /// Kernel-order index of the first element of each kernel list.
+    offsets: [usize; 2],
+}
+
+impl<S: Real, L: LaneReal<S, N>, const N: usize> Loop<S, L, N> {
+    fn new(packs: Packs<S, L, N>, isa: Isa, elements: &Elements<S>) -> Self {
+        fn order<K: LaneKernel<S, L, N>, S: Real, L: LaneReal<S, N>, const N: usize>(
+            _: &[Batch<K, L, N>],
+        ) -> [usize; 8] {
+            K::SCATTER_ORDER
+        }
+        let max_node = |v: &mut dyn Iterator<Item = [u32; 8]>| {
+            v.flat_map(|n| n).max().map_or(0, |m| m as usize + 1)
+        };
+        let (incidence, offsets) = match (&packs, elements) {
+            (
+                Packs::Reduced { general, boxes },
+                Elements::Reduced {
+                    general: g,
+                    boxes: b,
+                    ..
+                },
+            ) => {
+                let (og, ob) = (order(general), order(boxes));
+                let all = g
+                    .iter()
+                    .map(|e| og.map(|a| e.nodes()[a]))
+                    .chain(b.iter().map(|e| ob.map(|a| e.nodes()[a])));
+                let n = max_node(&mut all.clone());
+                (Incidence::build(all, n), [0, g.len()])
+            }
+            (Packs::Full(p), Elements::Full(v)) => {
+                let o = order(p);
+                let all = v.iter().map(|e| o.map(|a| e.nodes()[a]));
+                let n = max_node(&mut all.clone());
+                (Incidence::build(all, n), [0, v.len()])
+            }
+            _ => (Incidence::build(core::iter::empty(), 0), [0, 0]),
+        };
+        Loop {
+            packs,
+            isa,
+            incidence,
+            offsets,
+        }
+    }
 }
 
 impl<T: Real> Batched<T> {
@@ -180,7 +290,7 @@ impl<T: Real> Batched<T> {
             let e = elements.downcast_ref::<Elements<S>>()?;
             let l = laws.downcast_ref::<Vec<MaterialLaw<S>>>()?;
             let b: Box<dyn ElementLoop<S>> = match Packs::<S, L, N>::build(e, l) {
-                Ok(packs) => Box::new(Loop { packs, isa }),
+                Ok(packs) => Box::new(Loop::new(packs, isa, e)),
                 Err(err) => return Some(Err(err)),
             };
             // S is T here: the downcasts above succeeded.
@@ -217,6 +327,10 @@ impl<T: Real> Batched<T> {
     pub fn describe(&self) -> String {
         self.0.describe()
     }
+
+    pub fn element_loop(&self) -> &dyn ElementLoop<T> {
+        self.0.as_ref()
+    }
 }
 
 /// The scalar loop, for scalar types without a lane type.
@@ -234,6 +348,19 @@ impl<T: Real> ElementLoop<T> for ScalarLoop {
     }
     fn describe(&self) -> String {
         format!("{} scalar", T::NAME)
+    }
+    fn ranges(&self, _: usize) -> Vec<Range<usize>> {
+        Vec::new()
+    }
+    fn element_forces(&self, _: Range<usize>, _: &[[T; 3]], _: &mut [[[T; 3]; 8]]) -> bool {
+        false
+    }
+    fn incidence(&self) -> &Incidence {
+        static EMPTY: Incidence = Incidence {
+            start: Vec::new(),
+            slots: Vec::new(),
+        };
+        &EMPTY
     }
 }
 
@@ -268,6 +395,161 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<S, L, N
         };
         format!("{}x{N} {isa}", S::NAME)
     }
+    fn ranges(&self, parts: usize) -> Vec<Range<usize>> {
+        // Pack boundaries in kernel order, then about equal shares of packs.
+        let mut ends = Vec::new();
+        let mut push = |firsts: &mut dyn Iterator<Item = usize>| ends.extend(firsts);
+        match &self.packs {
+            Packs::Reduced { general, boxes } => {
+                push(&mut general.iter().map(|b| b.first + b.active));
+                push(&mut boxes.iter().map(|b| self.offsets[1] + b.first + b.active));
+            }
+            Packs::Full(p) => push(&mut p.iter().map(|b| b.first + b.active)),
+            Packs::Scalar(_) => {}
+        }
+        let parts = parts.clamp(1, ends.len().max(1));
+        let mut out = Vec::with_capacity(parts);
+        let mut from = 0;
+        for k in 1..=parts {
+            let Some(&end) = ends.get((k * ends.len()).div_ceil(parts).saturating_sub(1)) else {
+                break;
+            };
+            if end > from {
+                out.push(from..end);
+                from = end;
+            }
+        }
+        out
+    }
+    fn element_forces(&self, range: Range<usize>, u: &[[S; 3]], out: &mut [[[S; 3]; 8]]) -> bool {
+        let isa = self.isa;
+        let within = |offset: usize, first: usize, active: usize| {
+            offset + first >= range.start && offset + first + active <= range.end
+        };
+        match &self.packs {
+            Packs::Reduced { general, boxes } => {
+                let (og, ob) = (self.offsets[0], self.offsets[1]);
+                let g: Vec<&Batch<_, L, N>> = general
+                    .iter()
+                    .filter(|b| within(og, b.first, b.active))
+                    .collect();
+                let b: Vec<&Batch<_, L, N>> = boxes
+                    .iter()
+                    .filter(|b| within(ob, b.first, b.active))
+                    .collect();
+                forces_of(&g, og, range.start, u, out, isa)
+                    && forces_of(&b, ob, range.start, u, out, isa)
+            }
+            Packs::Full(p) => {
+                let f: Vec<&Batch<_, L, N>> =
+                    p.iter().filter(|b| within(0, b.first, b.active)).collect();
+                forces_of(&f, 0, range.start, u, out, isa)
+            }
+            Packs::Scalar(_) => false,
+        }
+    }
+    fn incidence(&self) -> &Incidence {
+        &self.incidence
+    }
+}
+
+/// The packs' per-element forces into `out` (element `offset + first + l` at
+/// `out[offset + first + l − base]`); false when one fails.
+fn forces_of<K, S, L, const N: usize>(
+    packs: &[&Batch<K, L, N>],
+    offset: usize,
+    base: usize,
+    u: &[[S; 3]],
+    out: &mut [[[S; 3]; 8]],
+    isa: Isa,
+) -> bool
+where
+    K: LaneKernel<S, L, N>,
+    S: Real,
+    L: LaneReal<S, N>,
+{
+    match isa {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as in `run`.
+        Isa::Avx => unsafe { forces_avx(packs, offset, base, u, out) },
+        _ => forces_portable(packs, offset, base, u, out),
+    }
+}
+
+#[inline(always)]
+fn forces_body<K, S, L, const N: usize>(
+    packs: &[&Batch<K, L, N>],
+    offset: usize,
+    base: usize,
+    u: &[[S; 3]],
+    out: &mut [[[S; 3]; 8]],
+) -> bool
+where
+    K: LaneKernel<S, L, N>,
+    S: Real,
+    L: LaneReal<S, N>,
+{
+    for b in packs {
+        let at = (offset + b.first).wrapping_sub(base);
+        let Some(dst) = out.get_mut(at..at + b.active) else {
+            return false;
+        };
+        let mut k = 0;
+        let r = b
+            .kernel
+            .lane_forces(&b.law, &b.nodes, b.active, u, |l, _, v| {
+                if let Some(d) = dst.get_mut(l) {
+                    d[k % 8] = v;
+                }
+                k += 1;
+            });
+        if r.is_err() {
+            return false;
+        }
+    }
+    true
+}
+
+/// [`forces_body`] compiled with AVX.
+///
+/// # Safety
+/// The CPU must have AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn forces_avx<K, S, L, const N: usize>(
+    packs: &[&Batch<K, L, N>],
+    offset: usize,
+    base: usize,
+    u: &[[S; 3]],
+    out: &mut [[[S; 3]; 8]],
+) -> bool
+where
+    K: LaneKernel<S, L, N>,
+    S: Real,
+    L: LaneReal<S, N>,
+{
+    forces_body(packs, offset, base, u, out)
+}
+
+#[multiversion(targets(
+    "x86_64+avx512f+avx512vl+avx2+avx",
+    "x86_64+avx2+avx",
+    "x86_64+avx",
+    "aarch64+neon"
+))]
+fn forces_portable<K, S, L, const N: usize>(
+    packs: &[&Batch<K, L, N>],
+    offset: usize,
+    base: usize,
+    u: &[[S; 3]],
+    out: &mut [[[S; 3]; 8]],
+) -> bool
+where
+    K: LaneKernel<S, L, N>,
+    S: Real,
+    L: LaneReal<S, N>,
+{
+    forces_body(packs, offset, base, u, out)
 }
 
 /// Runs one kernel's packs in order, adding each lane's forces; a failed pack is rerun by

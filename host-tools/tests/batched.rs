@@ -1,0 +1,261 @@
+//! The batched element loop (`solver::batched`) against the scalar loop it replaces
+//! (`Elements::internal_forces`, the firmware's kernels one element at a time): the same
+//! bits, in f64 and f32, reduced (general and parallelepiped kernels) and full
+//! integration, on distorted cells, with element counts that are not a multiple of the
+//! lane count, laws of several kinds side by side, one element alone, and an inverted
+//! element (the same error, naming the same element, and the same forces up to it).
+//!
+//! Bit-identity is the property (the board computes the scalar loop's bits), so the
+//! tolerance is zero; each comparison first checks that the forces are far from trivial.
+
+use host_tools::problem::elements::Elements;
+use host_tools::solver::batched::{Batched, Isa};
+use pe_firmware::physics::{
+    LameParameters, MaterialLaw, PhysicsError, Real, ReferenceHex, Volumetric,
+};
+
+/// A seeded generator (SplitMix64), printed seeds are fixed here.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+}
+
+/// Three laws of three kinds (a pack never mixes kinds).
+fn laws() -> Vec<MaterialLaw<f64>> {
+    vec![
+        MaterialLaw::NeoHookean(LameParameters::from_young_poisson(3.0e3, 0.45)),
+        MaterialLaw::MooneyRivlin {
+            c10: 500.0,
+            c01: 100.0,
+            kappa: 2.0e4,
+            volumetric: Volumetric::Log,
+        },
+        MaterialLaw::NeoHookeanDecoupled {
+            mu: 1.0e3,
+            kappa: 3.0e4,
+        },
+    ]
+}
+
+/// Material of cell `e`: runs of different lengths, so packs split where the kind changes.
+fn material(e: usize) -> u16 {
+    match e % 11 {
+        0..=5 => 0,
+        6 | 7 => 1,
+        _ => 2,
+    }
+}
+
+/// A row of `n` cells (1 cm), nodes shared; `jitter` moves every node by up to that
+/// fraction of the cell (distorted cells), 0 leaves parallelepipeds.
+fn row(n: usize, jitter: f64, rng: &mut Rng) -> (Vec<[f64; 3]>, Vec<[u32; 8]>) {
+    let h = 0.01;
+    let mut nodes = Vec::new();
+    if n == 0 {
+        return (nodes, Vec::new());
+    }
+    for i in 0..=n {
+        for (y, z) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)] {
+            nodes.push([
+                (i as f64 + jitter * rng.next()) * h,
+                (y + jitter * rng.next()) * h,
+                (z + jitter * rng.next()) * h,
+            ]);
+        }
+    }
+    // Gmsh order: bottom face (z = 0) then top, counter-clockwise.
+    let cells = (0..n as u32)
+        .map(|i| {
+            let (a, b) = (4 * i, 4 * (i + 1));
+            [a, b, b + 1, a + 1, a + 3, b + 3, b + 2, a + 2]
+        })
+        .collect();
+    (nodes, cells)
+}
+
+struct Case<T> {
+    elements: Elements<T>,
+    laws: Vec<MaterialLaw<T>>,
+    u: Vec<[T; 3]>,
+}
+
+/// `general` distorted cells and `boxes` parallelepipeds (reduced), or all of them full.
+fn case<T: Real>(general: usize, boxes: usize, full: bool, seed: u64) -> Case<T> {
+    let mut rng = Rng(seed);
+    let (mut nodes, mut cells) = row(general, 0.15, &mut rng);
+    let (bn, bc) = row(boxes, 0.0, &mut rng);
+    let off = nodes.len() as u32;
+    nodes.extend(bn.iter().map(|x| [x[0], x[1] + 0.05, x[2]]));
+    cells.extend(bc.iter().map(|c| c.map(|n| n + off)));
+    let laws64 = laws();
+    let refs: Vec<ReferenceHex> = cells
+        .iter()
+        .map(|c| ReferenceHex::new(&c.map(|n| nodes[n as usize])).expect("valid cell"))
+        .collect();
+    let elements = if full {
+        Elements::Full(
+            refs.iter()
+                .zip(&cells)
+                .enumerate()
+                .map(|(e, (r, c))| r.full(*c, material(e)))
+                .collect(),
+        )
+    } else {
+        let k = |e: usize| laws64[material(e) as usize].hourglass_modulus();
+        let g: Vec<_> = (0..general)
+            .map(|e| refs[e].reduced(cells[e], material(e), k(e), 0.1))
+            .collect();
+        let b: Vec<_> = (general..general + boxes)
+            .map(|e| {
+                assert!(refs[e].is_parallelepiped(), "cell {e} is a parallelepiped");
+                refs[e].parallelepiped(cells[e], material(e), k(e), 0.1)
+            })
+            .collect();
+        Elements::Reduced {
+            general: g,
+            boxes: b,
+            cells: (0..(general + boxes) as u32).collect(),
+        }
+    };
+    let u = (0..nodes.len())
+        .map(|_| core::array::from_fn(|_| T::from_f64(2e-3 * rng.next())))
+        .collect();
+    Case {
+        elements,
+        laws: laws64.iter().map(|l| l.cast::<T>()).collect(),
+        u,
+    }
+}
+
+fn isas() -> Vec<Isa> {
+    let mut v = vec![Isa::Portable];
+    if Isa::detect() != Isa::Portable {
+        v.push(Isa::detect());
+    }
+    v
+}
+
+/// Both loops from zero forces; returns (scalar, batched) results and forces.
+#[allow(clippy::type_complexity)]
+fn both<T: Real>(
+    c: &Case<T>,
+    isa: Isa,
+) -> (
+    (Result<(), PhysicsError>, Vec<[T; 3]>),
+    (Result<(), PhysicsError>, Vec<[T; 3]>),
+) {
+    let n = c.u.len();
+    let mut fs = vec![[T::ZERO; 3]; n];
+    let rs = c.elements.internal_forces(&c.laws, &c.u, &mut fs);
+    let b = Batched::build(&c.elements, &c.laws, isa).expect("packs");
+    let mut fb = vec![[T::ZERO; 3]; n];
+    let rb = b.internal_forces(&c.elements, &c.laws, &c.u, &mut fb);
+    ((rs, fs), (rb, fb))
+}
+
+fn assert_same_bits<T: Real>(a: &[[T; 3]], b: &[[T; 3]], what: &str) {
+    assert_eq!(a.len(), b.len(), "{what}: lengths");
+    let max = a
+        .iter()
+        .flatten()
+        .fold(0.0f64, |m, v| m.max(v.to_f64().abs()));
+    let nonzero = a.iter().flatten().filter(|v| v.to_f64() != 0.0).count();
+    // Displacements of 2e-3 m on 1 cm cells of kPa materials: forces of order 1e-2 N.
+    assert!(max > 1e-5, "{what}: forces are trivial (max {max:e})");
+    assert!(
+        nonzero == 3 * a.len(),
+        "{what}: {nonzero} of {} components non-zero",
+        3 * a.len()
+    );
+    for (k, (x, y)) in a.iter().zip(b).enumerate() {
+        for i in 0..3 {
+            assert_eq!(
+                x[i].to_f64().to_bits(),
+                y[i].to_f64().to_bits(),
+                "{what}: node {k} component {i}: scalar {:e}, batched {:e}",
+                x[i].to_f64(),
+                y[i].to_f64()
+            );
+        }
+    }
+}
+
+fn same_bits_for<T: Real>() {
+    // Counts that are multiples of neither 4 nor 8, one element, and only boxes.
+    for (general, boxes) in [(13, 11), (1, 0), (0, 1), (0, 21), (29, 0)] {
+        for full in [false, true] {
+            let c = case::<T>(general, boxes, full, 7 + general as u64);
+            for isa in isas() {
+                let ((rs, fs), (rb, fb)) = both(&c, isa);
+                let what = format!(
+                    "{} {} general {general} boxes {boxes} {isa:?}",
+                    T::NAME,
+                    if full { "full" } else { "reduced" }
+                );
+                assert_eq!(rs, Ok(()), "{what}: scalar");
+                assert_eq!(rb, Ok(()), "{what}: batched");
+                assert_same_bits(&fs, &fb, &what);
+            }
+        }
+    }
+}
+
+#[test]
+fn batched_loop_gives_the_scalar_loops_bits_f64() {
+    same_bits_for::<f64>();
+}
+
+#[test]
+fn batched_loop_gives_the_scalar_loops_bits_f32() {
+    same_bits_for::<f32>();
+}
+
+/// An inverted element in the middle of a pack: the batched loop reports what the scalar
+/// loop reports (element, Jacobian), with the same forces added before it.
+fn inverted_for<T: Real>() {
+    for full in [false, true] {
+        let mut c = case::<T>(13, 11, full, 3);
+        // Fold cell 6 (general, lane 2 of the second pack of 4, the first of 8):
+        // push its top face (nodes of x-station 7, z = 1) through its bottom.
+        let cell6 = match &c.elements {
+            Elements::Reduced { general, .. } => general[6].connectivity.nodes,
+            Elements::Full(v) => v[6].connectivity.nodes,
+        };
+        for &n in &cell6[4..] {
+            c.u[n as usize][2] = T::from_f64(-0.03);
+        }
+        for isa in isas() {
+            let ((rs, fs), (rb, fb)) = both(&c, isa);
+            let what = format!("{} full {full} {isa:?}", T::NAME);
+            let e = rs.expect_err("the scalar loop finds the folded cell");
+            match e {
+                PhysicsError::InvertedElement { element, .. } => {
+                    assert!(element <= 6, "{what}: scalar names element {element}")
+                }
+                e => panic!("{what}: unexpected {e}"),
+            }
+            assert_eq!(rb, Err(e), "{what}: the same error");
+            assert_eq!(fs.len(), fb.len());
+            for (x, y) in fs.iter().flatten().zip(fb.iter().flatten()) {
+                assert_eq!(x.to_f64().to_bits(), y.to_f64().to_bits(), "{what}");
+            }
+            let added = fs.iter().flatten().filter(|v| v.to_f64() != 0.0).count();
+            assert!(
+                added > 0,
+                "{what}: the elements before it added their forces"
+            );
+        }
+    }
+}
+
+#[test]
+fn an_inverted_element_is_named_as_the_scalar_loop_names_it() {
+    inverted_for::<f64>();
+    inverted_for::<f32>();
+}
