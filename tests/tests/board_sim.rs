@@ -32,6 +32,49 @@ fn one_board_equals_serial_bit_for_bit() {
         .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits)));
 }
 
+/// The parallel solver (`pe solve --threads N`) computes the bits of one thread and of one
+/// board, whatever N, in both precisions: on the built-in (general kernel, contact) and on
+/// the seed's box (parallelepiped kernel), each far from rest after its steps.
+#[test]
+fn threads_give_the_bits_of_one_thread_and_of_one_board() {
+    let mut cases = vec![(builtin_problem("coarse", 1000), "builtin")];
+    let mut seed_box = repo_scene("seed-box.toml");
+    seed_box.solver.steps = Some(400);
+    cases.push((seed_box, "seed box"));
+    for (mut p, name) in cases {
+        for precision in [
+            pe_firmware::image::Precision::F64,
+            pe_firmware::image::Precision::F32,
+        ] {
+            p.solver.precision = precision;
+            let one = solver::run(&p, name, &mut ()).unwrap().displacements;
+            let u_max = one.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(u_max > 1e-4, "{name} {precision}: moved, max |u| {u_max} m");
+            for threads in [2, 3] {
+                let many = solver::run_threads(&p, name, &mut (), threads)
+                    .unwrap()
+                    .displacements;
+                assert_eq!(one.len(), many.len(), "{name}: lengths");
+                assert!(
+                    one.iter()
+                        .zip(&many)
+                        .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits)),
+                    "{name} {precision}: {threads} threads differ from one"
+                );
+            }
+            if name == "builtin" && precision == pe_firmware::image::Precision::F64 {
+                let dir = compile(&p, "builtin:coarse", "1x1x1", "threads-b111");
+                let board = sim(&dir, &SimOptions::default()).displacements;
+                assert_eq!(board.len(), one.len());
+                assert!(one
+                    .iter()
+                    .zip(&board)
+                    .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits)));
+            }
+        }
+    }
+}
+
 /// The manifest repeats the images' step; an image set whose step differs from it (an
 /// image from another compilation) is refused before the run, naming the image.
 #[test]

@@ -123,18 +123,24 @@ impl Real for Counted {
     }
 }
 
-/// A box scene of about `elements` cells, clamped at x = 0, under gravity.
+/// The seed's case scaled to about `elements` cells: a 20 x 10 x 10 cm block of soft tissue
+/// (3 kPa, ν = 0.45) in `2n x n x n` cells, clamped at x = 0, sagging under gravity with
+/// damping, at the seed's step of 100 us. It stays stable however long it runs (it settles;
+/// 30 000 steps of the 2000-cell block were run), so a timing can take as many steps as it needs.
 pub fn bench_scene(
     elements: usize,
     integration: Integration,
     precision: Precision,
 ) -> Result<Scene> {
-    let n = ((elements as f64 / 4.0).cbrt()).round().max(1.0) as usize;
-    let mut scene = builders::box_cantilever([0.1, 0.025, 0.025], [4 * n, n, n], 3.0e3, 0.45, true);
+    let n = ((elements as f64 / 2.0).cbrt()).round().max(1.0) as usize;
+    let mut scene = builders::box_cantilever([0.2, 0.1, 0.1], [2 * n, n, n], 3.0e3, 0.45, true);
     scene.gravity = Some(builders::gravity_down());
     scene.solver.precision = precision;
     scene.solver.integration = integration;
     scene.solver.damping = 20.0;
+    // The seed's step (10 kHz), well below the critical one at rest (2.6 ms for 2000
+    // cells), which the sag shrinks.
+    scene.solver.dt = Some(1.0e-4);
     Ok(scene)
 }
 
@@ -178,51 +184,145 @@ pub fn element_step_flops(
     Ok((out, take_flops()))
 }
 
-/// ns per element-step of a whole serial step (forces, assembly, update) for one config.
-pub fn ns_per_element_step(
+/// One configuration's timing: ns per element-step of whole steps (forces, assembly,
+/// update), median, least and most over the runs.
+#[derive(Clone, Copy, Debug)]
+pub struct Timing {
+    pub elements: usize,
+    pub threads: usize,
+    pub steps_per_run: u64,
+    pub ns_median: f64,
+    pub ns_min: f64,
+    pub ns_max: f64,
+}
+
+/// Times whole steps of the bench scene: `runs` runs, each from rest (20 steps to warm
+/// up) for at least `seconds`.
+pub fn time_steps(
     elements: usize,
-    steps: u64,
     integration: Integration,
     precision: Precision,
-) -> Result<(usize, f64)> {
+    threads: usize,
+    seconds: f64,
+    runs: usize,
+) -> Result<Timing> {
     let scene = bench_scene(elements, integration, precision)?;
     let p = Problem::from_scene(&scene, std::path::Path::new("."))?;
     let dt = p.time_step.dt_s;
-    fn time<T: Real>(p: &Problem, dt: f64, steps: u64) -> Result<f64> {
+    fn one<T: Real>(p: &Problem, dt: f64, threads: usize, seconds: f64) -> Result<(u64, f64)> {
         let mut m = Model::<T>::new(p, dt);
-        for _ in 0..10 {
+        m.set_threads(threads)?;
+        for _ in 0..20 {
             m.advance()?;
         }
         let t = Instant::now();
-        for _ in 0..steps {
-            m.advance()?;
+        let mut steps = 0u64;
+        loop {
+            for _ in 0..16 {
+                m.advance()?;
+            }
+            steps += 16;
+            let s = t.elapsed().as_secs_f64();
+            if s >= seconds {
+                return Ok((steps, s));
+            }
         }
-        Ok(t.elapsed().as_secs_f64())
     }
-    let secs = if precision == Precision::F32 {
-        time::<f32>(&p, dt, steps)?
-    } else {
-        time::<f64>(&p, dt, steps)?
-    };
     let n = p.mesh.cells.len();
-    Ok((n, secs * 1e9 / (n as f64 * steps as f64)))
+    let mut ns = Vec::new();
+    let mut steps_per_run = 0;
+    for _ in 0..runs.max(1) {
+        let (steps, secs) = if precision == Precision::F32 {
+            one::<f32>(&p, dt, threads, seconds)?
+        } else {
+            one::<f64>(&p, dt, threads, seconds)?
+        };
+        steps_per_run = steps;
+        ns.push(secs * 1e9 / (n as f64 * steps as f64));
+    }
+    ns.sort_by(f64::total_cmp);
+    Ok(Timing {
+        elements: n,
+        threads,
+        steps_per_run,
+        ns_median: ns[ns.len() / 2],
+        ns_min: ns[0],
+        ns_max: ns[ns.len() - 1],
+    })
 }
 
-pub fn run_cli(elements: usize, steps: u64) -> Result<()> {
-    println!("host cost of one element-step (whole serial step / elements), one thread:");
+/// The CPU's clock (GHz) as the kernel reports it, if it does.
+fn clock_ghz() -> Option<f64> {
+    let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("cpu MHz"))?;
+    line.split(':')
+        .nth(1)?
+        .trim()
+        .parse::<f64>()
+        .ok()
+        .map(|m| m / 1e3)
+}
+
+/// `pe bench`: the table of ns per element-step, reduced/full x f64/f32 x one thread/all
+/// threads, with the fraction of the machine's peak, and the flop counts.
+pub fn run_cli(elements: usize, seconds: f64, runs: usize) -> Result<()> {
+    let all = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let ghz = clock_ghz();
+    let isa = crate::solver::batched::Isa::detect();
     println!(
-        "{:<10} {:<6} {:>9} {:>14}",
-        "integr.", "prec.", "elements", "ns/elem-step"
+        "host cost of one element-step (whole steps of the seed's box / elements), median of {runs} runs of >= {seconds} s each, {isa:?} lanes:"
     );
-    for integ in [Integration::Reduced, Integration::Full] {
-        for prec in [Precision::F64, Precision::F32] {
-            let (n, ns) = ns_per_element_step(elements, steps, integ, prec)?;
-            println!("{integ:<10} {prec:<6} {n:>9} {ns:>14.1}");
-        }
-    }
-    println!("\nfloating-point operations of one element's internal force (neo-Hookean):");
+    println!(
+        "{:<8} {:<5} {:>8} {:>7} {:>12} {:>17} {:>10} {:>9}",
+        "integr.",
+        "prec.",
+        "elements",
+        "threads",
+        "ns/elem-step",
+        "(min .. max)",
+        "steps/run",
+        "% peak"
+    );
+    let mut flops = Vec::new();
     for integ in [Integration::Reduced, Integration::Full] {
         let (kernels, node) = element_step_flops(integ)?;
+        // The bench scene is all parallelepipeds (reduced) or all full elements; about
+        // 1.27 nodes per element.
+        let e = kernels.first().map_or(0, |k| k.1.total());
+        flops.push((integ, kernels, node, e as f64 + 1.27 * node.total() as f64));
+    }
+    for (integ, _, _, per_step) in &flops {
+        for prec in [Precision::F64, Precision::F32] {
+            for threads in if all > 1 { vec![1, all] } else { vec![1] } {
+                let t = time_steps(elements, *integ, prec, threads, seconds, runs)?;
+                // Peak: 2 FMA units x 256 bits per core per cycle (16 f64 or 32 f32 flops).
+                let lanes = if prec == Precision::F32 { 32.0 } else { 16.0 };
+                let peak = ghz.map(|g| {
+                    let achieved = per_step / t.ns_median; // flops per ns
+                    format!("{:.1}", 100.0 * achieved / (lanes * g * threads as f64))
+                });
+                println!(
+                    "{:<8} {:<5} {:>8} {:>7} {:>12.1} {:>17} {:>10} {:>9}",
+                    integ.to_string(),
+                    prec.to_string(),
+                    t.elements,
+                    threads,
+                    t.ns_median,
+                    format!("({:.1} .. {:.1})", t.ns_min, t.ns_max),
+                    t.steps_per_run,
+                    peak.unwrap_or_else(|| "?".into())
+                );
+            }
+        }
+    }
+    match ghz {
+        Some(g) => println!(
+            "% peak: flops per element-step (below) over {g:.2} GHz x 16 (f64) or 32 (f32) flops per cycle per thread (two 256-bit FMA units); the kernels use no FMA (the board's bits), so half of it is their ceiling"
+        ),
+        None => println!("% peak: the clock is unknown here"),
+    }
+    println!("\nfloating-point operations of one element's internal force (neo-Hookean):");
+    for (integ, kernels, node, _) in flops {
         for (kind, e) in kernels {
             println!(
                 "{integ:<8} {kind:<15} element: {} (add {}, mul {}, div {}, sqrt/ln/cbrt {}); node update: {}",

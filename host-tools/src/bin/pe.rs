@@ -140,9 +140,12 @@ enum Command {
         /// Elements of the benchmark mesh (a box).
         #[arg(long, default_value_t = 2000)]
         elements: usize,
-        /// Steps to time per configuration.
-        #[arg(long, default_value_t = 200)]
-        steps: u64,
+        /// Seconds each timed run lasts at least.
+        #[arg(long, default_value_t = 1.0)]
+        seconds: f64,
+        /// Timed runs per configuration (the median is reported).
+        #[arg(long, default_value_t = 3)]
+        runs: usize,
     },
     /// Run a scene over a grid of solver configurations; write cost and error against the
     /// most accurate configuration to DIR/tradeoff.csv, .md and .png.
@@ -291,9 +294,11 @@ fn main() -> Result<()> {
                 host_tools::compile::inspect(&dir, [c[0], c[1], c[2]])?
             );
         }
-        Command::Bench { elements, steps } => {
-            host_tools::analysis::bench::run_cli(elements, steps)?
-        }
+        Command::Bench {
+            elements,
+            seconds,
+            runs,
+        } => host_tools::analysis::bench::run_cli(elements, seconds, runs)?,
         Command::Tradeoff {
             scene,
             output,

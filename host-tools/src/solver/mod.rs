@@ -56,14 +56,18 @@ pub struct Model<'p, T: Real> {
     pub contact: Option<ContactState>,
     /// Worker threads of the parallel solver ([`Model::set_threads`]); None: one thread.
     pool: Option<rayon::ThreadPool>,
-    /// Per-element nodal forces of the parallel element phase (kernel order).
-    element_forces: Vec<[[T; 3]; 8]>,
+    /// How the threads share the elements, and each block's forces kept aside.
+    plan: Option<batched::Plan>,
+    kept: Vec<Vec<[T; 3]>>,
 }
 
 /// Nodes per block of the node update: the unit of the parallel node phase, and of the
 /// kinetic-energy and reaction sums (summed per block, then block by block), so the
 /// figures are the same whatever the thread count.
 const NODE_BLOCK: usize = 2048;
+
+/// One block of the node update: its index, and its nodes' `u`, `u_prev` and `f_int`.
+type NodeBlock<'a, T> = (usize, ((&'a mut [[T; 3]], &'a mut [[T; 3]]), &'a mut [[T; 3]]));
 
 /// What one block of the node update found.
 #[derive(Default)]
@@ -249,14 +253,24 @@ impl<'p, T: Real> Model<'p, T> {
             reaction_fixed: [0.0; 3],
             contact: ContactState::new(problem, dt_s),
             pool: None,
-            element_forces: Vec::new(),
+            plan: None,
+            kept: Vec::new(),
         }
     }
 
-    /// Runs on `threads` threads (1: this one): elements in blocks of packs, each
-    /// element's forces kept apart and summed per node in the scalar loop's order, then
-    /// the node update in blocks; the bits are those of one thread whatever the count.
+    /// Runs on `threads` threads (1: this one): elements in blocks of packs
+    /// ([`batched::Plan`]: each node's forces summed in the scalar loop's order), then the
+    /// node update in blocks; the bits are those of one thread whatever the count.
     pub fn set_threads(&mut self, threads: usize) -> Result<()> {
+        // A few blocks per thread, so a slow one does not hold the others up.
+        self.plan = match (&self.batched, threads > 1) {
+            (Some(b), true) => b.element_loop().plan(2 * threads, self.u.len()),
+            _ => None,
+        };
+        self.kept = self
+            .plan
+            .as_ref()
+            .map_or_else(Vec::new, |p| p.kept_buffers());
         self.pool = if threads > 1 {
             Some(
                 rayon::ThreadPoolBuilder::new()
@@ -275,45 +289,23 @@ impl<'p, T: Real> Model<'p, T> {
         self.pool.as_ref().map_or(1, |p| p.current_num_threads())
     }
 
-    /// Internal forces at `u` into `f_int`, on the pool when there is one. With a pool
-    /// the per-node sums are left to the node phase (returns true).
-    fn element_phase(&mut self) -> Result<bool, PhysicsError> {
-        if let (Some(pool), Some(b)) = (&self.pool, &self.batched) {
-            let el = b.element_loop();
-            let ranges = el.ranges(4 * pool.current_num_threads());
-            if !ranges.is_empty() {
-                self.element_forces
-                    .resize(self.elements.len(), [[T::ZERO; 3]; 8]);
-                let mut chunks = Vec::with_capacity(ranges.len());
-                let mut rest = self.element_forces.as_mut_slice();
-                let mut at = 0;
-                for r in &ranges {
-                    let (head, tail) = rest.split_at_mut((r.end - at).min(rest.len()));
-                    chunks.push((r.clone(), head));
-                    rest = tail;
-                    at = r.end;
-                }
-                let u = &self.u;
-                let ok = pool.install(|| {
-                    use rayon::prelude::*;
-                    chunks
-                        .into_par_iter()
-                        .map(|(r, out)| el.element_forces(r, u, out))
-                        .collect::<Vec<bool>>()
-                });
-                if ok.iter().all(|&k| k) {
-                    return Ok(true);
-                }
-            }
-        }
+    /// Internal forces at `u` into `f_int`, on the pool when there is one.
+    fn element_phase(&mut self) -> Result<(), PhysicsError> {
         self.f_int.iter_mut().for_each(|f| *f = [T::ZERO; 3]);
+        if let (Some(pool), Some(b), Some(plan)) = (&self.pool, &self.batched, &self.plan) {
+            let el = b.element_loop();
+            if el.parallel_forces(plan, &mut self.kept, pool, &self.u, &mut self.f_int) {
+                return Ok(());
+            }
+            // A pack failed: the one-thread loop names the element.
+            self.f_int.iter_mut().for_each(|f| *f = [T::ZERO; 3]);
+        }
         match &self.batched {
             Some(b) => b.internal_forces(&self.elements, &self.laws, &self.u, &mut self.f_int),
             None => self
                 .elements
                 .internal_forces(&self.laws, &self.u, &mut self.f_int),
-        }?;
-        Ok(false)
+        }
     }
 
     pub fn time_s(&self) -> f64 {
@@ -368,8 +360,7 @@ impl<'p, T: Real> Model<'p, T> {
         let t = self.time_s();
         let t_next = t + self.dt_s;
         let step = self.step;
-        let gather = self
-            .element_phase()
+        self.element_phase()
             .map_err(|error| StepError { step, error })?;
         self.external_forces(t)
             .map_err(|error| StepError { step, error })?;
@@ -377,23 +368,13 @@ impl<'p, T: Real> Model<'p, T> {
         let problem = self.problem;
         let (limit, ms) = (problem.solver.speed_limit, problem.solver.mass_scaling);
         let cd = self.cd;
-        let incidence = match (&self.batched, gather) {
-            (Some(b), true) => Some(b.element_loop().incidence()),
-            _ => None,
-        };
-        let (gain, f_ext, forces) = (&self.gain, &self.f_ext, &self.element_forces);
-        // One block of nodes from `first`: gather (parallel element phase), update, sums.
-        let block = |(k, ((u, u_prev), f_int)): (
-            usize,
-            ((&mut [[T; 3]], &mut [[T; 3]]), &mut [[T; 3]]),
-        )| {
+        let (gain, f_ext) = (&self.gain, &self.f_ext);
+        // One block of nodes from `first`: update and sums.
+        let block = |(k, ((u, u_prev), f_int)): NodeBlock<'_, T>| {
             let first = k * NODE_BLOCK;
             let mut sums = BlockSums::default();
             for (j, (u, u_prev)) in u.iter_mut().zip(u_prev.iter_mut()).enumerate() {
                 let n = first + j;
-                if let Some(inc) = incidence {
-                    f_int[j] = inc.gather(n, forces);
-                }
                 let (f_ext, f_int) = (f_ext[n], f_int[j]);
                 let reaction = |r: &mut [f64; 3]| {
                     for i in 0..3 {

@@ -131,67 +131,74 @@ pub trait ElementLoop<T: Real>: Send + Sync {
     ) -> Result<(), PhysicsError>;
     /// What runs: the lane type ("f64x4 avx", ...).
     fn describe(&self) -> String;
-    /// About `parts` ranges of kernel-order elements covering all of them, each a whole
-    /// number of packs.
-    fn ranges(&self, parts: usize) -> Vec<Range<usize>>;
-    /// Each element's nodal forces of the elements `range` (from [`Self::ranges`]) into
-    /// `out` (one entry per element, nodes in [`Incidence`] order); false when a pack
-    /// fails (the caller then runs [`Self::internal_forces`] for the error).
-    fn element_forces(&self, range: Range<usize>, u: &[[T; 3]], out: &mut [[[T; 3]; 8]]) -> bool;
-    /// Which element slots add into each node, in the order the scalar loop adds them.
-    fn incidence(&self) -> &Incidence;
+    /// How `parts` threads share the elements ([`Plan`]); None when this loop has no
+    /// packs to share.
+    fn plan(&self, parts: usize, node_count: usize) -> Option<Plan>;
+    /// The internal forces at `u` added into `f` (zero on entry) by the plan's blocks on
+    /// `pool`, with the bits of [`Self::internal_forces`]; false when a pack fails or
+    /// the plan does not fit (the caller zeroes `f` and runs [`Self::internal_forces`]
+    /// for the error).
+    fn parallel_forces(
+        &self,
+        plan: &Plan,
+        kept: &mut [Vec<[T; 3]>],
+        pool: &rayon::ThreadPool,
+        u: &[[T; 3]],
+        f: &mut [[T; 3]],
+    ) -> bool;
 }
 
-/// For each node, the element slots (`8 · element + slot`, kernel order) whose forces
-/// add into it, in kernel order: summing them from zero in this order gives the scalar
-/// loop's bits (each element adds once to each of its nodes).
-pub struct Incidence {
-    start: Vec<u32>,
-    slots: Vec<u32>,
+/// Elements shared among threads with the scalar loop's bits. The elements (kernel order)
+/// are cut into blocks of whole packs; a node belongs to the first block that touches
+/// it. Each block's thread adds its forces straight into the nodes it owns (in element
+/// order: no earlier block touches them), and keeps its forces on other nodes aside, in
+/// order; these are added after all blocks finished, block by block. So every node sums
+/// its elements' forces from zero in kernel order, as one thread does.
+pub struct Plan {
+    /// Per block, the pack index ranges of each kernel list (general, parallelepipeds;
+    /// full integration uses the first).
+    blocks: Vec<[Range<usize>; 2]>,
+    /// Owning block of each node (`u16::MAX`: no element).
+    owner: Vec<u16>,
+    /// Per block, the nodes of its forces kept aside, in the order it produces them.
+    aside: Vec<Vec<u32>>,
 }
 
-impl Incidence {
-    /// `nodes[e]` in slot order, for the kernel-order elements.
-    fn build(nodes: impl Iterator<Item = [u32; 8]>, node_count: usize) -> Incidence {
-        let nodes: Vec<[u32; 8]> = nodes.collect();
-        let mut count = vec![0u32; node_count + 1];
-        for e in &nodes {
-            for &n in e {
-                if let Some(c) = count.get_mut(n as usize + 1) {
-                    *c += 1;
-                }
-            }
-        }
-        for k in 1..count.len() {
-            count[k] += count[k - 1];
-        }
-        let start = count.clone();
-        let mut slots = vec![0u32; *count.last().unwrap_or(&0) as usize];
-        for (e, ns) in nodes.iter().enumerate() {
-            for (k, &n) in ns.iter().enumerate() {
-                if let Some(at) = count.get_mut(n as usize) {
-                    if let Some(s) = slots.get_mut(*at as usize) {
-                        *s = (8 * e + k) as u32;
-                    }
-                    *at += 1;
-                }
-            }
-        }
-        Incidence { start, slots }
+impl Plan {
+    pub fn blocks(&self) -> usize {
+        self.blocks.len()
     }
 
-    /// Node `n`'s internal force: its slots of `forces` summed from zero in order.
-    #[inline]
-    pub fn gather<T: Real>(&self, n: usize, forces: &[[[T; 3]; 8]]) -> [T; 3] {
-        let mut f = [T::ZERO; 3];
-        let (a, b) = (self.start[n] as usize, self.start[n + 1] as usize);
-        for &s in &self.slots[a..b] {
-            let v = forces[s as usize / 8][s as usize % 8];
+    /// Room for each block's forces kept aside.
+    pub fn kept_buffers<T>(&self) -> Vec<Vec<[T; 3]>> {
+        self.aside
+            .iter()
+            .map(|a| Vec::with_capacity(a.len()))
+            .collect()
+    }
+}
+
+/// The force array, written by several threads at nodes each owns alone.
+struct SharedForces<T>(*mut [T; 3], usize);
+
+// SAFETY: threads only write through it at nodes their block owns (a node has one owner),
+// and nothing reads the array until they have all finished (`Plan`).
+unsafe impl<T: Send> Sync for SharedForces<T> {}
+
+impl<T: Real> SharedForces<T> {
+    /// Adds `v` at node `n`.
+    ///
+    /// # Safety
+    /// Only the block that owns `n` calls this for `n`, while no one else accesses it.
+    #[inline(always)]
+    unsafe fn add(&self, n: usize, v: [T; 3]) {
+        if n < self.1 {
+            // SAFETY: in bounds (checked), and exclusive to this thread (the caller).
+            let d = unsafe { &mut *self.0.add(n) };
             for i in 0..3 {
-                f[i] += v[i];
+                d[i] += v[i];
             }
         }
-        f
     }
 }
 
@@ -222,53 +229,6 @@ pub struct Batched<T: Real>(Box<dyn ElementLoop<T>>);
 struct Loop<S: Real, L: LaneReal<S, N>, const N: usize> {
     packs: Packs<S, L, N>,
     isa: Isa,
-    incidence: Incidence,
-    /// Kernel-order index of the first element of each kernel list.
-    offsets: [usize; 2],
-}
-
-impl<S: Real, L: LaneReal<S, N>, const N: usize> Loop<S, L, N> {
-    fn new(packs: Packs<S, L, N>, isa: Isa, elements: &Elements<S>) -> Self {
-        fn order<K: LaneKernel<S, L, N>, S: Real, L: LaneReal<S, N>, const N: usize>(
-            _: &[Batch<K, L, N>],
-        ) -> [usize; 8] {
-            K::SCATTER_ORDER
-        }
-        let max_node = |v: &mut dyn Iterator<Item = [u32; 8]>| {
-            v.flat_map(|n| n).max().map_or(0, |m| m as usize + 1)
-        };
-        let (incidence, offsets) = match (&packs, elements) {
-            (
-                Packs::Reduced { general, boxes },
-                Elements::Reduced {
-                    general: g,
-                    boxes: b,
-                    ..
-                },
-            ) => {
-                let (og, ob) = (order(general), order(boxes));
-                let all = g
-                    .iter()
-                    .map(|e| og.map(|a| e.nodes()[a]))
-                    .chain(b.iter().map(|e| ob.map(|a| e.nodes()[a])));
-                let n = max_node(&mut all.clone());
-                (Incidence::build(all, n), [0, g.len()])
-            }
-            (Packs::Full(p), Elements::Full(v)) => {
-                let o = order(p);
-                let all = v.iter().map(|e| o.map(|a| e.nodes()[a]));
-                let n = max_node(&mut all.clone());
-                (Incidence::build(all, n), [0, v.len()])
-            }
-            _ => (Incidence::build(core::iter::empty(), 0), [0, 0]),
-        };
-        Loop {
-            packs,
-            isa,
-            incidence,
-            offsets,
-        }
-    }
 }
 
 impl<T: Real> Batched<T> {
@@ -290,7 +250,7 @@ impl<T: Real> Batched<T> {
             let e = elements.downcast_ref::<Elements<S>>()?;
             let l = laws.downcast_ref::<Vec<MaterialLaw<S>>>()?;
             let b: Box<dyn ElementLoop<S>> = match Packs::<S, L, N>::build(e, l) {
-                Ok(packs) => Box::new(Loop::new(packs, isa, e)),
+                Ok(packs) => Box::new(Loop { packs, isa }),
                 Err(err) => return Some(Err(err)),
             };
             // S is T here: the downcasts above succeeded.
@@ -349,18 +309,18 @@ impl<T: Real> ElementLoop<T> for ScalarLoop {
     fn describe(&self) -> String {
         format!("{} scalar", T::NAME)
     }
-    fn ranges(&self, _: usize) -> Vec<Range<usize>> {
-        Vec::new()
+    fn plan(&self, _: usize, _: usize) -> Option<Plan> {
+        None
     }
-    fn element_forces(&self, _: Range<usize>, _: &[[T; 3]], _: &mut [[[T; 3]; 8]]) -> bool {
+    fn parallel_forces(
+        &self,
+        _: &Plan,
+        _: &mut [Vec<[T; 3]>],
+        _: &rayon::ThreadPool,
+        _: &[[T; 3]],
+        _: &mut [[T; 3]],
+    ) -> bool {
         false
-    }
-    fn incidence(&self) -> &Incidence {
-        static EMPTY: Incidence = Incidence {
-            start: Vec::new(),
-            slots: Vec::new(),
-        };
-        &EMPTY
     }
 }
 
@@ -395,74 +355,142 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<S, L, N
         };
         format!("{}x{N} {isa}", S::NAME)
     }
-    fn ranges(&self, parts: usize) -> Vec<Range<usize>> {
-        // Pack boundaries in kernel order, then about equal shares of packs.
-        let mut ends = Vec::new();
-        let mut push = |firsts: &mut dyn Iterator<Item = usize>| ends.extend(firsts);
-        match &self.packs {
-            Packs::Reduced { general, boxes } => {
-                push(&mut general.iter().map(|b| b.first + b.active));
-                push(&mut boxes.iter().map(|b| self.offsets[1] + b.first + b.active));
-            }
-            Packs::Full(p) => push(&mut p.iter().map(|b| b.first + b.active)),
-            Packs::Scalar(_) => {}
-        }
-        let parts = parts.clamp(1, ends.len().max(1));
-        let mut out = Vec::with_capacity(parts);
-        let mut from = 0;
-        for k in 1..=parts {
-            let Some(&end) = ends.get((k * ends.len()).div_ceil(parts).saturating_sub(1)) else {
-                break;
-            };
-            if end > from {
-                out.push(from..end);
-                from = end;
-            }
-        }
-        out
-    }
-    fn element_forces(&self, range: Range<usize>, u: &[[S; 3]], out: &mut [[[S; 3]; 8]]) -> bool {
-        let isa = self.isa;
-        let within = |offset: usize, first: usize, active: usize| {
-            offset + first >= range.start && offset + first + active <= range.end
+    fn plan(&self, parts: usize, node_count: usize) -> Option<Plan> {
+        let lists: [Vec<([[u32; 8]; N], usize)>; 2] = match &self.packs {
+            Packs::Reduced { general, boxes } => [listed(general), listed(boxes)],
+            Packs::Full(p) => [listed(p), Vec::new()],
+            Packs::Scalar(_) => return None,
         };
-        match &self.packs {
-            Packs::Reduced { general, boxes } => {
-                let (og, ob) = (self.offsets[0], self.offsets[1]);
-                let g: Vec<&Batch<_, L, N>> = general
-                    .iter()
-                    .filter(|b| within(og, b.first, b.active))
-                    .collect();
-                let b: Vec<&Batch<_, L, N>> = boxes
-                    .iter()
-                    .filter(|b| within(ob, b.first, b.active))
-                    .collect();
-                forces_of(&g, og, range.start, u, out, isa)
-                    && forces_of(&b, ob, range.start, u, out, isa)
+        // Packs in kernel order as (list, index), cut into `parts` runs of about equal
+        // element counts.
+        let order: Vec<(usize, usize)> = (0..2)
+            .flat_map(|k| (0..lists[k].len()).map(move |i| (k, i)))
+            .collect();
+        let parts = parts
+            .clamp(1, order.len().max(1))
+            .min(u16::MAX as usize - 1);
+        let elements: usize = order.iter().map(|&(k, i)| lists[k][i].1).sum();
+        let mut blocks = vec![[0..0, 0..0]; parts];
+        let mut owner = vec![u16::MAX; node_count];
+        let mut aside = vec![Vec::new(); parts];
+        let (mut done, mut block) = (0, 0);
+        for &(k, i) in &order {
+            let (nodes, active) = &lists[k][i];
+            while block + 1 < parts && done * parts >= (block + 1) * elements {
+                block += 1;
             }
-            Packs::Full(p) => {
-                let f: Vec<&Batch<_, L, N>> =
-                    p.iter().filter(|b| within(0, b.first, b.active)).collect();
-                forces_of(&f, 0, range.start, u, out, isa)
+            let r = &mut blocks[block][k];
+            if r.start == r.end {
+                *r = i..i + 1;
+            } else {
+                r.end = i + 1;
             }
-            Packs::Scalar(_) => false,
+            for at in nodes.iter().take(*active) {
+                for &n in at {
+                    match owner.get_mut(n as usize) {
+                        Some(o) if *o == u16::MAX => *o = block as u16,
+                        Some(o) if *o == block as u16 => {}
+                        Some(_) => aside[block].push(n),
+                        None => return None,
+                    }
+                }
+            }
+            done += active;
         }
+        Some(Plan {
+            blocks,
+            owner,
+            aside,
+        })
     }
-    fn incidence(&self) -> &Incidence {
-        &self.incidence
+
+    fn parallel_forces(
+        &self,
+        plan: &Plan,
+        kept: &mut [Vec<[S; 3]>],
+        pool: &rayon::ThreadPool,
+        u: &[[S; 3]],
+        f: &mut [[S; 3]],
+    ) -> bool {
+        use rayon::prelude::*;
+        if kept.len() != plan.blocks.len() || plan.owner.len() != f.len() || u.len() != f.len() {
+            return false;
+        }
+        let shared = SharedForces(f.as_mut_ptr(), f.len());
+        let isa = self.isa;
+        let ok = pool.install(|| {
+            plan.blocks
+                .par_iter()
+                .zip(kept.par_iter_mut())
+                .enumerate()
+                .map(|(b, (ranges, kept))| {
+                    kept.clear();
+                    let owner = &plan.owner;
+                    let shared = &shared;
+                    let mut scatter = |n: usize, v: [S; 3]| {
+                        if owner.get(n) == Some(&(b as u16)) {
+                            // SAFETY: block `b` owns node `n` (see `Plan`).
+                            unsafe { shared.add(n, v) }
+                        } else {
+                            kept.push(v);
+                        }
+                    };
+                    match &self.packs {
+                        Packs::Reduced { general, boxes } => {
+                            let g = general.get(ranges[0].clone()).unwrap_or(&[]);
+                            let x = boxes.get(ranges[1].clone()).unwrap_or(&[]);
+                            run_with(g, u, &mut scatter, isa).is_none()
+                                && run_with(x, u, &mut scatter, isa).is_none()
+                        }
+                        Packs::Full(p) => {
+                            let p = p.get(ranges[0].clone()).unwrap_or(&[]);
+                            run_with(p, u, &mut scatter, isa).is_none()
+                        }
+                        Packs::Scalar(_) => false,
+                    }
+                })
+                .collect::<Vec<bool>>()
+        });
+        if !ok.iter().all(|&k| k) {
+            return false;
+        }
+        // The forces kept aside, block by block, each in the order it produced them.
+        for (nodes, values) in plan.aside.iter().zip(kept.iter()) {
+            if nodes.len() != values.len() {
+                return false;
+            }
+            for (&n, v) in nodes.iter().zip(values) {
+                if let Some(d) = f.get_mut(n as usize) {
+                    for i in 0..3 {
+                        d[i] += v[i];
+                    }
+                }
+            }
+        }
+        true
     }
 }
 
-/// The packs' per-element forces into `out` (element `offset + first + l` at
-/// `out[offset + first + l − base]`); false when one fails.
-fn forces_of<K, S, L, const N: usize>(
-    packs: &[&Batch<K, L, N>],
-    offset: usize,
-    base: usize,
+/// Each pack's nodes in scatter order (per lane) and its active count.
+fn listed<K, S, L, const N: usize>(packs: &[Batch<K, L, N>]) -> Vec<([[u32; 8]; N], usize)>
+where
+    K: LaneKernel<S, L, N>,
+    S: Real,
+    L: LaneReal<S, N>,
+{
+    packs
+        .iter()
+        .map(|b| (b.nodes.map(|at| K::SCATTER_ORDER.map(|a| at[a])), b.active))
+        .collect()
+}
+
+/// [`run_packs_body`] on the instruction set `isa`.
+fn run_with<K, S, L, const N: usize>(
+    packs: &[Batch<K, L, N>],
     u: &[[S; 3]],
-    out: &mut [[[S; 3]; 8]],
+    scatter: &mut impl FnMut(usize, [S; 3]),
     isa: Isa,
-) -> bool
+) -> Option<usize>
 where
     K: LaneKernel<S, L, N>,
     S: Real,
@@ -470,86 +498,10 @@ where
 {
     match isa {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: as in `run`.
-        Isa::Avx => unsafe { forces_avx(packs, offset, base, u, out) },
-        _ => forces_portable(packs, offset, base, u, out),
+        // SAFETY: `Isa::Avx` is only chosen where the CPU has AVX (`Isa::detect`).
+        Isa::Avx => unsafe { run_packs_avx(packs, u, scatter) },
+        _ => run_packs(packs, u, scatter),
     }
-}
-
-#[inline(always)]
-fn forces_body<K, S, L, const N: usize>(
-    packs: &[&Batch<K, L, N>],
-    offset: usize,
-    base: usize,
-    u: &[[S; 3]],
-    out: &mut [[[S; 3]; 8]],
-) -> bool
-where
-    K: LaneKernel<S, L, N>,
-    S: Real,
-    L: LaneReal<S, N>,
-{
-    for b in packs {
-        let at = (offset + b.first).wrapping_sub(base);
-        let Some(dst) = out.get_mut(at..at + b.active) else {
-            return false;
-        };
-        let mut k = 0;
-        let r = b
-            .kernel
-            .lane_forces(&b.law, &b.nodes, b.active, u, |l, _, v| {
-                if let Some(d) = dst.get_mut(l) {
-                    d[k % 8] = v;
-                }
-                k += 1;
-            });
-        if r.is_err() {
-            return false;
-        }
-    }
-    true
-}
-
-/// [`forces_body`] compiled with AVX.
-///
-/// # Safety
-/// The CPU must have AVX.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-unsafe fn forces_avx<K, S, L, const N: usize>(
-    packs: &[&Batch<K, L, N>],
-    offset: usize,
-    base: usize,
-    u: &[[S; 3]],
-    out: &mut [[[S; 3]; 8]],
-) -> bool
-where
-    K: LaneKernel<S, L, N>,
-    S: Real,
-    L: LaneReal<S, N>,
-{
-    forces_body(packs, offset, base, u, out)
-}
-
-#[multiversion(targets(
-    "x86_64+avx512f+avx512vl+avx2+avx",
-    "x86_64+avx2+avx",
-    "x86_64+avx",
-    "aarch64+neon"
-))]
-fn forces_portable<K, S, L, const N: usize>(
-    packs: &[&Batch<K, L, N>],
-    offset: usize,
-    base: usize,
-    u: &[[S; 3]],
-    out: &mut [[[S; 3]; 8]],
-) -> bool
-where
-    K: LaneKernel<S, L, N>,
-    S: Real,
-    L: LaneReal<S, N>,
-{
-    forces_body(packs, offset, base, u, out)
 }
 
 /// Runs one kernel's packs in order, adding each lane's forces; a failed pack is rerun by
@@ -577,13 +529,14 @@ where
     let mut from = 0;
     loop {
         let rest = packs.get(from..).unwrap_or(&[]);
-        let failed = match isa {
-            #[cfg(target_arch = "x86_64")]
-            // SAFETY: `Isa::Avx` is only chosen where the CPU has AVX (`Isa::detect`, or a
-            // caller that checked the same).
-            Isa::Avx => unsafe { run_packs_avx(rest, u, f) },
-            _ => run_packs(rest, u, f),
+        let mut add = |n: usize, v: [S; 3]| {
+            if let Some(d) = f.get_mut(n) {
+                for i in 0..3 {
+                    d[i] += v[i];
+                }
+            }
         };
+        let failed = run_with(rest, u, &mut add, isa);
         let Some(j) = failed else { return Ok(()) };
         // The scalar kernel on the failed pack's elements: the error, named as the scalar
         // loop names it (or, should the scalar kernel pass, the pack's forces).
@@ -595,13 +548,14 @@ where
     }
 }
 
-/// The packs in order, each lane's forces added into `f`; the index of the first pack
-/// that fails (nothing of it added), if any.
+/// The packs in order, each lane's forces handed to `scatter(node, force)` in the
+/// scalar loop's order; the index of the first pack that fails (nothing of it handed
+/// out), if any.
 #[inline(always)]
 fn run_packs_body<K, S, L, const N: usize>(
     packs: &[Batch<K, L, N>],
     u: &[[S; 3]],
-    f: &mut [[S; 3]],
+    scatter: &mut impl FnMut(usize, [S; 3]),
 ) -> Option<usize>
 where
     K: LaneKernel<S, L, N>,
@@ -609,15 +563,14 @@ where
     L: LaneReal<S, N>,
 {
     for (k, b) in packs.iter().enumerate() {
-        let r = b
-            .kernel
-            .lane_forces(&b.law, &b.nodes, b.active, u, |_, n, v| {
-                if let Some(d) = f.get_mut(n) {
-                    for i in 0..3 {
-                        d[i] += v[i];
-                    }
-                }
-            });
+        let r = b.kernel.lane_forces(
+            &b.law,
+            &b.nodes,
+            b.active,
+            u,
+            #[inline(always)]
+            |_, n, v| scatter(n, v),
+        );
         if r.is_err() {
             return Some(k);
         }
@@ -634,14 +587,14 @@ where
 unsafe fn run_packs_avx<K, S, L, const N: usize>(
     packs: &[Batch<K, L, N>],
     u: &[[S; 3]],
-    f: &mut [[S; 3]],
+    scatter: &mut impl FnMut(usize, [S; 3]),
 ) -> Option<usize>
 where
     K: LaneKernel<S, L, N>,
     S: Real,
     L: LaneReal<S, N>,
 {
-    run_packs_body(packs, u, f)
+    run_packs_body(packs, u, scatter)
 }
 
 /// [`run_packs_body`] for the portable lanes, compiled for several instruction sets.
@@ -654,12 +607,12 @@ where
 fn run_packs<K, S, L, const N: usize>(
     packs: &[Batch<K, L, N>],
     u: &[[S; 3]],
-    f: &mut [[S; 3]],
+    scatter: &mut impl FnMut(usize, [S; 3]),
 ) -> Option<usize>
 where
     K: LaneKernel<S, L, N>,
     S: Real,
     L: LaneReal<S, N>,
 {
-    run_packs_body(packs, u, f)
+    run_packs_body(packs, u, scatter)
 }
