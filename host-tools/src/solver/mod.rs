@@ -67,7 +67,10 @@ pub struct Model<'p, T: Real> {
 const NODE_BLOCK: usize = 2048;
 
 /// One block of the node update: its index, and its nodes' `u`, `u_prev` and `f_int`.
-type NodeBlock<'a, T> = (usize, ((&'a mut [[T; 3]], &'a mut [[T; 3]]), &'a mut [[T; 3]]));
+type NodeBlock<'a, T> = (
+    usize,
+    ((&'a mut [[T; 3]], &'a mut [[T; 3]]), &'a mut [[T; 3]]),
+);
 
 /// What one block of the node update found.
 #[derive(Default)]

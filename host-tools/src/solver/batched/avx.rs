@@ -1,7 +1,11 @@
 //! Lane types over AVX registers (x86-64): 4 f64 in a `__m256d`, 8 f32 in a `__m256`, as
 //! [`Real`]s whose every operation is one IEEE 754 instruction per lane (add, sub, mul,
 //! div, sqrt: correctly rounded, the scalar's bits) or the scalar `libm` function per lane
-//! (`ln`, `cbrt`). No fused multiply-add is used.
+//! (`cbrt`; `ln` too for a lane outside the normal positive range). `ln` of normal positive
+//! lanes is `libm`'s own algorithm (FreeBSD's `e_log.c` / `e_logf.c`: the argument
+//! reduction per lane in integers, then the polynomial in the registers, in `libm`'s order
+//! of operations), so it gives `libm`'s bits; a test holds it to `libm` on inputs across
+//! the whole range. No fused multiply-add is used.
 //!
 //! Safety: the methods call AVX intrinsics. They are only executed inside functions
 //! compiled with `#[target_feature(enable = "avx")]` and reached after
@@ -35,6 +39,11 @@ macro_rules! avx_lanes {
             fn of(v: [$s; $n]) -> Self {
                 // SAFETY: AVX is present (module doc); `v` holds $n values.
                 $name(unsafe { $loadu(v.as_ptr()) })
+            }
+            #[inline(always)]
+            fn splat(x: $s) -> Self {
+                // SAFETY: AVX is present (module doc).
+                $name(unsafe { $set1(x) })
             }
             #[inline(always)]
             fn each(self, f: impl Fn($s) -> $s) -> Self {
@@ -166,7 +175,7 @@ macro_rules! avx_lanes {
             }
             #[inline(always)]
             fn ln(self) -> Self {
-                self.each(<$s as Real>::ln)
+                self.ln_lanes()
             }
             #[inline(always)]
             fn cbrt(self) -> Self {
@@ -239,3 +248,186 @@ avx_lanes!(
     _mm256_cmp_ps,
     _mm256_movemask_ps
 );
+
+/// `libm::log`'s constants (libm 0.2, `log.rs`), the same literals (kept verbatim, digits
+/// beyond the type's precision included, so they are visibly libm's).
+#[allow(clippy::excessive_precision)]
+mod log64 {
+    pub const LN2_HI: f64 = 6.93147180369123816490e-01;
+    pub const LN2_LO: f64 = 1.90821492927058770002e-10;
+    pub const LG1: f64 = 6.666666666666735130e-01;
+    pub const LG2: f64 = 3.999999999940941908e-01;
+    pub const LG3: f64 = 2.857142874366239149e-01;
+    pub const LG4: f64 = 2.222219843214978396e-01;
+    pub const LG5: f64 = 1.818357216161805012e-01;
+    pub const LG6: f64 = 1.531383769920937332e-01;
+    pub const LG7: f64 = 1.479819860511658591e-01;
+}
+
+/// `libm::logf`'s constants (libm 0.2, `logf.rs`), the same literals (verbatim).
+#[allow(clippy::excessive_precision)]
+mod log32 {
+    pub const LN2_HI: f32 = 6.9313812256e-01;
+    pub const LN2_LO: f32 = 9.0580006145e-06;
+    pub const LG1: f32 = 0.66666662693;
+    pub const LG2: f32 = 0.40000972152;
+    pub const LG3: f32 = 0.28498786688;
+    pub const LG4: f32 = 0.24279078841;
+}
+
+impl F64x4 {
+    /// `libm::log` lane by lane (see the module doc).
+    #[inline(always)]
+    fn ln_lanes(self) -> Self {
+        use log64::*;
+        let x = self.lanes();
+        let (mut reduced, mut dk) = ([0.0f64; 4], [0.0f64; 4]);
+        for l in 0..4 {
+            let ui = x[l].to_bits();
+            let hx = (ui >> 32) as u32;
+            // Zero, subnormal, negative, infinite or NaN: libm's special paths.
+            if !(0x0010_0000..0x7ff0_0000).contains(&hx) {
+                return self.each(<f64 as Real>::ln);
+            }
+            // Reduce x into [sqrt(2)/2, sqrt(2)]: x = 2^k (1 + f).
+            let hx = hx + (0x3ff0_0000 - 0x3fe6_a09e);
+            let k = ((hx >> 20) as i32) - 0x3ff;
+            let hx = (hx & 0x000f_ffff) + 0x3fe6_a09e;
+            reduced[l] = f64::from_bits(((hx as u64) << 32) | (ui & 0xffff_ffff));
+            dk[l] = k as f64;
+        }
+        let c = Self::splat;
+        let (x, dk) = (Self::of(reduced), Self::of(dk));
+        let f = x - c(1.0);
+        let hfsq = c(0.5) * f * f;
+        let s = f / (c(2.0) + f);
+        let z = s * s;
+        let w = z * z;
+        let t1 = w * (c(LG2) + w * (c(LG4) + w * c(LG6)));
+        let t2 = z * (c(LG1) + w * (c(LG3) + w * (c(LG5) + w * c(LG7))));
+        let r = t2 + t1;
+        s * (hfsq + r) + dk * c(LN2_LO) - hfsq + f + dk * c(LN2_HI)
+    }
+}
+
+impl F32x8 {
+    /// `libm::logf` lane by lane (see the module doc).
+    #[inline(always)]
+    fn ln_lanes(self) -> Self {
+        use log32::*;
+        let x = self.lanes();
+        let (mut reduced, mut dk) = ([0.0f32; 8], [0.0f32; 8]);
+        for l in 0..8 {
+            let ix = x[l].to_bits();
+            // Zero, subnormal, negative, infinite or NaN: libm's special paths.
+            if !(0x0080_0000..0x7f80_0000).contains(&ix) {
+                return self.each(<f32 as Real>::ln);
+            }
+            let ix = ix + (0x3f80_0000 - 0x3f35_04f3);
+            let k = ((ix >> 23) as i32) - 0x7f;
+            reduced[l] = f32::from_bits((ix & 0x007f_ffff) + 0x3f35_04f3);
+            dk[l] = k as f32;
+        }
+        let c = Self::splat;
+        let (x, dk) = (Self::of(reduced), Self::of(dk));
+        let f = x - c(1.0);
+        let s = f / (c(2.0) + f);
+        let z = s * s;
+        let w = z * z;
+        let t1 = w * (c(LG2) + w * c(LG4));
+        let t2 = z * (c(LG1) + w * c(LG3));
+        let r = t2 + t1;
+        let hfsq = c(0.5) * f * f;
+        s * (hfsq + r) + dk * c(LN2_LO) - hfsq + f + dk * c(LN2_HI)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Inputs across the whole range: random bit patterns (every exponent, both signs,
+    /// subnormals, infinities, NaNs), values near 1 (the kernels' Jacobians) and the
+    /// special values.
+    fn inputs64() -> Vec<f64> {
+        let mut v = vec![
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        v.extend([
+            f64::MIN_POSITIVE,
+            5e-324,
+            f64::MAX,
+            std::f64::consts::FRAC_1_SQRT_2,
+            std::f64::consts::SQRT_2,
+        ]);
+        let mut z = 0x1234_5678_9abc_def0u64;
+        for k in 0..200_000u64 {
+            z ^= z << 13;
+            z ^= z >> 7;
+            z ^= z << 17;
+            v.push(f64::from_bits(z));
+            v.push(1.0 + (k as f64 - 100_000.0) * 3e-7);
+            // Positive normal numbers of every exponent (whole packs take the SIMD path).
+            let e = (z >> 52) % 0x7fe + 1;
+            v.push(f64::from_bits((e << 52) | (z & 0x000f_ffff_ffff_ffff)));
+            let e32 = (z >> 23) as u32 % 0xfe + 1;
+            v.push(f32::from_bits((e32 << 23) | (z as u32 & 0x007f_ffff)) as f64);
+        }
+        v
+    }
+
+    #[test]
+    fn lane_ln_is_libm_log_bit_for_bit() {
+        if !std::arch::is_x86_feature_detected!("avx") {
+            return;
+        }
+        let xs = inputs64();
+        let mut checked = 0;
+        for chunk in xs.chunks_exact(4) {
+            let x: [f64; 4] = [chunk[0], chunk[1], chunk[2], chunk[3]];
+            let got = F64x4::of(x).ln().lanes();
+            for l in 0..4 {
+                let want = libm::log(x[l]);
+                assert!(
+                    got[l].to_bits() == want.to_bits() || (got[l].is_nan() && want.is_nan()),
+                    "log({:e}) = {:e}, libm {:e}",
+                    x[l],
+                    got[l],
+                    want
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked >= 800_000);
+        let mut checked32 = 0;
+        for chunk in xs.chunks_exact(8) {
+            let x: [f32; 8] = core::array::from_fn(|l| {
+                // Both f32 bit patterns (random) and values near 1.
+                if l % 2 == 0 {
+                    f32::from_bits(chunk[l].to_bits() as u32)
+                } else {
+                    chunk[l] as f32
+                }
+            });
+            let got = F32x8::of(x).ln().lanes();
+            for l in 0..8 {
+                let want = libm::logf(x[l]);
+                assert!(
+                    got[l].to_bits() == want.to_bits() || (got[l].is_nan() && want.is_nan()),
+                    "logf({:e}) = {:e}, libm {:e}",
+                    x[l],
+                    got[l],
+                    want
+                );
+                checked32 += 1;
+            }
+        }
+        assert!(checked32 >= 800_000);
+    }
+}
