@@ -35,18 +35,8 @@ impl<S: Real, const N: usize> Lanes<S, N> {
         Lanes([x; N])
     }
 
-    /// The lanes `f(0), …, f(N − 1)`.
     // Plain loops rather than `array::map`/`from_fn`, which the optimiser does not always
     // see through at this depth of inlining.
-    #[inline(always)]
-    pub fn from_fn(mut f: impl FnMut(usize) -> S) -> Self {
-        let mut r = [S::ZERO; N];
-        for (l, v) in r.iter_mut().enumerate() {
-            *v = f(l);
-        }
-        Lanes(r)
-    }
-
     #[inline(always)]
     fn map(mut self, f: impl Fn(S) -> S) -> Self {
         for v in self.0.iter_mut() {

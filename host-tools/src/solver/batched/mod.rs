@@ -96,18 +96,19 @@ where
 }
 
 /// A model's elements packed for one lane type.
-enum Packs<S: Real, L: LaneReal<S, N>, const N: usize> {
+enum Packs<L, const N: usize> {
     Reduced {
         general: Vec<Batch<HexReduced<L>, L, N>>,
         boxes: Vec<Batch<HexBox<L>, L, N>>,
     },
     Full(Vec<Batch<HexFull<L>, L, N>>),
-    #[allow(dead_code)]
-    Scalar(core::marker::PhantomData<S>),
 }
 
-impl<S: Real, L: LaneReal<S, N>, const N: usize> Packs<S, L, N> {
-    fn build(elements: &Elements<S>, laws: &[MaterialLaw<S>]) -> Result<Self, PhysicsError> {
+impl<L, const N: usize> Packs<L, N> {
+    fn build<S: Real>(elements: &Elements<S>, laws: &[MaterialLaw<S>]) -> Result<Self, PhysicsError>
+    where
+        L: LaneReal<S, N>,
+    {
         Ok(match elements {
             Elements::Reduced { general, boxes, .. } => Packs::Reduced {
                 general: pack(general, laws)?,
@@ -165,10 +166,6 @@ pub struct Plan {
 }
 
 impl Plan {
-    pub fn blocks(&self) -> usize {
-        self.blocks.len()
-    }
-
     /// Room for each block's forces kept aside.
     pub fn kept_buffers<T>(&self) -> Vec<Vec<[T; 3]>> {
         self.aside
@@ -226,8 +223,8 @@ impl Isa {
 /// The batched elements of a model in scalar type `T`.
 pub struct Batched<T: Real>(Box<dyn ElementLoop<T>>);
 
-struct Loop<S: Real, L: LaneReal<S, N>, const N: usize> {
-    packs: Packs<S, L, N>,
+struct Loop<L, const N: usize> {
+    packs: Packs<L, N>,
     isa: Isa,
 }
 
@@ -245,11 +242,11 @@ impl<T: Real> Batched<T> {
             isa: Isa,
         ) -> Option<Result<Box<dyn ElementLoop<T>>, PhysicsError>>
         where
-            Loop<S, L, N>: ElementLoop<S>,
+            Loop<L, N>: ElementLoop<S>,
         {
             let e = elements.downcast_ref::<Elements<S>>()?;
             let l = laws.downcast_ref::<Vec<MaterialLaw<S>>>()?;
-            let b: Box<dyn ElementLoop<S>> = match Packs::<S, L, N>::build(e, l) {
+            let b: Box<dyn ElementLoop<S>> = match Packs::<L, N>::build(e, l) {
                 Ok(packs) => Box::new(Loop { packs, isa }),
                 Err(err) => return Some(Err(err)),
             };
@@ -324,7 +321,7 @@ impl<T: Real> ElementLoop<T> for ScalarLoop {
     }
 }
 
-impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<S, L, N> {
+impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
     fn internal_forces(
         &self,
         elements: &Elements<S>,
@@ -359,7 +356,6 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<S, L, N
         let lists: [Vec<([[u32; 8]; N], usize)>; 2] = match &self.packs {
             Packs::Reduced { general, boxes } => [listed(general), listed(boxes)],
             Packs::Full(p) => [listed(p), Vec::new()],
-            Packs::Scalar(_) => return None,
         };
         // Packs in kernel order as (list, index), cut into `parts` runs of about equal
         // element counts.
@@ -446,7 +442,6 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<S, L, N
                             let p = p.get(ranges[0].clone()).unwrap_or(&[]);
                             run_with(p, u, &mut scatter, isa).is_none()
                         }
-                        Packs::Scalar(_) => false,
                     }
                 })
                 .collect::<Vec<bool>>()
