@@ -265,10 +265,27 @@ fn clock_ghz() -> Option<f64> {
         .map(|m| m / 1e3)
 }
 
+/// The configurations `pe bench` times: None times every one.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Only {
+    pub precision: Option<Precision>,
+    pub integration: Option<Integration>,
+    pub threads: Option<usize>,
+}
+
 /// `pe bench`: the table of ns per element-step, reduced/full x f64/f32 x one thread/all
-/// threads, with the fraction of the machine's peak, and the flop counts.
-pub fn run_cli(elements: usize, seconds: f64, runs: usize) -> Result<()> {
+/// threads (or the ones `only` names), with the fraction of the machine's peak, and the flop
+/// counts.
+pub fn run_cli(elements: usize, seconds: f64, runs: usize, only: Only) -> Result<()> {
     let all = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if only.threads == Some(0) {
+        return Err(anyhow!("--threads 0: at least one thread is needed"));
+    }
+    let thread_counts = match only.threads {
+        Some(n) => vec![n],
+        None if all > 1 => vec![1, all],
+        None => vec![1],
+    };
     let ghz = clock_ghz();
     let isa = crate::solver::batched::Isa::detect();
     println!(
@@ -291,11 +308,17 @@ pub fn run_cli(elements: usize, seconds: f64, runs: usize) -> Result<()> {
         flops.push((integ, kernels, node));
     }
     for (integ, kernels, node) in &flops {
+        if only.integration.is_some_and(|i| i != *integ) {
+            continue;
+        }
         // The bench scene is all parallelepipeds (reduced) or all full elements: the first
         // kernel counted, plus a node update per node.
         let element = kernels.first().map_or(0, |k| k.1.total()) as f64;
         for prec in [Precision::F64, Precision::F32] {
-            for threads in if all > 1 { vec![1, all] } else { vec![1] } {
+            if only.precision.is_some_and(|p| p != prec) {
+                continue;
+            }
+            for &threads in &thread_counts {
                 let t = time_steps(elements, *integ, prec, threads, seconds, runs)?;
                 let per_step =
                     element + t.nodes as f64 / t.elements.max(1) as f64 * node.total() as f64;

@@ -146,6 +146,15 @@ enum Command {
         /// Timed runs per configuration (the median is reported).
         #[arg(long, default_value_t = 3)]
         runs: usize,
+        /// Only this precision (default: both).
+        #[arg(long, value_enum)]
+        precision: Option<PrecisionArg>,
+        /// Only this integration (default: both).
+        #[arg(long, value_enum)]
+        integration: Option<IntegrationArg>,
+        /// Only this many threads (default: one and all cores).
+        #[arg(long)]
+        threads: Option<usize>,
     },
     /// Run a scene over a grid of solver configurations; write cost and error against the
     /// most accurate configuration to DIR/tradeoff.csv, .md and .png.
@@ -298,7 +307,19 @@ fn main() -> Result<()> {
             elements,
             seconds,
             runs,
-        } => host_tools::analysis::bench::run_cli(elements, seconds, runs)?,
+            precision,
+            integration,
+            threads,
+        } => host_tools::analysis::bench::run_cli(
+            elements,
+            seconds,
+            runs,
+            host_tools::analysis::bench::Only {
+                precision: precision.map(Into::into),
+                integration: integration.map(Into::into),
+                threads,
+            },
+        )?,
         Command::Tradeoff {
             scene,
             output,
