@@ -6,14 +6,14 @@ use pe_firmware::physics::contact::{
     build_candidates, check_travel, evaluate_pairs, evaluate_tools, Candidate, ContactModel,
     ContactStats,
 };
-use pe_firmware::physics::explicit::{update_node, NodeMove};
 use pe_firmware::physics::{CentralDifference, MaterialLaw, PhysicsError, Real};
 
 use crate::problem::elements::Elements;
-use crate::problem::{NodeKind, Problem};
+use crate::problem::Problem;
 
 pub mod batched;
 mod monitor;
+mod nodes;
 mod run;
 
 pub use monitor::{DtMonitor, Energies};
@@ -32,8 +32,10 @@ pub struct Model<'p, T: Real> {
     pub laws: Vec<MaterialLaw<T>>,
     pub dt_s: f64,
     pub cd: CentralDifference<T>,
-    /// `C / m_inertial` per node.
+    /// `C / m_inertial` per node, once per component (`3 n` values).
     pub gain: Vec<T>,
+    /// `0.5 · m · mass_scaling` per node (kinetic energy `Σ ke_mass v²`), kg.
+    ke_mass: Vec<f64>,
     /// Gravity force per node (true mass), N.
     pub gravity_force: Vec<[T; 3]>,
     pub u: Vec<[T; 3]>,
@@ -65,21 +67,6 @@ pub struct Model<'p, T: Real> {
 /// kinetic-energy and reaction sums (summed per block, then block by block), so the
 /// figures are the same whatever the thread count.
 const NODE_BLOCK: usize = 2048;
-
-/// One block of the node update: its index, and its nodes' `u`, `u_prev` and `f_int`.
-type NodeBlock<'a, T> = (
-    usize,
-    ((&'a mut [[T; 3]], &'a mut [[T; 3]]), &'a mut [[T; 3]]),
-);
-
-/// What one block of the node update found.
-#[derive(Default)]
-struct BlockSums {
-    kinetic_energy: f64,
-    reaction_prescribed: [f64; 3],
-    reaction_fixed: [f64; 3],
-    error: Option<PhysicsError>,
-}
 
 /// The serial solver's contact state: the tables, the search and the forces of the last step.
 pub struct ContactState {
@@ -223,11 +210,9 @@ impl<'p, T: Real> Model<'p, T> {
     pub fn new(problem: &'p Problem, dt_s: f64) -> Self {
         let n = problem.mesh.nodes.len();
         let cd = CentralDifference::<T>::new(dt_s, problem.solver.damping);
-        let gain = problem
-            .mass
-            .iter()
-            .map(|m| cd.gain(m * problem.solver.mass_scaling))
-            .collect();
+        let gain = Self::gains(problem, &cd);
+        let ms = problem.solver.mass_scaling;
+        let ke_mass = problem.mass.iter().map(|m| 0.5 * m * ms).collect();
         let gravity_force = problem
             .mass
             .iter()
@@ -243,6 +228,7 @@ impl<'p, T: Real> Model<'p, T> {
             dt_s,
             cd,
             gain,
+            ke_mass,
             gravity_force,
             u: vec![[T::ZERO; 3]; n],
             u_prev: vec![[T::ZERO; 3]; n],
@@ -331,9 +317,14 @@ impl<'p, T: Real> Model<'p, T> {
         self.step_base = self.step;
         self.dt_s = dt_new;
         self.cd = CentralDifference::<T>::new(dt_new, self.problem.solver.damping);
-        let ms = self.problem.solver.mass_scaling;
-        let cd = self.cd;
-        self.gain = self.problem.mass.iter().map(|m| cd.gain(m * ms)).collect();
+        self.gain = Self::gains(self.problem, &self.cd);
+    }
+
+    /// `C / m_inertial` per node, repeated for its three components.
+    fn gains(problem: &Problem, cd: &CentralDifference<T>) -> Vec<T> {
+        let ms = problem.solver.mass_scaling;
+        let gain = |m: &f64| [cd.gain(m * ms); 3];
+        problem.mass.iter().flat_map(gain).collect()
     }
 
     /// External forces at time `t`: gravity plus ramped loads plus contact (in that order,
@@ -367,59 +358,37 @@ impl<'p, T: Real> Model<'p, T> {
             .map_err(|error| StepError { step, error })?;
         self.external_forces(t)
             .map_err(|error| StepError { step, error })?;
-        let inv_2dt = 1.0 / (2.0 * self.dt_s);
-        let problem = self.problem;
-        let (limit, ms) = (problem.solver.speed_limit, problem.solver.mass_scaling);
-        let cd = self.cd;
-        let (gain, f_ext) = (&self.gain, &self.f_ext);
-        // One block of nodes from `first`: update and sums.
-        let block = |(k, ((u, u_prev), f_int)): NodeBlock<'_, T>| {
-            let first = k * NODE_BLOCK;
-            let mut sums = BlockSums::default();
-            for (j, (u, u_prev)) in u.iter_mut().zip(u_prev.iter_mut()).enumerate() {
-                let n = first + j;
-                let (f_ext, f_int) = (f_ext[n], f_int[j]);
-                let reaction = |r: &mut [f64; 3]| {
-                    for i in 0..3 {
-                        r[i] += (f_int[i] - f_ext[i]).to_f64();
-                    }
-                };
-                let mv = match problem.node_kind[n] {
-                    NodeKind::Free => NodeMove::Free {
-                        gain: gain[n],
-                        residual: core::array::from_fn(|i| f_ext[i] - f_int[i]),
-                    },
-                    NodeKind::Fixed => {
-                        reaction(&mut sums.reaction_fixed);
-                        NodeMove::Held([T::ZERO; 3])
-                    }
-                    NodeKind::Prescribed(p) => {
-                        reaction(&mut sums.reaction_prescribed);
-                        NodeMove::Held(problem.paths[p as usize].at(t_next).map(T::from_f64))
-                    }
-                };
-                match update_node(&cd, u, u_prev, mv, inv_2dt, limit, n as u32) {
-                    Ok(v2) => sums.kinetic_energy += 0.5 * problem.mass[n] * ms * v2,
-                    Err(e) => {
-                        sums.error = Some(e);
-                        break;
-                    }
-                }
-            }
-            sums
+        let nodes = nodes::NodeStep {
+            problem: self.problem,
+            cd: self.cd,
+            gain: &self.gain,
+            ke_mass: &self.ke_mass,
+            f_ext: &self.f_ext,
+            inv_2dt_per_s: 1.0 / (2.0 * self.dt_s),
+            speed_limit_m_per_s: self.problem.solver.speed_limit,
+            t_next_s: t_next,
         };
+        let f_int = &self.f_int;
         let parts = self
             .u
             .chunks_mut(NODE_BLOCK)
             .zip(self.u_prev.chunks_mut(NODE_BLOCK))
-            .zip(self.f_int.chunks_mut(NODE_BLOCK));
-        let sums: Vec<BlockSums> = match &self.pool {
+            .enumerate()
+            .map(|(k, (u, u_prev))| {
+                let first = k * NODE_BLOCK;
+                let f_int = &f_int[first..first + u.len()];
+                (first, u, u_prev, f_int)
+            });
+        let block = |(first, u, u_prev, f_int): (usize, &mut [[T; 3]], &mut _, &[[T; 3]])| {
+            nodes.block(first, u, u_prev, f_int)
+        };
+        let sums: Vec<nodes::BlockSums> = match &self.pool {
             Some(pool) => {
                 use rayon::prelude::*;
-                let parts: Vec<_> = parts.enumerate().collect();
+                let parts: Vec<_> = parts.collect();
                 pool.install(|| parts.into_par_iter().map(block).collect())
             }
-            None => parts.enumerate().map(block).collect(),
+            None => parts.map(block).collect(),
         };
         let (mut ke, mut rp, mut rf) = (0.0, [0.0; 3], [0.0; 3]);
         for s in &sums {

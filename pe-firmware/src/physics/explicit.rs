@@ -116,8 +116,50 @@ impl<T: Real> CentralDifference<T> {
     /// `u⁺ = A u − B u⁻ + gain (f_ext − f_int)` for one node; returns `u⁺`.
     #[inline(always)]
     pub fn advance(&self, u: &[T; 3], u_prev: &[T; 3], gain: T, residual: &[T; 3]) -> [T; 3] {
-        core::array::from_fn(|i| self.a * u[i] - self.b * u_prev[i] + gain * residual[i])
+        core::array::from_fn(|i| self.advance_component(u[i], u_prev[i], gain, residual[i]))
     }
+
+    /// One component of [`CentralDifference::advance`]: `A u − B u⁻ + gain r`, evaluated
+    /// left to right (the host's node update runs it over whole arrays of components).
+    #[inline(always)]
+    pub fn advance_component(&self, u: T, u_prev: T, gain: T, residual: T) -> T {
+        self.a * u - self.b * u_prev + gain * residual
+    }
+}
+
+/// One component of the squared half-step speed, m²/s²: `v_i²` with
+/// `v_i = (u⁺_i − u⁻_i) / 2Δt` in `f64` (`inv_2dt_per_s = 1/2Δt`). The squared speed is
+/// `(v_0² + v_1²) + v_2²`, in that order.
+#[inline(always)]
+pub fn speed_component_squared<T: Real>(next: T, prev: T, inv_2dt_per_s: f64) -> f64 {
+    let v = (next - prev).to_f64() * inv_2dt_per_s;
+    v * v
+}
+
+/// The guards of the node update on one node, given its squared half-step speed `v2`
+/// (sum of [`speed_component_squared`]) and `u⁺`: a free node's `u⁺` must be finite and
+/// the speed must not exceed `speed_limit_m_per_s`. One comparison decides the common
+/// case: a squared speed below the squared limit is finite, so `u⁺` is (`u⁻` is, from the
+/// step before); anything else goes through the checks one by one, in their order.
+#[inline(always)]
+pub fn check_node<T: Real>(
+    next: &[T; 3],
+    free: bool,
+    v2: f64,
+    speed_limit_m_per_s: f64,
+    node: u32,
+) -> Result<(), PhysicsError> {
+    if v2 < speed_limit_m_per_s * speed_limit_m_per_s {
+        return Ok(());
+    }
+    // Components, not the array: they stay in registers on the common path.
+    let [x, y, z] = *next;
+    check_node_slow(
+        [x, y, z].iter().all(|v| v.is_finite()) || !free,
+        v2,
+        speed_limit_m_per_s,
+        node,
+    )
 }
 
 /// Gathers the elements' nodal displacements, computes their internal forces and adds them
@@ -189,12 +231,10 @@ pub enum NodeMove<T> {
 /// The node update of the serial solver and of every board (one function, so they compute
 /// the same bits): `u⁺ = A u − B u⁻ + gain (f_ext − f_int)` for a free node, the held value
 /// otherwise; then `u⁻ := u`, `u := u⁺`. Refuses a non-finite `u⁺` and a half-step speed
-/// `|u⁺ − u⁻| / 2Δt` above `speed_limit_m_per_s`, naming `node`. Returns the squared speed
-/// (m²/s², for the kinetic energy).
-///
-/// One comparison decides the common case: a squared speed below the squared limit is
-/// finite, so `u⁺` is (`u⁻` is, from the step before); anything else goes through the
-/// checks one by one, in their order ([`check_node`]).
+/// `|u⁺ − u⁻| / 2Δt` above `speed_limit_m_per_s`, naming `node` ([`check_node`]). Returns
+/// the squared speed (m²/s², for the kinetic energy). The host runs the same three
+/// functions ([`CentralDifference::advance_component`], [`speed_component_squared`],
+/// [`check_node`]) over whole arrays of nodes.
 #[inline(always)]
 pub fn update_node<T: Real>(
     cd: &CentralDifference<T>,
@@ -210,29 +250,20 @@ pub fn update_node<T: Real>(
         NodeMove::Free { gain, residual } => (cd.advance(&cur, &prev, gain, &residual), true),
         NodeMove::Held(next) => (next, false),
     };
-    let v: [f64; 3] = core::array::from_fn(|i| (next[i] - prev[i]).to_f64() * inv_2dt_per_s);
-    let v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-    if !(v2 < speed_limit_m_per_s * speed_limit_m_per_s) {
-        // Components, not the array: they stay in registers on the common path.
-        let [x, y, z] = next;
-        check_node(
-            [x, y, z].iter().all(|v| v.is_finite()) || !free,
-            v2,
-            speed_limit_m_per_s,
-            node,
-        )?;
-    }
+    let s = |i: usize| speed_component_squared(next[i], prev[i], inv_2dt_per_s);
+    let v2 = s(0) + s(1) + s(2);
+    check_node(&next, free, v2, speed_limit_m_per_s, node)?;
     *u_prev = cur;
     *u = next;
     Ok(v2)
 }
 
-/// The checks of [`update_node`] one by one: a free node's `u⁺` must be finite
+/// The checks of [`check_node`] one by one: a free node's `u⁺` must be finite
 /// (`finite`: it is, or the node is held, whose `u⁺` is the path's), and the squared speed
 /// `v2` must not exceed the squared limit.
 #[cold]
 #[inline(never)]
-fn check_node(
+fn check_node_slow(
     finite: bool,
     v2: f64,
     speed_limit_m_per_s: f64,
