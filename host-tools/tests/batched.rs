@@ -259,3 +259,32 @@ fn an_inverted_element_is_named_as_the_scalar_loop_names_it() {
     inverted_for::<f64>();
     inverted_for::<f32>();
 }
+
+/// A node index outside the displacements (the last node dropped: the last cell of the box
+/// row, in the last pack, points past the end): the batched loop reports what the scalar
+/// loop reports, with the same forces added before it, and reads nothing out of bounds.
+fn bad_index_for<T: Real>() {
+    for full in [false, true] {
+        let mut c = case::<T>(13, 11, full, 5);
+        c.u.pop();
+        for isa in isas() {
+            let ((rs, fs), (rb, fb)) = both(&c, isa);
+            let what = format!("{} full {full} {isa:?}", T::NAME);
+            let e = rs.expect_err("the scalar loop finds the bad index");
+            assert_eq!(e, PhysicsError::BadIndex { element: 23 }, "{what}");
+            assert_eq!(rb, Err(e), "{what}: the same error");
+            assert_eq!(fs.len(), fb.len(), "{what}: lengths");
+            let added = fs.iter().flatten().filter(|v| v.to_f64() != 0.0).count();
+            assert!(added > 0, "{what}: the elements before it added forces");
+            for (x, y) in fs.iter().flatten().zip(fb.iter().flatten()) {
+                assert_eq!(x.to_f64().to_bits(), y.to_f64().to_bits(), "{what}");
+            }
+        }
+    }
+}
+
+#[test]
+fn a_node_outside_the_mesh_is_named_as_the_scalar_loop_names_it() {
+    bad_index_for::<f64>();
+    bad_index_for::<f32>();
+}

@@ -987,26 +987,7 @@ fn gather_lanes<S: Real, L: LaneReal<S, N>, const N: usize>(
     nodes: &[[u32; 8]; N],
     u: &[[S; 3]],
 ) -> Result<[[L; 3]; 8], KernelFault> {
-    let mut ue = [[[S::ZERO; 3]; 8]; N];
-    for (l, row) in ue.iter_mut().enumerate() {
-        for (a, v) in row.iter_mut().enumerate() {
-            *v = *u.get(nodes[l][a] as usize).ok_or(KernelFault::BadIndex)?;
-        }
-    }
-    Ok(array(
-        #[inline(always)]
-        |a| {
-            array(
-                #[inline(always)]
-                |i| {
-                    L::from_lanes(array(
-                        #[inline(always)]
-                        |l| ue[l][a][i],
-                    ))
-                },
-            )
-        },
-    ))
+    L::gather_corners(u, nodes).ok_or(KernelFault::BadIndex)
 }
 
 /// Per corner and component, the lanes as an array.

@@ -21,7 +21,7 @@ use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 
 use super::hex::{GaussPoint, HexBox, HexFull, HexReduced};
 use super::material::{LameParameters, MaterialLaw};
-use super::real::Real;
+use super::real::{array, Real};
 
 /// `N` values of scalar type `S`, lane `l` belonging to element `l` of a batch.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -164,9 +164,35 @@ impl<S: Real, const N: usize> Real for Lanes<S, N> {
 
 /// A [`Real`] that holds `N` lanes of scalar type `S` and computes, in every lane, what
 /// `S` computes: [`Lanes`] (plain arrays, any target), or a host type over SIMD registers.
-pub trait LaneReal<S, const N: usize>: Real {
+pub trait LaneReal<S: Real, const N: usize>: Real {
     fn from_lanes(v: [S; N]) -> Self;
     fn to_lanes(self) -> [S; N];
+    /// The displacements `u[nodes[l][a]]` of the 8 corners `a` of each lane's element as
+    /// lane values (a gather and a transpose); `None` when an index is outside `u`. Lane
+    /// types with a faster shuffle override it.
+    #[inline(always)]
+    fn gather_corners(u: &[[S; 3]], nodes: &[[u32; 8]; N]) -> Option<[[Self; 3]; 8]> {
+        let mut ue = [[[S::ZERO; 3]; 8]; N];
+        for (l, row) in ue.iter_mut().enumerate() {
+            for (a, v) in row.iter_mut().enumerate() {
+                *v = *u.get(nodes[l][a] as usize)?;
+            }
+        }
+        Some(array(
+            #[inline(always)]
+            |a| {
+                array(
+                    #[inline(always)]
+                    |i| {
+                        Self::from_lanes(array(
+                            #[inline(always)]
+                            |l| ue[l][a][i],
+                        ))
+                    },
+                )
+            },
+        ))
+    }
 }
 
 impl<S: Real, const N: usize> LaneReal<S, N> for Lanes<S, N> {

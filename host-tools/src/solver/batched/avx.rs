@@ -198,17 +198,6 @@ macro_rules! avx_lanes {
                 Self::of(core::array::from_fn(|l| Real::min(a[l], b[l])))
             }
         }
-
-        impl LaneReal<$s, $n> for $name {
-            #[inline(always)]
-            fn from_lanes(v: [$s; $n]) -> Self {
-                Self::of(v)
-            }
-            #[inline(always)]
-            fn to_lanes(self) -> [$s; $n] {
-                self.lanes()
-            }
-        }
     };
 }
 
@@ -248,6 +237,98 @@ avx_lanes!(
     _mm256_cmp_ps,
     _mm256_movemask_ps
 );
+
+/// The gather of the corners' displacements, for both lane types: every index checked
+/// once, then each lane's 3-vector loaded whole into a register (`f64`: two loads; `f32`:
+/// one masked load, lanes `l` and `l + 4` sharing a register in its two halves) and the
+/// lanes transposed by shuffles, which only move bits. Measured against the default
+/// (element by element into an array, then the lanes from it) on `pe bench`'s box: f32
+/// 34 -> 28 ns per element-step, f64 about 2% faster.
+impl LaneReal<f64, 4> for F64x4 {
+    #[inline(always)]
+    fn from_lanes(v: [f64; 4]) -> Self {
+        Self::of(v)
+    }
+    #[inline(always)]
+    fn to_lanes(self) -> [f64; 4] {
+        self.lanes()
+    }
+    #[inline(always)]
+    fn gather_corners(u: &[[f64; 3]], nodes: &[[u32; 8]; 4]) -> Option<[[Self; 3]; 8]> {
+        if nodes.iter().flatten().any(|&n| n as usize >= u.len()) {
+            return None;
+        }
+        let mut out = [[Self::ZERO; 3]; 8];
+        // SAFETY: AVX is present (module doc); every index was checked above, and the
+        // loads read within one `[f64; 3]`.
+        unsafe {
+            for (a, o) in out.iter_mut().enumerate() {
+                let mut r = [_mm256_setzero_pd(); 4];
+                for (r, at) in r.iter_mut().zip(nodes) {
+                    let p = u.get_unchecked(at[a] as usize).as_ptr();
+                    let xy = _mm_loadu_pd(p);
+                    let z = _mm_load_sd(p.add(2));
+                    *r = _mm256_insertf128_pd::<1>(_mm256_castpd128_pd256(xy), z);
+                    // x y z 0
+                }
+                let t0 = _mm256_unpacklo_pd(r[0], r[1]); // x0 x1 z0 z1
+                let t1 = _mm256_unpackhi_pd(r[0], r[1]); // y0 y1 0 0
+                let t2 = _mm256_unpacklo_pd(r[2], r[3]); // x2 x3 z2 z3
+                let t3 = _mm256_unpackhi_pd(r[2], r[3]); // y2 y3 0 0
+                *o = [
+                    F64x4(_mm256_permute2f128_pd::<0x20>(t0, t2)),
+                    F64x4(_mm256_permute2f128_pd::<0x20>(t1, t3)),
+                    F64x4(_mm256_permute2f128_pd::<0x31>(t0, t2)),
+                ];
+            }
+        }
+        Some(out)
+    }
+}
+
+impl LaneReal<f32, 8> for F32x8 {
+    #[inline(always)]
+    fn from_lanes(v: [f32; 8]) -> Self {
+        Self::of(v)
+    }
+    #[inline(always)]
+    fn to_lanes(self) -> [f32; 8] {
+        self.lanes()
+    }
+    #[inline(always)]
+    fn gather_corners(u: &[[f32; 3]], nodes: &[[u32; 8]; 8]) -> Option<[[Self; 3]; 8]> {
+        if nodes.iter().flatten().any(|&n| n as usize >= u.len()) {
+            return None;
+        }
+        let mut out = [[Self::ZERO; 3]; 8];
+        // SAFETY: AVX is present (module doc); every index was checked above, and each
+        // masked load reads the three values of one `[f32; 3]` and nothing beyond it.
+        unsafe {
+            let mask = _mm_setr_epi32(-1, -1, -1, 0);
+            for (a, o) in out.iter_mut().enumerate() {
+                let mut r = [_mm_setzero_ps(); 8];
+                for (r, at) in r.iter_mut().zip(nodes) {
+                    let p = u.get_unchecked(at[a] as usize).as_ptr();
+                    *r = _mm_maskload_ps(p, mask); // x y z 0
+                }
+                let mut h = [_mm256_setzero_ps(); 4];
+                for (l, h) in h.iter_mut().enumerate() {
+                    *h = _mm256_set_m128(r[l + 4], r[l]);
+                }
+                let t0 = _mm256_unpacklo_ps(h[0], h[1]); // x0 x1 y0 y1 | x4 x5 y4 y5
+                let t1 = _mm256_unpackhi_ps(h[0], h[1]); // z0 z1 0 0 | z4 z5 0 0
+                let t2 = _mm256_unpacklo_ps(h[2], h[3]); // x2 x3 y2 y3 | x6 x7 y6 y7
+                let t3 = _mm256_unpackhi_ps(h[2], h[3]); // z2 z3 0 0 | z6 z7 0 0
+                *o = [
+                    F32x8(_mm256_shuffle_ps::<0x44>(t0, t2)),
+                    F32x8(_mm256_shuffle_ps::<0xEE>(t0, t2)),
+                    F32x8(_mm256_shuffle_ps::<0x44>(t1, t3)),
+                ];
+            }
+        }
+        Some(out)
+    }
+}
 
 /// `libm::log`'s constants (libm 0.2, `log.rs`), the same literals (kept verbatim, digits
 /// beyond the type's precision included, so they are visibly libm's).
