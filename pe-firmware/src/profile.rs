@@ -225,9 +225,9 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             per_element_step: 882,
             box_kernel_per_element: 460,
             box_per_element_step: 569,
-            per_node_update: 105,
+            per_node_update: 103,
             per_contact_node: 1225,
-            step_per_element: 1499,
+            step_per_element: 1495,
         },
         FirmwareCost {
             precision: F32,
@@ -236,9 +236,9 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             per_element_step: 3333,
             box_kernel_per_element: 0,
             box_per_element_step: 0,
-            per_node_update: 105,
+            per_node_update: 103,
             per_contact_node: 1257,
-            step_per_element: 3960,
+            step_per_element: 3955,
         },
     ]
 };
