@@ -37,11 +37,18 @@ pub struct Model<'p, T: Real> {
     /// `0.5 · m · mass_scaling` per node (kinetic energy `Σ ke_mass v²`), kg.
     ke_mass: Vec<f64>,
     /// Gravity force per node (true mass), N.
-    pub gravity_force: Vec<[T; 3]>,
+    gravity_force: Vec<[T; 3]>,
     pub u: Vec<[T; 3]>,
     pub u_prev: Vec<[T; 3]>,
+    /// Internal forces: summed by the element phase, consumed (and zeroed, ready for the
+    /// next step) by the node update.
     pub f_int: Vec<[T; 3]>,
+    /// Whether `f_int` is all zeros (the node update zeroed it; false after a failed step).
+    f_int_zero: bool,
+    /// External forces: gravity, plus loads and contact at the nodes in `f_ext_dirty`.
     pub f_ext: Vec<[T; 3]>,
+    /// Nodes whose `f_ext` differs from gravity (loads, contact), restored each step.
+    f_ext_dirty: Vec<usize>,
     /// Steps taken so far.
     pub step: u64,
     /// Time (s) and step at which the current `dt_s` took effect: the state is at
@@ -213,7 +220,7 @@ impl<'p, T: Real> Model<'p, T> {
         let gain = Self::gains(problem, &cd);
         let ms = problem.solver.mass_scaling;
         let ke_mass = problem.mass.iter().map(|m| 0.5 * m * ms).collect();
-        let gravity_force = problem
+        let gravity_force: Vec<[T; 3]> = problem
             .mass
             .iter()
             .map(|m| problem.gravity.map(|g| T::from_f64(g * m)))
@@ -229,11 +236,13 @@ impl<'p, T: Real> Model<'p, T> {
             cd,
             gain,
             ke_mass,
-            gravity_force,
             u: vec![[T::ZERO; 3]; n],
             u_prev: vec![[T::ZERO; 3]; n],
             f_int: vec![[T::ZERO; 3]; n],
-            f_ext: vec![[T::ZERO; 3]; n],
+            f_int_zero: true,
+            f_ext: gravity_force.clone(),
+            gravity_force,
+            f_ext_dirty: Vec::new(),
             step: 0,
             time_base_s: 0.0,
             step_base: 0,
@@ -279,9 +288,11 @@ impl<'p, T: Real> Model<'p, T> {
     }
 
     /// Internal forces at `u` into `f_int`, on the pool when there is one.
-    fn element_phase(&mut self) -> Result<(), PhysicsError> {
-        self.f_int.iter_mut().for_each(|f| *f = [T::ZERO; 3]);
-        if let (Some(pool), Some(b), Some(plan)) = (&self.pool, &self.batched, &self.plan) {
+    fn element_phase(&mut self, pool: Option<&rayon::ThreadPool>) -> Result<(), PhysicsError> {
+        if !std::mem::replace(&mut self.f_int_zero, false) {
+            self.f_int.iter_mut().for_each(|f| *f = [T::ZERO; 3]);
+        }
+        if let (Some(pool), Some(b), Some(plan)) = (pool, &self.batched, &self.plan) {
             let el = b.element_loop();
             if el.parallel_forces(plan, &mut self.kept, pool, &self.u, &mut self.f_int) {
                 return Ok(());
@@ -330,19 +341,26 @@ impl<'p, T: Real> Model<'p, T> {
     /// External forces at time `t`: gravity plus ramped loads plus contact (in that order,
     /// as the board runtime adds them).
     fn external_forces(&mut self, t: f64) -> Result<(), PhysicsError> {
-        self.f_ext.copy_from_slice(&self.gravity_force);
+        // Gravity everywhere: only the nodes given more last step need restoring.
+        let (f_ext, dirty) = (&mut self.f_ext, &mut self.f_ext_dirty);
+        for n in dirty.drain(..) {
+            f_ext[n] = self.gravity_force[n];
+        }
         for l in &self.problem.loads {
             let s = l.ramp.as_ref().map(|r| r.at(t)[0]).unwrap_or(1.0);
+            let n = l.node as usize;
+            dirty.push(n);
             for i in 0..3 {
-                self.f_ext[l.node as usize][i] += T::from_f64(l.force[i] * s);
+                f_ext[n][i] += T::from_f64(l.force[i] * s);
             }
         }
         if let Some(c) = self.contact.as_mut() {
             c.evaluate(self.problem, &self.u, self.step, t)?;
             for (node, f) in c.run.nodes.iter().zip(&c.force) {
-                let e = &mut self.f_ext[node.global as usize];
+                let n = node.global as usize;
+                dirty.push(n);
                 for i in 0..3 {
-                    e[i] += T::from_f64(f[i]);
+                    f_ext[n][i] += T::from_f64(f[i]);
                 }
             }
         }
@@ -350,11 +368,25 @@ impl<'p, T: Real> Model<'p, T> {
     }
 
     /// One central-difference step from `t_n` to `t_{n+1}`.
+    ///
+    /// With threads, the whole step runs inside the pool (one hand-off per step: the
+    /// phases' parallel loops then start on threads already awake).
     pub fn advance(&mut self) -> Result<(), StepError> {
+        match self.pool.take() {
+            Some(pool) => {
+                let r = pool.install(|| self.advance_inner(Some(&pool)));
+                self.pool = Some(pool);
+                r
+            }
+            None => self.advance_inner(None),
+        }
+    }
+
+    fn advance_inner(&mut self, pool: Option<&rayon::ThreadPool>) -> Result<(), StepError> {
         let t = self.time_s();
         let t_next = t + self.dt_s;
         let step = self.step;
-        self.element_phase()
+        self.element_phase(pool)
             .map_err(|error| StepError { step, error })?;
         self.external_forces(t)
             .map_err(|error| StepError { step, error })?;
@@ -368,21 +400,17 @@ impl<'p, T: Real> Model<'p, T> {
             speed_limit_m_per_s: self.problem.solver.speed_limit,
             t_next_s: t_next,
         };
-        let f_int = &self.f_int;
         let parts = self
             .u
             .chunks_mut(NODE_BLOCK)
             .zip(self.u_prev.chunks_mut(NODE_BLOCK))
+            .zip(self.f_int.chunks_mut(NODE_BLOCK))
             .enumerate()
-            .map(|(k, (u, u_prev))| {
-                let first = k * NODE_BLOCK;
-                let f_int = &f_int[first..first + u.len()];
-                (first, u, u_prev, f_int)
-            });
-        let block = |(first, u, u_prev, f_int): (usize, &mut [[T; 3]], &mut _, &[[T; 3]])| {
+            .map(|(k, ((u, u_prev), f_int))| (k * NODE_BLOCK, u, u_prev, f_int));
+        let block = |(first, u, u_prev, f_int): (usize, &mut [[T; 3]], &mut _, &mut _)| {
             nodes.block(first, u, u_prev, f_int)
         };
-        let sums: Vec<nodes::BlockSums> = match &self.pool {
+        let sums: Vec<nodes::BlockSums> = match pool {
             Some(pool) => {
                 use rayon::prelude::*;
                 let parts: Vec<_> = parts.collect();
@@ -401,6 +429,7 @@ impl<'p, T: Real> Model<'p, T> {
                 rf[i] += s.reaction_fixed[i];
             }
         }
+        self.f_int_zero = true;
         self.kinetic_energy = ke;
         self.reaction_prescribed = rp;
         self.reaction_fixed = rf;

@@ -6,7 +6,8 @@
 //! free, [`CentralDifference::advance_component`] and [`speed_component_squared`], into
 //! scratch arrays (vectorised: the components are independent); (2) node by node, in
 //! order, a held node's `u⁺` and speed replaced by its path's, the reactions, the guards
-//! ([`check_node`]) and the kinetic energy summed in node order; (3) `u⁻ := u`, `u := u⁺`.
+//! ([`check_node`]) and the kinetic energy summed in node order; (3) `u⁻ := u`, `u := u⁺`,
+//! and `f_int` zeroed for the next step's element phase.
 //! A node that fails its guards stops the block with its error before (3): the nodes of
 //! earlier runs are updated, the rest are not.
 //!
@@ -46,13 +47,14 @@ pub(super) struct BlockSums {
 }
 
 impl<T: Real> NodeStep<'_, T> {
-    /// Updates the nodes `first..first + u.len()` (`u`, `u_prev`, `f_int` are theirs).
+    /// Updates the nodes `first..first + u.len()` (`u`, `u_prev`, `f_int` are theirs) and
+    /// zeroes their `f_int`.
     pub fn block(
         &self,
         first: usize,
         u: &mut [[T; 3]],
         u_prev: &mut [[T; 3]],
-        f_int: &[[T; 3]],
+        f_int: &mut [[T; 3]],
     ) -> BlockSums {
         let mut sums = BlockSums::default();
         let mut next = [[T::ZERO; 3]; RUN];
@@ -60,7 +62,7 @@ impl<T: Real> NodeStep<'_, T> {
         let runs = u
             .chunks_mut(RUN)
             .zip(u_prev.chunks_mut(RUN))
-            .zip(f_int.chunks(RUN));
+            .zip(f_int.chunks_mut(RUN));
         for (r, ((u, u_prev), f_int)) in runs.enumerate() {
             let first = first + r * RUN;
             let len = u.len();
@@ -112,6 +114,7 @@ impl<T: Real> NodeStep<'_, T> {
             // (3) The new state.
             u_prev.copy_from_slice(u);
             u.copy_from_slice(next);
+            f_int.fill([T::ZERO; 3]);
         }
         sums
     }
