@@ -204,8 +204,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             box_kernel_per_element: 615,
             box_per_element_step: 700,
             per_node_update: 103,
-            per_contact_node: 1199,
-            step_per_element: 1726,
+            per_contact_node: 1212,
+            step_per_element: 1731,
         },
         FirmwareCost {
             precision: F64,
@@ -215,8 +215,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             box_kernel_per_element: 0,
             box_per_element_step: 0,
             per_node_update: 103,
-            per_contact_node: 1071,
-            step_per_element: 5125,
+            per_contact_node: 1077,
+            step_per_element: 5126,
         },
         FirmwareCost {
             precision: F32,
@@ -226,8 +226,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             box_kernel_per_element: 460,
             box_per_element_step: 569,
             per_node_update: 103,
-            per_contact_node: 1225,
-            step_per_element: 1495,
+            per_contact_node: 1206,
+            step_per_element: 1488,
         },
         FirmwareCost {
             precision: F32,
@@ -237,8 +237,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             box_kernel_per_element: 0,
             box_per_element_step: 0,
             per_node_update: 103,
-            per_contact_node: 1257,
-            step_per_element: 3955,
+            per_contact_node: 1231,
+            step_per_element: 3948,
         },
     ]
 };

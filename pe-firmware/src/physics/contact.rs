@@ -438,6 +438,24 @@ pub fn evaluate_pairs(
         let (_, _, depth_max) = m.roles(direction as usize).ok_or(bad(direction as usize))?;
         let node = m.nodes.get(s).ok_or(bad(s))?;
         let Some(x) = pos(s) else { continue };
+        // A group none of whose nodes gets a force here (another board's contact): skipped
+        // before the penetration tests, with the same result (nothing added, no statistic)
+        // and its indices still checked.
+        if !apply(s) {
+            let mut here = false;
+            for c in group {
+                let face = m.faces.get(c.face as usize).ok_or(bad(c.face as usize))?;
+                for &n in &face.nodes {
+                    if n as usize >= m.nodes.len() {
+                        return Err(bad(n as usize));
+                    }
+                    here |= apply(n as usize);
+                }
+            }
+            if !here {
+                continue;
+            }
+        }
         let mut best: Option<(usize, FacePenetration)> = None;
         for c in group {
             let mut q = [[0.0; 3]; 4];
