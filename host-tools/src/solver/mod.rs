@@ -1,5 +1,6 @@
-//! The serial reference solver: one thread, the whole mesh, the shared physics kernels.
-//! Every parallel run (board-sim, the board array) is compared with it.
+//! The serial reference solver: the whole mesh, the shared physics kernels, on one thread
+//! or several with the same bits. Every parallel run (board-sim, the board array) is
+//! compared with it.
 
 use anyhow::{anyhow, Result};
 use pe_firmware::physics::contact::{
