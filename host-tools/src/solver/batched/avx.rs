@@ -198,6 +198,25 @@ macro_rules! avx_lanes {
                 Self::of(core::array::from_fn(|l| Real::min(a[l], b[l])))
             }
         }
+        /// The gather checks every index once, then transposes (each type's `corners_in`).
+        impl LaneReal<$s, $n> for $name {
+            #[inline(always)]
+            fn from_lanes(v: [$s; $n]) -> Self {
+                Self::of(v)
+            }
+            #[inline(always)]
+            fn to_lanes(self) -> [$s; $n] {
+                self.lanes()
+            }
+            #[inline(always)]
+            fn gather_corners(u: &[[$s; 3]], nodes: &[[u32; 8]; $n]) -> Option<[[Self; 3]; 8]> {
+                if nodes.iter().flatten().any(|&n| n as usize >= u.len()) {
+                    return None;
+                }
+                // SAFETY: every index is inside `u` (checked above).
+                Some(unsafe { Self::corners_in(u, nodes) })
+            }
+        }
     };
 }
 
@@ -238,29 +257,20 @@ avx_lanes!(
     _mm256_movemask_ps
 );
 
-/// The gather of the corners' displacements, for both lane types: every index checked
-/// once, then each lane's 3-vector loaded whole into a register (`f64`: two loads; `f32`:
-/// one masked load, lanes `l` and `l + 4` sharing a register in its two halves) and the
-/// lanes transposed by shuffles, which only move bits. Measured against the default
-/// (element by element into an array, then the lanes from it) on `pe bench`'s box: f32
-/// 34 -> 28 ns per element-step, f64 about 2% faster.
-impl LaneReal<f64, 4> for F64x4 {
+/// The gather of the corners' displacements, for both lane types: each lane's 3-vector
+/// loaded whole into a register (`f64`: two loads; `f32`: one masked load, lanes `l` and
+/// `l + 4` sharing a register in its two halves) and the lanes transposed by shuffles,
+/// which only move bits. Measured against the default (element by element into an array,
+/// then the lanes from it) on `pe bench`'s box: f32 34 -> 28 ns per element-step, f64
+/// about 2% faster.
+impl F64x4 {
+    /// # Safety
+    /// Every index in `nodes` is inside `u`.
     #[inline(always)]
-    fn from_lanes(v: [f64; 4]) -> Self {
-        Self::of(v)
-    }
-    #[inline(always)]
-    fn to_lanes(self) -> [f64; 4] {
-        self.lanes()
-    }
-    #[inline(always)]
-    fn gather_corners(u: &[[f64; 3]], nodes: &[[u32; 8]; 4]) -> Option<[[Self; 3]; 8]> {
-        if nodes.iter().flatten().any(|&n| n as usize >= u.len()) {
-            return None;
-        }
+    unsafe fn corners_in(u: &[[f64; 3]], nodes: &[[u32; 8]; 4]) -> [[Self; 3]; 8] {
         let mut out = [[Self::ZERO; 3]; 8];
-        // SAFETY: AVX is present (module doc); every index was checked above, and the
-        // loads read within one `[f64; 3]`.
+        // SAFETY: AVX is present (module doc); the indices are inside `u` (the caller),
+        // and the loads read within one `[f64; 3]`.
         unsafe {
             for (a, o) in out.iter_mut().enumerate() {
                 let mut r = [_mm256_setzero_pd(); 4];
@@ -282,27 +292,18 @@ impl LaneReal<f64, 4> for F64x4 {
                 ];
             }
         }
-        Some(out)
+        out
     }
 }
 
-impl LaneReal<f32, 8> for F32x8 {
+impl F32x8 {
+    /// # Safety
+    /// Every index in `nodes` is inside `u`.
     #[inline(always)]
-    fn from_lanes(v: [f32; 8]) -> Self {
-        Self::of(v)
-    }
-    #[inline(always)]
-    fn to_lanes(self) -> [f32; 8] {
-        self.lanes()
-    }
-    #[inline(always)]
-    fn gather_corners(u: &[[f32; 3]], nodes: &[[u32; 8]; 8]) -> Option<[[Self; 3]; 8]> {
-        if nodes.iter().flatten().any(|&n| n as usize >= u.len()) {
-            return None;
-        }
+    unsafe fn corners_in(u: &[[f32; 3]], nodes: &[[u32; 8]; 8]) -> [[Self; 3]; 8] {
         let mut out = [[Self::ZERO; 3]; 8];
-        // SAFETY: AVX is present (module doc); every index was checked above, and each
-        // masked load reads the three values of one `[f32; 3]` and nothing beyond it.
+        // SAFETY: AVX is present (module doc); the indices are inside `u` (the caller),
+        // and each masked load reads the three values of one `[f32; 3]` and nothing beyond.
         unsafe {
             let mask = _mm_setr_epi32(-1, -1, -1, 0);
             for (a, o) in out.iter_mut().enumerate() {
@@ -326,7 +327,7 @@ impl LaneReal<f32, 8> for F32x8 {
                 ];
             }
         }
-        Some(out)
+        out
     }
 }
 

@@ -132,21 +132,25 @@ pub trait ElementLoop<T: Real>: Send + Sync {
     ) -> Result<(), PhysicsError>;
     /// What runs: the lane type ("f64x4 avx", ...).
     fn describe(&self) -> String;
-    /// How `parts` threads share the elements ([`Plan`]); None when this loop has no
-    /// packs to share.
-    fn plan(&self, parts: usize, node_count: usize) -> Option<Plan>;
+    /// How `parts` threads share the elements ([`Plan`]); None (the default) when this
+    /// loop has no packs to share.
+    fn plan(&self, _parts: usize, _node_count: usize) -> Option<Plan> {
+        None
+    }
     /// The internal forces at `u` added into `f` (zero on entry) by the plan's blocks on
     /// `pool`, with the bits of [`Self::internal_forces`]; false when a pack fails or
     /// the plan does not fit (the caller zeroes `f` and runs [`Self::internal_forces`]
-    /// for the error).
+    /// for the error). The default, for a loop without a plan, is false.
     fn parallel_forces(
         &self,
-        plan: &Plan,
-        kept: &mut [Vec<[T; 3]>],
-        pool: &rayon::ThreadPool,
-        u: &[[T; 3]],
-        f: &mut [[T; 3]],
-    ) -> bool;
+        _plan: &Plan,
+        _kept: &mut [Vec<[T; 3]>],
+        _pool: &rayon::ThreadPool,
+        _u: &[[T; 3]],
+        _f: &mut [[T; 3]],
+    ) -> bool {
+        false
+    }
 }
 
 /// Elements shared among threads with the scalar loop's bits. The elements (kernel order)
@@ -305,19 +309,6 @@ impl<T: Real> ElementLoop<T> for ScalarLoop {
     }
     fn describe(&self) -> String {
         format!("{} scalar", T::NAME)
-    }
-    fn plan(&self, _: usize, _: usize) -> Option<Plan> {
-        None
-    }
-    fn parallel_forces(
-        &self,
-        _: &Plan,
-        _: &mut [Vec<[T; 3]>],
-        _: &rayon::ThreadPool,
-        _: &[[T; 3]],
-        _: &mut [[T; 3]],
-    ) -> bool {
-        false
     }
 }
 
