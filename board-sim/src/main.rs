@@ -144,6 +144,7 @@ fn bench(level: &str, boards: &str, steps: u64) -> Result<()> {
     let mut scene = builtin_scene(level)?;
     scene.solver.steps = Some(steps);
     let problem = Problem::from_scene(&scene, std::path::Path::new("."))?;
+    problem.print_notes();
     let t = std::time::Instant::now();
     let serial = host_tools::solver::run(&problem, "serial", &mut ())?;
     let serial_s = t.elapsed().as_secs_f64();
@@ -193,6 +194,7 @@ fn builtin(
 ) -> Result<()> {
     let scene = builtin_scene(level)?;
     let problem = Problem::from_scene(&scene, std::path::Path::new("."))?;
+    problem.print_notes();
     let images = out.join("images");
     let machine = host_tools::compile::partition::Machine::parse(boards)?;
     let name = format!("builtin:{level}");

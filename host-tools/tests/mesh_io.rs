@@ -562,7 +562,8 @@ fn error_garbage_number() {
     assert!(e.contains("\"zero\"") && e.contains("node 6"), "{e}");
 }
 
-/// A file with only lower-dimensional elements has no hexahedra: say so and list what it has.
+/// A tetrahedral mesh is refused naming the type and the count; a file with only
+/// lower-dimensional elements has no volume cells: say so and list what it has.
 #[test]
 fn error_no_hexahedra() {
     let text = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n\
@@ -570,19 +571,31 @@ fn error_no_hexahedra() {
                 $EndElements\n";
     let (_tmp, path) = write_temp("tet", "tet.msh", text);
     let e = load_mesh(&path).unwrap_err();
-    assert!(matches!(e, MeshError::NoHexahedra { .. }));
+    assert!(matches!(e, MeshError::UnsupportedCells { .. }), "{e}");
     let e = e.to_string();
-    assert!(e.contains("tet.msh") && e.contains("type 4"), "{e}");
+    assert!(
+        e.contains("tet.msh") && e.contains("1 tetrahedra (Gmsh type 4)"),
+        "{e}"
+    );
+    let tri = text.replace("3 1 4 1\n1 1 2 3 4", "2 1 2 1\n1 1 2 3");
+    let (_tmp, path) = write_temp("tri", "tri.msh", &tri);
+    let e = load_mesh(&path).unwrap_err();
+    assert!(matches!(e, MeshError::NoHexahedra { .. }), "{e}");
+    let e = e.to_string();
+    assert!(
+        e.contains("tri.msh") && e.contains("only boundary cells (1 triangles (Gmsh type 2))"),
+        "{e}"
+    );
 }
 
-/// MSH 2.2 is refused with a message saying which version is supported.
+/// MSH versions other than 4.1 and 2.2 are refused with a message saying which are read.
 #[test]
 fn error_old_msh_version() {
-    let text = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n";
-    let (_tmp, path) = write_temp("v22", "old.msh", text);
+    let text = "$MeshFormat\n3.0 0 8\n$EndMeshFormat\n";
+    let (_tmp, path) = write_temp("v30", "old.msh", text);
     let e = err_text(&path);
     assert!(
-        e.contains("old.msh:2:") && e.contains("2.2") && e.contains("4.1"),
+        e.contains("old.msh:2:") && e.contains("3.0") && e.contains("4.1") && e.contains("2.2"),
         "{e}"
     );
 }
@@ -616,15 +629,15 @@ fn vtk_minimal_cube_with_region() {
     assert_eq!(m.node_tags, (1..=8).collect::<Vec<u64>>());
 }
 
-/// A VTK cell that is not a hexahedron names the cell index and its type.
+/// A VTK volume cell the solver has no element for is refused naming its type and count.
 #[test]
-fn error_vtk_non_hex_cell() {
-    let (_tmp, path) = write_temp("vtkwedge", "wedge.vtk", &cube_vtk(11, ""));
+fn error_vtk_unsupported_cell() {
+    let (_tmp, path) = write_temp("vtkvoxel", "voxel.vtk", &cube_vtk(11, ""));
     let e = load_mesh(&path).unwrap_err();
-    assert!(matches!(e, MeshError::NonHexCell { cell: 0, .. }), "{e}");
+    assert!(matches!(e, MeshError::UnsupportedCells { .. }), "{e}");
     let e = e.to_string();
     assert!(
-        e.contains("wedge.vtk") && e.contains("cell 0") && e.contains("11"),
+        e.contains("voxel.vtk") && e.contains("1 VTK_VOXEL (11)"),
         "{e}"
     );
 }

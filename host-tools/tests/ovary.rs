@@ -179,6 +179,7 @@ fn ovary_is_separate_closed_body() {
             cell_regions: m.cell_regions[c.site.cells.clone()].to_vec(),
             region_names: m.region_names.clone(),
             source: "ovary".into(),
+            ..Default::default()
         };
         let mut edges: HashMap<[u32; 2], usize> = HashMap::new();
         for f in sub.boundary_faces() {

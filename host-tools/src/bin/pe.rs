@@ -349,6 +349,7 @@ fn solve(scene: &SceneArgs, overrides: &Overrides, outputs: SolveOutputs) -> Res
     let (mut sc, dir, name) = scene.load()?;
     overrides.apply(&mut sc);
     let problem = Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
+    problem.print_notes();
     let (dt, dt_crit) = (
         problem.time_step.dt_s,
         problem.time_step.critical.dt_critical_s,
@@ -418,6 +419,7 @@ fn compile(
         format!("--profile {profile:?}: known profiles are pe-board, qemu-mps2-an500")
     })?;
     let problem = Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
+    problem.print_notes();
     let source = match (&scene.scene, scene.builtin) {
         (Some(p), false) => std::fs::canonicalize(p)
             .unwrap_or(p.clone())

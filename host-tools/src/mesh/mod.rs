@@ -25,7 +25,7 @@ pub enum MeshError {
         source: std::io::Error,
     },
     /// The file name's extension is not one the importer knows.
-    #[error("{}: unsupported mesh file extension {ext:?} (expected .msh or .vtk)", .path.display())]
+    #[error("{}: unsupported mesh file extension {ext:?} (expected .msh, .vtk or .vtu)", .path.display())]
     UnsupportedExtension { path: PathBuf, ext: String },
     /// The file does not follow its format.
     #[error("{}{}: {msg}", .path.display(), line_suffix(*.line))]
@@ -42,16 +42,13 @@ pub enum MeshError {
         element: u64,
         node: u64,
     },
-    /// The file holds no 8-node hexahedra at all.
-    #[error("{}: no hexahedra (8-node hex cells) found: {detail}", .path.display())]
+    /// The file holds no volume cell at all (no hexahedron, no prism).
+    #[error("{}: no volume cells (hexahedra or prisms) found: {detail}", .path.display())]
     NoHexahedra { path: PathBuf, detail: String },
-    /// A VTK cell that is not `VTK_HEXAHEDRON` (12).
-    #[error("{}: cell {cell} has VTK type {cell_type}, only VTK_HEXAHEDRON (12) is supported", .path.display())]
-    NonHexCell {
-        path: PathBuf,
-        cell: usize,
-        cell_type: String,
-    },
+    /// Volume cells the solver has no element for (tetrahedra, pyramids, quadratic cells):
+    /// their types and counts.
+    #[error("{}: the mesh has volume cells the solver cannot run: {detail} (only hexahedra and prisms (wedges) are supported; convert or remesh with hexahedra, e.g. gmsh -3 with Mesh.RecombineAll = 1 and Mesh.SubdivisionAlgorithm = 2)", .path.display())]
+    UnsupportedCells { path: PathBuf, detail: String },
     /// A cell uses the same node twice (a collapsed hexahedron). `item` is
     /// "element <tag> (line <n>)" for Gmsh files and "cell <0-based index>" otherwise;
     /// `node` is the node's tag.
@@ -98,14 +95,9 @@ fn line_suffix(line: Option<usize>) -> String {
 
 /// Outward faces of a hexahedron in Gmsh/VTK order, each counter-clockwise seen from
 /// outside (so the right-hand normal points out of the cell when its Jacobian is positive).
-pub const HEX_FACES: [[usize; 4]; 6] = [
-    [0, 3, 2, 1], // bottom (-zeta)
-    [4, 5, 6, 7], // top (+zeta)
-    [0, 1, 5, 4], // front (-eta)
-    [1, 2, 6, 5], // right (+xi)
-    [2, 3, 7, 6], // back (+eta)
-    [3, 0, 4, 7], // left (-xi)
-];
+/// In order: bottom (-zeta), top (+zeta), front (-eta), right (+xi), back (+eta), left (-xi).
+/// (The firmware's table, defined once.)
+pub const HEX_FACES: [[usize; 4]; 6] = pe_firmware::physics::hex::FACES;
 
 /// A linear hexahedral mesh in metres.
 ///
@@ -125,6 +117,44 @@ pub struct Mesh {
     pub region_names: BTreeMap<i32, String>,
     /// Where the mesh came from (a path or a generator description), for error messages.
     pub source: String,
+    /// Named node sets the file provides (Gmsh physical points, curves and surfaces; VTK
+    /// point-data tags and tagged boundary cells): sorted, de-duplicated node indices.
+    pub node_sets: BTreeMap<String, Vec<u32>>,
+    /// What the reader did that the user should know: prisms read as degenerate hexahedra,
+    /// boundary cells turned into node sets or left unused, a unit conversion. Printed when
+    /// the scene is loaded.
+    pub notes: Vec<String>,
+}
+
+/// A prism (wedge) `p` with triangles `p0 p1 p2` (counter-clockwise seen from the other
+/// triangle) and `p3 p4 p5` above them, as the degenerate hexahedron explicit codes use:
+/// `[p0, p1, p2, p2, p3, p4, p5, p5]` (corner 3 collapsed onto 2, corner 7 onto 6).
+pub fn prism_as_hexahedron(p: [u32; 6]) -> [u32; 8] {
+    [p[0], p[1], p[2], p[2], p[3], p[4], p[5], p[5]]
+}
+
+/// Whether `c` is a prism stored by [`prism_as_hexahedron`]: corners 3 = 2 and 7 = 6, the
+/// six others distinct.
+pub fn is_prism(c: &[u32; 8]) -> bool {
+    let six = [c[0], c[1], c[2], c[4], c[5], c[6]];
+    c[3] == c[2] && c[7] == c[6] && (1..6).all(|a| !six[..a].contains(&six[a]))
+}
+
+/// The key under which two cells' faces are the same face: the face's distinct nodes,
+/// sorted, padded with `u32::MAX` (so a prism's triangle matches its neighbour's whichever
+/// node repeats), and how many distinct nodes it has (fewer than 3: no area, not a face).
+pub fn face_key(f: [u32; 4]) -> ([u32; 4], usize) {
+    let mut k = f;
+    k.sort_unstable();
+    let mut out = [u32::MAX; 4];
+    let mut n = 0;
+    for v in k {
+        if n == 0 || out[n - 1] != v {
+            out[n] = v;
+            n += 1;
+        }
+    }
+    (out, n)
 }
 
 impl Mesh {
@@ -146,8 +176,9 @@ impl Mesh {
         (lo, hi)
     }
 
-    /// Topological sanity: node indices in range, no node repeated within a cell, one region
-    /// per cell, one tag per node and finite coordinates. Geometry (inverted cells) is not
+    /// Topological sanity: node indices in range, no node repeated within a cell (except a
+    /// prism's collapsed corners, see [`prism_as_hexahedron`]), one region per cell, one tag
+    /// per node, finite coordinates and node sets within the nodes. Geometry (inverted cells) is not
     /// checked here; see [`Mesh::min_scaled_jacobian`].
     pub fn validate(&self) -> Result<(), MeshError> {
         let path = PathBuf::from(&self.source);
@@ -187,7 +218,7 @@ impl Mesh {
                         nodes: n,
                     });
                 }
-                if cell[..a].contains(&idx) {
+                if cell[..a].contains(&idx) && !is_prism(cell) {
                     return Err(MeshError::RepeatedNode {
                         path,
                         item: format!("cell {ci}"),
@@ -196,34 +227,53 @@ impl Mesh {
                 }
             }
         }
+        for (name, set) in &self.node_sets {
+            if let Some(&idx) = set.iter().find(|&&i| i as usize >= n) {
+                return Err(MeshError::InvalidInput {
+                    path,
+                    msg: format!(
+                        "node set {name:?} refers to node index {idx}, but the mesh has {n} nodes"
+                    ),
+                });
+            }
+        }
         Ok(())
     }
 
-    /// Quadrilateral faces that belong to exactly one cell, oriented outward (counter-clockwise
-    /// seen from outside, for cells with positive Jacobian). Order: by cell, then by
-    /// [`HEX_FACES`] order. Assumes [`Mesh::validate`] passed.
-    pub fn boundary_faces(&self) -> Vec<[u32; 4]> {
-        let key = |f: [u32; 4]| {
-            let mut k = f;
-            k.sort_unstable();
-            k
-        };
+    /// Faces that belong to exactly one cell, with that cell's index, in cell order then
+    /// [`HEX_FACES`] order, as the cell lists them (outward for a cell with positive
+    /// Jacobian). A prism's triangles come as quadrilaterals with one node repeated; its
+    /// collapsed face (two distinct nodes, no area) is never a face. Assumes
+    /// [`Mesh::validate`] passed.
+    pub fn boundary_faces_with_cells(&self) -> Vec<([u32; 4], u32)> {
         let faces = |c: &[u32; 8]| HEX_FACES.map(|f| f.map(|a| c[a]));
         let mut count: HashMap<[u32; 4], u32> = HashMap::with_capacity(self.cells.len() * 4);
         for c in &self.cells {
             for f in faces(c) {
-                *count.entry(key(f)).or_insert(0) += 1;
+                let (k, distinct) = face_key(f);
+                if distinct >= 3 {
+                    *count.entry(k).or_insert(0) += 1;
+                }
             }
         }
         let mut out = Vec::new();
-        for c in &self.cells {
+        for (ci, c) in self.cells.iter().enumerate() {
             for f in faces(c) {
-                if count.get(&key(f)) == Some(&1) {
-                    out.push(f);
+                let (k, distinct) = face_key(f);
+                if distinct >= 3 && count.get(&k) == Some(&1) {
+                    out.push((f, ci as u32));
                 }
             }
         }
         out
+    }
+
+    /// [`Mesh::boundary_faces_with_cells`] without the cells.
+    pub fn boundary_faces(&self) -> Vec<[u32; 4]> {
+        self.boundary_faces_with_cells()
+            .into_iter()
+            .map(|(f, _)| f)
+            .collect()
     }
 
     /// Indices of nodes that no cell uses (ascending). An explicit solver gives such nodes
@@ -271,6 +321,12 @@ impl Mesh {
         });
         for c in &mut self.cells {
             for i in c.iter_mut() {
+                *i = new_index[*i as usize];
+            }
+        }
+        for set in self.node_sets.values_mut() {
+            set.retain(|&i| keep(i as usize));
+            for i in set.iter_mut() {
                 *i = new_index[*i as usize];
             }
         }

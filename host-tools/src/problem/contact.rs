@@ -9,51 +9,35 @@ use anyhow::{anyhow, bail, Result};
 use pe_firmware::physics::contact::{
     Capsule, ContactFace, ContactNode, ContactPair, Tool, SURFACES_MAX,
 };
-use pe_firmware::physics::hex::FACES;
 
 use crate::mesh::Mesh;
 use crate::scene::ContactSpec;
 
-/// Boundary faces of the mesh with the cell each belongs to, oriented outward (counter-
-/// clockwise seen from outside), in cell order.
+/// Boundary faces of the mesh with the cell each belongs to ([`Mesh::boundary_faces_with_cells`]),
+/// oriented outward (counter-clockwise seen from outside) by the cell's centre, in cell order.
 pub fn boundary_faces_with_cells(mesh: &Mesh) -> Vec<([u32; 4], u32)> {
-    let mut count: BTreeMap<[u32; 4], u32> = BTreeMap::new();
-    for c in &mesh.cells {
-        for f in FACES {
-            let mut k = f.map(|i| c[i]);
-            k.sort_unstable();
-            *count.entry(k).or_insert(0) += 1;
-        }
-    }
     let mut out = Vec::new();
-    for (ci, c) in mesh.cells.iter().enumerate() {
+    for (q, ci) in mesh.boundary_faces_with_cells() {
+        let c = &mesh.cells[ci as usize];
         let centre: [f64; 3] = core::array::from_fn(|i| {
             c.iter().map(|&n| mesh.nodes[n as usize][i]).sum::<f64>() / 8.0
         });
-        for f in FACES {
-            let q = f.map(|i| c[i]);
-            let mut k = q;
-            k.sort_unstable();
-            if count.get(&k) != Some(&1) {
-                continue;
-            }
-            let p = q.map(|n| mesh.nodes[n as usize]);
-            let d1: [f64; 3] = core::array::from_fn(|i| p[2][i] - p[0][i]);
-            let d2: [f64; 3] = core::array::from_fn(|i| p[3][i] - p[1][i]);
-            let n = [
-                d1[1] * d2[2] - d1[2] * d2[1],
-                d1[2] * d2[0] - d1[0] * d2[2],
-                d1[0] * d2[1] - d1[1] * d2[0],
-            ];
-            let fc: [f64; 3] = core::array::from_fn(|i| p.iter().map(|x| x[i]).sum::<f64>() / 4.0);
-            let out_dot: f64 = (0..3).map(|i| n[i] * (fc[i] - centre[i])).sum();
-            let q = if out_dot >= 0.0 {
-                q
-            } else {
-                [q[0], q[3], q[2], q[1]]
-            };
-            out.push((q, ci as u32));
-        }
+        let p = q.map(|n| mesh.nodes[n as usize]);
+        let d1: [f64; 3] = core::array::from_fn(|i| p[2][i] - p[0][i]);
+        let d2: [f64; 3] = core::array::from_fn(|i| p[3][i] - p[1][i]);
+        let n = [
+            d1[1] * d2[2] - d1[2] * d2[1],
+            d1[2] * d2[0] - d1[0] * d2[2],
+            d1[0] * d2[1] - d1[1] * d2[0],
+        ];
+        let fc: [f64; 3] = core::array::from_fn(|i| p.iter().map(|x| x[i]).sum::<f64>() / 4.0);
+        let out_dot: f64 = (0..3).map(|i| n[i] * (fc[i] - centre[i])).sum();
+        let q = if out_dot >= 0.0 {
+            q
+        } else {
+            [q[0], q[3], q[2], q[1]]
+        };
+        out.push((q, ci));
     }
     out
 }

@@ -34,6 +34,14 @@ impl<const N: usize> Path1<N> {
     }
 }
 
+/// Dilatational wave speeds of soft tissue in SI units, with a wide margin (gels to
+/// nearly incompressible stiff tissue): outside it a material is probably in other units.
+pub const PLAUSIBLE_WAVE_SPEED_M_PER_S: (f64, f64) = (0.1, 3000.0);
+
+/// The critical step of a plausible soft-tissue mesh is about 1e-4 s; above this a scene
+/// is probably mis-scaled.
+pub const PLAUSIBLE_DT_MAX_S: f64 = 1e-2;
+
 /// How a node moves.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum NodeKind {
@@ -77,6 +85,10 @@ pub struct Problem {
     /// The time step every run and compilation of this problem uses, computed once when
     /// the problem is built.
     pub time_step: TimeStep,
+    /// What the user should know about how the scene was read: the mesh's notes (prisms,
+    /// boundary cells, unit conversion) and warnings of a scene that looks mis-scaled.
+    /// The commands print them before they start ([`Problem::print_notes`]).
+    pub notes: Vec<String>,
 }
 
 /// A problem's time step and the stability limit it was chosen against.
@@ -491,8 +503,11 @@ impl Problem {
             surface_faces,
             surface_face_cells,
             time_step: TimeStep::default(),
+            notes: Vec::new(),
         };
         problem.time_step = problem.choose_time_step()?;
+        problem.notes = problem.mesh.notes.clone();
+        problem.notes.extend(problem.scale_warnings());
         Ok(problem)
     }
 
@@ -603,6 +618,41 @@ impl Problem {
             }
         };
         Ok(TimeStep { dt_s: dt, critical })
+    }
+
+    /// Warnings when the wave speed or the stable step is far outside what soft tissue in
+    /// SI units gives (a mesh in millimetres read as metres makes the step 1000 times too
+    /// long; a density in g/cm³ makes the waves 30 times too fast).
+    fn scale_warnings(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        let (lo, hi) = PLAUSIBLE_WAVE_SPEED_M_PER_S;
+        for (m, (law, rho)) in self.laws.iter().zip(&self.densities).enumerate() {
+            let c = (law.dilatational_modulus() / rho).sqrt();
+            if !(lo..=hi).contains(&c) {
+                out.push(format!(
+                    "warning: material {m} has a wave speed of {c:.3e} m/s (soft tissue: {lo}-{hi}): check that its moduli are in Pa and its density in kg/m³"
+                ));
+            }
+        }
+        let dt = self.time_step.critical.dt_critical_s;
+        if dt > PLAUSIBLE_DT_MAX_S {
+            out.push(format!(
+                "warning: the critical step is {dt:.3e} s, far above a soft-tissue mesh's (about 1e-4 s): is the mesh in metres? (see [mesh] unit)"
+            ));
+        }
+        out
+    }
+
+    /// Prints [`Problem::notes`] on standard error, one per line, prefixed "note: " unless
+    /// they are warnings.
+    pub fn print_notes(&self) {
+        for n in &self.notes {
+            if n.starts_with("warning:") {
+                eprintln!("{n}");
+            } else {
+                eprintln!("note: {n}");
+            }
+        }
     }
 
     /// Number of steps the scene runs.

@@ -29,6 +29,7 @@ pub fn box_cantilever(
             builtin: None,
             level: None,
             blocks: vec![],
+            unit: None,
         },
         materials: vec![neo_hookean(youngs_modulus_pa, poisson_ratio)],
         fixed: if clamped {

@@ -49,6 +49,7 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
             builtin: Some("uterus_ovary".into()),
             level: Some(level.into()),
             blocks: vec![],
+            unit: None,
         },
         // Uterine wall ~ 10 kPa; the oviducts are softer (3 kPa).
         materials: vec![

@@ -11,7 +11,67 @@ use crate::mesh::Mesh;
 use crate::scene::builtin::PROBE_TIP_RADIUS_M;
 use crate::scene::*;
 
+/// The scene's mesh in metres and its named node sets (the file's physical groups or point
+/// tags, or the built-in anatomy's sets). `[mesh] unit` converts the coordinates; a mesh
+/// whose size looks mis-scaled for soft tissue gets a warning in its notes.
 pub fn load(spec: &MeshSpec, scene_dir: &Path) -> Result<(Mesh, BTreeMap<String, Vec<u32>>)> {
+    let metres_per_unit = match spec.unit.as_deref() {
+        None | Some("m") => 1.0,
+        Some("cm") => 1e-2,
+        Some("mm") => 1e-3,
+        Some(other) => {
+            bail!("[mesh] unit = {other:?}: the units known are \"m\", \"cm\" and \"mm\"")
+        }
+    };
+    if spec.builtin.is_some() && metres_per_unit != 1.0 {
+        bail!("[mesh] unit: the built-in anatomy is in metres already; remove `unit`");
+    }
+    let (mut mesh, sets) = load_in_file_units(spec, scene_dir)?;
+    if metres_per_unit != 1.0 {
+        for p in &mut mesh.nodes {
+            *p = p.map(|x| x * metres_per_unit);
+        }
+        mesh.notes.push(format!(
+            "coordinates converted from {} to metres (x {metres_per_unit})",
+            spec.unit.as_deref().unwrap_or("m")
+        ));
+    }
+    if let Some(w) = size_warning(&mesh) {
+        mesh.notes.push(w);
+    }
+    Ok((mesh, sets))
+}
+
+/// Soft-tissue scenes are between a few millimetres and a metre or two across; outside
+/// [`PLAUSIBLE_SIZE_M`], a warning that names the likely unit mistake.
+fn size_warning(mesh: &Mesh) -> Option<String> {
+    if mesh.nodes.is_empty() {
+        return None;
+    }
+    let (lo, hi) = mesh.bounding_box();
+    let size = (0..3).map(|i| hi[i] - lo[i]).fold(0.0, f64::max);
+    let (min, max) = PLAUSIBLE_SIZE_M;
+    if size > max {
+        Some(format!(
+            "warning: the mesh is {size:.4} m across, large for soft tissue: if its coordinates are millimetres, set [mesh] unit = \"mm\""
+        ))
+    } else if size < min {
+        Some(format!(
+            "warning: the mesh is {size:.3e} m across, small for soft tissue: check [mesh] unit (coordinates must end up in metres)"
+        ))
+    } else {
+        None
+    }
+}
+
+/// Sizes (m) of a plausible soft-tissue scene, smallest and largest extent: outside them
+/// the mesh is probably in another unit.
+pub const PLAUSIBLE_SIZE_M: (f64, f64) = (2e-3, 2.0);
+
+fn load_in_file_units(
+    spec: &MeshSpec,
+    scene_dir: &Path,
+) -> Result<(Mesh, BTreeMap<String, Vec<u32>>)> {
     let given = [
         spec.file.is_some(),
         spec.generate.is_some(),
@@ -53,7 +113,9 @@ pub fn load(spec: &MeshSpec, scene_dir: &Path) -> Result<(Mesh, BTreeMap<String,
     }
     if let Some(f) = &spec.file {
         let path = scene_dir.join(f);
-        return Ok((crate::mesh::io::load_mesh(&path)?, BTreeMap::new()));
+        let mut mesh = crate::mesh::io::load_mesh(&path)?;
+        let sets = std::mem::take(&mut mesh.node_sets);
+        return Ok((mesh, sets));
     }
     if let Some(g) = &spec.generate {
         if g.kind != "box" {

@@ -113,8 +113,14 @@ pub struct ContactPairSpec {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MeshSpec {
-    /// Gmsh MSH 4.1 or legacy VTK hexahedra, relative to the scene file.
+    /// A mesh file relative to the scene file: Gmsh MSH 4.1 or 2.2, legacy VTK (up to 5.1)
+    /// or VTK XML `.vtu`; hexahedra and prisms, its physical groups or point tags as node sets.
     pub file: Option<PathBuf>,
+    /// Length unit of the mesh's coordinates (the file's, or `generate`/`blocks` sizes):
+    /// "m" (default), "cm" or "mm"; they are converted to metres on reading. Everything
+    /// else in the scene is SI (metres, seconds, newtons, pascals).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
     pub generate: Option<GenerateSpec>,
     /// Built-in anatomy: "uterus" (uterus and both tubes) or "uterus_ovary" (plus the
     /// right ovary under the right tube, region `right_ovary`, its lower part the node set

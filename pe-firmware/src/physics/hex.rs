@@ -164,6 +164,15 @@ pub const PARALLELEPIPED_TOLERANCE: f64 = 1e-13;
 /// Scaled Jacobian threshold under which a cell is refused as degenerate.
 pub const MIN_SCALED_JACOBIAN: f64 = 1e-6;
 
+/// The corner of a prism at `c` of its triangle `a b c` (counter-clockwise seen from the
+/// other triangle), as a Jacobian whose columns are the edges `a − c`, `b − c` and the
+/// prism's vertical edge `up` (from the bottom triangle to the top one): a positive
+/// determinant for a well-shaped prism in either triangle.
+fn prism_corner(a: [f64; 3], b: [f64; 3], c: [f64; 3], up: [f64; 3]) -> [[f64; 3]; 3] {
+    let (e1, e2) = (tensor::sub(&a, &c), tensor::sub(&b, &c));
+    core::array::from_fn(|i| [e1[i], e2[i], up[i]])
+}
+
 impl ReferenceHex {
     pub fn new(x: &[[f64; 3]; 8]) -> Result<Self, GeometryError> {
         if x.iter().flatten().any(|v| !v.is_finite()) {
@@ -173,9 +182,18 @@ impl ReferenceHex {
         // Jacobian (a folded cell) is refused. A slightly negative corner value with
         // positive Gauss-point values is a valid, if distorted, cell (the MacNeal-Harder
         // patch has one), so the hard test is at the Gauss points below.
+        //
+        // A prism stored as a degenerate hexahedron (corner 3 on corner 2, 7 on 6, the form
+        // explicit codes use for wedges) has no hexahedral corners 2, 3, 6, 7: there the
+        // prism's own corner is checked, the triangle's two edges and the vertical edge.
+        let prism = x[3] == x[2] && x[7] == x[6];
         let mut min_scaled_jacobian = f64::INFINITY;
-        for corner in NODE_XI {
-            let jm = jacobian(x, &natural_gradients(corner));
+        for (a, corner) in NODE_XI.iter().enumerate() {
+            let jm = match (prism, a) {
+                (true, 2 | 3) => prism_corner(x[0], x[1], x[2], tensor::sub(&x[6], &x[2])),
+                (true, 6 | 7) => prism_corner(x[4], x[5], x[6], tensor::sub(&x[6], &x[2])),
+                _ => jacobian(x, &natural_gradients(*corner)),
+            };
             let d = tensor::det(&jm);
             let cols: [f64; 3] = core::array::from_fn(|j| {
                 libm::sqrt(jm[0][j] * jm[0][j] + jm[1][j] * jm[1][j] + jm[2][j] * jm[2][j])
@@ -183,7 +201,7 @@ impl ReferenceHex {
             let scale = cols[0] * cols[1] * cols[2];
             if !(scale > 0.0) || d < -0.2 * scale {
                 return Err(GeometryError::NonPositiveJacobian {
-                    at: corner,
+                    at: *corner,
                     det_j: d,
                 });
             }
@@ -194,7 +212,11 @@ impl ReferenceHex {
             let mut m = f64::INFINITY;
             for f in FACES {
                 for k in 0..4 {
-                    m = m.min(tensor::norm(&tensor::sub(&x[f[k]], &x[f[(k + 1) % 4]])));
+                    let e = tensor::norm(&tensor::sub(&x[f[k]], &x[f[(k + 1) % 4]]));
+                    // A prism's collapsed edges (2-3, 6-7) are not edges.
+                    if !(prism && e == 0.0) {
+                        m = m.min(e);
+                    }
                 }
             }
             m * m * m / 8.0

@@ -312,6 +312,7 @@ pub fn generate(level: Level) -> Anatomy {
             (REGION_VAGINA, "vagina".to_string()),
         ]),
         source: format!("builtin uterus with fallopian tubes ({level})"),
+        ..Mesh::default()
     };
     Anatomy {
         mesh,

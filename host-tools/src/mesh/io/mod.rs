@@ -1,14 +1,16 @@
-//! Mesh import (Gmsh MSH 4.1, legacy VTK unstructured grids) and a structured box
-//! generator, all producing the common [`Mesh`].
+//! Mesh import (Gmsh MSH 4.1 and 2.2, legacy VTK up to 5.1, VTK XML `.vtu`) and a
+//! structured box generator, all producing the common [`Mesh`]. What becomes of each kind of
+//! cell (hexahedra, prisms, boundary cells, others) is one rule for every format, in
+//! `cells.rs`.
 //!
-//! The MSH reader is a hand-written parser for the MSH 4.1 sections volume meshes use
+//! The MSH reader is a hand-written parser for the MSH sections volume meshes use
 //! (`$MeshFormat`, `$PhysicalNames`, `$Entities`, `$Nodes`, `$Elements`; other sections are
 //! skipped), ASCII or binary. It is used instead of the `mshio` crate because `mshio` 0.4
 //! drops the per-block node tags when the global tag range is dense (so a permuted tag order
 //! would be silently misread), does not read `$PhysicalNames`, and reports errors without
 //! line numbers. (The tests still compare the two on a real file.)
 //!
-//! Legacy VTK files are read with `vtkio`, after a structural walk of the ASCII text that
+//! VTK files are read with `vtkio` (legacy and XML); ASCII legacy files first get a structural walk of the ASCII text that
 //! locates faults by line (vtkio's own errors carry no position, and it silently drops a
 //! cell data array cut short by truncation).
 //!
@@ -21,27 +23,35 @@ use std::path::Path;
 use crate::mesh::Mesh;
 pub use crate::mesh::MeshError;
 
+mod cells;
 mod msh;
+mod msh2;
 mod vtk;
 
 pub use msh::parse_msh;
-pub use vtk::parse_vtk;
+pub use vtk::{parse_vtk, parse_vtu};
 
 /// Load a hexahedral mesh, choosing the reader by extension (case-insensitive): `.msh`
-/// (Gmsh MSH 4.1, see [`parse_msh`]) or `.vtk` (legacy VTK unstructured grid of
-/// `VTK_HEXAHEDRON` cells, see [`parse_vtk`]). The result has passed [`Mesh::validate`].
+/// (Gmsh MSH 4.1 or 2.2, see [`parse_msh`]), `.vtk` (legacy VTK unstructured grid up to
+/// version 5.1, see [`parse_vtk`]) or `.vtu` (VTK XML unstructured grid, see
+/// [`parse_vtu`]). The result has passed [`Mesh::validate`].
 pub fn load_mesh(path: &Path) -> Result<Mesh, MeshError> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .map(|e| e.to_ascii_lowercase())
         .unwrap_or_default();
-    if ext != "msh" && ext != "vtk" {
-        return Err(MeshError::UnsupportedExtension {
-            path: path.to_path_buf(),
-            ext,
-        });
-    }
+    let parse = match ext.as_str() {
+        "msh" => parse_msh,
+        "vtk" => parse_vtk,
+        "vtu" => parse_vtu,
+        _ => {
+            return Err(MeshError::UnsupportedExtension {
+                path: path.to_path_buf(),
+                ext,
+            })
+        }
+    };
     let bytes = std::fs::read(path).map_err(|source| match source.kind() {
         std::io::ErrorKind::NotFound => MeshError::NotFound {
             path: path.to_path_buf(),
@@ -51,11 +61,7 @@ pub fn load_mesh(path: &Path) -> Result<Mesh, MeshError> {
             source,
         },
     })?;
-    if ext == "msh" {
-        parse_msh(path, &bytes)
-    } else {
-        parse_vtk(path, &bytes)
-    }
+    parse(path, &bytes)
 }
 
 /// A structured box of `cells[0] x cells[1] x cells[2]` hexahedra spanning from the origin to

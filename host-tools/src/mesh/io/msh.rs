@@ -1,76 +1,58 @@
-//! The Gmsh MSH 4.1 reader (ASCII and binary): the sections volume meshes use.
+//! The Gmsh MSH reader, versions 4.1 and 2.2, ASCII and binary: the sections volume
+//! meshes use. Hexahedra and prisms are the cells; points, curves and surfaces tagged
+//! with a physical group give that group's node set (see [`CellCollector`]).
 
+use super::cells::{gmsh_type, CellCollector, CellKind};
 use super::*;
 
-/// Gmsh element type of the 8-node hexahedron.
-const GMSH_HEX8: i32 = 5;
-
-/// Number of nodes of a Gmsh element type (the common ones; enough to skip any element
-/// block a volume mesh has).
-fn gmsh_nodes_per_element(t: u32) -> Option<usize> {
-    Some(match t {
-        1 => 2,
-        2 => 3,
-        3 => 4,
-        4 => 4,
-        5 => 8,
-        6 => 6,
-        7 => 5,
-        8 => 3,
-        9 => 6,
-        10 => 9,
-        11 => 10,
-        12 => 27,
-        13 => 18,
-        14 => 14,
-        15 => 1,
-        16 => 8,
-        17 => 20,
-        18 => 15,
-        19 => 13,
-        20 => 9,
-        21 => 10,
-        22 => 12,
-        23 => 15,
-        24 => 15,
-        25 => 21,
-        26 => 4,
-        27 => 5,
-        28 => 6,
-        29 => 20,
-        30 => 35,
-        31 => 56,
-        92 => 64,
-        93 => 125,
-        _ => return None,
-    })
+/// The MSH versions read.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum MshVersion {
+    V41,
+    V22,
 }
 
 /// What the sections read so far hold, assembled into a [`Mesh`] at the end.
 #[derive(Default)]
-struct MshContents {
+pub(super) struct MshContents {
     seen_format: bool,
-    endian: Option<Endian>,
-    region_names: BTreeMap<i32, String>,
-    /// Volume entity tag -> physical group tag.
-    volume_region: HashMap<i32, i32>,
+    pub version: Option<MshVersion>,
+    pub endian: Option<Endian>,
+    /// (dimension, physical tag) -> name.
+    pub physical_names: BTreeMap<(i32, i32), String>,
+    /// (dimension, entity tag) -> the entity's physical tags.
+    entity_groups: HashMap<(i32, i32), Vec<i32>>,
     seen_entities: bool,
-    nodes: Vec<[f64; 3]>,
-    node_tags: Vec<u64>,
-    node_index: HashMap<u64, u32>,
-    seen_nodes: bool,
-    cells: Vec<[u32; 8]>,
-    cell_regions: Vec<i32>,
+    pub nodes: Vec<[f64; 3]>,
+    pub node_tags: Vec<u64>,
+    pub node_index: HashMap<u64, u32>,
+    pub seen_nodes: bool,
+    pub cells: CellCollector,
     seen_elements: bool,
-    /// Element type -> count, for the "no hexahedra" message.
-    other_types: BTreeMap<i32, usize>,
 }
 
-/// Parse the bytes of a Gmsh MSH 4.1 file, ASCII or binary. `path` is used for error
-/// messages only. Takes the 8-node hexahedra (type 5); lower-dimensional elements are
-/// ignored. A cell's region is the first physical tag of its volume entity (0 if it has
-/// none), region names come from the dimension-3 `$PhysicalNames`. Nodes keep file order,
-/// their tags in `node_tags`. Errors give the line (ASCII) or byte offset (binary).
+impl MshContents {
+    /// The node set name of physical group `tag` of dimension `dim` (0-2): its
+    /// `$PhysicalNames` name, else "point N", "curve N" or "surface N".
+    pub fn group_name(&self, dim: i32, tag: i32) -> String {
+        match self.physical_names.get(&(dim, tag)) {
+            Some(n) => n.clone(),
+            None => {
+                let kind = ["point", "curve", "surface", "volume"];
+                format!("{} {tag}", kind.get(dim as usize).unwrap_or(&"group"))
+            }
+        }
+    }
+}
+
+/// Parse the bytes of a Gmsh MSH file, version 4.1 or 2.2, ASCII or binary. `path` is used
+/// for error messages only. Hexahedra (type 5) and prisms (type 6, as degenerate
+/// hexahedra) are the cells; a cell's region is the (first) physical tag of its volume
+/// entity (4.1) or its first tag (2.2), 0 if it has none; region names come from the
+/// dimension-3 `$PhysicalNames`. Points, lines, triangles and quadrangles in a physical
+/// group give the group's node set, named by `$PhysicalNames` (or "surface N", "curve N",
+/// "point N"). Other volume cells are refused, naming their type and count. Nodes keep file
+/// order, their tags in `node_tags`. Errors give the line (ASCII) or byte offset (binary).
 pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
     let mut r = Reader::new(path, bytes);
     let mut m = MshContents::default();
@@ -94,27 +76,37 @@ pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
                 ),
             ));
         }
+        let v2 = m.version == Some(MshVersion::V22);
         match header {
             "$MeshFormat" => {
                 // A second (ASCII) $MeshFormat keeps the byte order already read.
-                if let Some(e) = read_mesh_format(&mut r)? {
+                let (version, endian) = read_mesh_format(&mut r)?;
+                if m.seen_format && m.version != Some(version) {
+                    return Err(r.err(Some(line), "a second $MeshFormat with another version"));
+                }
+                if let Some(e) = endian {
                     m.endian = Some(e);
                 }
+                m.version = Some(version);
                 m.seen_format = true;
             }
-            "$PhysicalNames" => read_physical_names(&mut r, &mut m.region_names)?,
-            "$Entities" => {
+            "$PhysicalNames" => read_physical_names(&mut r, &mut m.physical_names)?,
+            "$Entities" if !v2 => {
                 m.seen_entities = true;
                 r.bin = m.endian;
-                read_entities(&mut r, &mut m.volume_region)?;
+                read_entities(&mut r, &mut m.entity_groups)?;
             }
             "$Nodes" => {
                 if m.seen_nodes {
                     return Err(r.err(Some(line), "more than one $Nodes section"));
                 }
                 m.seen_nodes = true;
-                r.bin = m.endian;
-                read_nodes(&mut r, path, &mut m)?;
+                if v2 {
+                    super::msh2::read_nodes(&mut r, path, &mut m)?;
+                } else {
+                    r.bin = m.endian;
+                    read_nodes(&mut r, path, &mut m)?;
+                }
             }
             "$Elements" => {
                 if m.seen_elements {
@@ -124,8 +116,12 @@ pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
                     return Err(r.err(Some(line), "$Elements before $Nodes"));
                 }
                 m.seen_elements = true;
-                r.bin = m.endian;
-                read_elements(&mut r, path, &mut m)?;
+                if v2 {
+                    super::msh2::read_elements(&mut r, path, &mut m)?;
+                } else {
+                    r.bin = m.endian;
+                    read_elements(&mut r, path, &mut m)?;
+                }
             }
             _ => skip_section(&mut r, line, header)?,
         }
@@ -133,19 +129,22 @@ pub fn parse_msh(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
     finish(&r, path, m)
 }
 
-/// `$MeshFormat`: only version 4.1; returns the byte order of a binary file (None for
-/// ASCII).
-fn read_mesh_format(r: &mut Reader) -> Result<Option<Endian>, MeshError> {
+/// `$MeshFormat`: version 4.1 or 2.2, and the byte order of a binary file (None for ASCII).
+fn read_mesh_format(r: &mut Reader) -> Result<(MshVersion, Option<Endian>), MeshError> {
     let (version, vline) = r.token("MSH format version")?;
-    if version != "4.1" {
-        return Err(r.err(
-            Some(vline),
-            format!(
-                "MSH format version {version} is not supported, only 4.1 \
-                 (gmsh: -format msh41)"
-            ),
-        ));
-    }
+    let version = match version {
+        "4.1" => MshVersion::V41,
+        "2.2" | "2.1" | "2" | "2.0" => MshVersion::V22,
+        _ => {
+            return Err(r.err(
+                Some(vline),
+                format!(
+                    "MSH format version {version} is not supported, only 4.1 and 2.2 \
+                     (gmsh: -format msh41 or msh22)"
+                ),
+            ))
+        }
+    };
     let (file_type, fline) = r.parse::<u32>("MSH file type (0 ASCII, 1 binary)")?;
     let (data_size, dline) = r.parse::<u32>("MSH data size")?;
     let endian = match file_type {
@@ -182,13 +181,13 @@ fn read_mesh_format(r: &mut Reader) -> Result<Option<Endian>, MeshError> {
         }
     };
     r.expect_end("$EndMeshFormat")?;
-    Ok(endian)
+    Ok((version, endian))
 }
 
-/// `$PhysicalNames` (text even in binary files): the names of the dimension-3 groups.
+/// `$PhysicalNames` (text even in binary files): every group's name by (dimension, tag).
 fn read_physical_names(
     r: &mut Reader,
-    region_names: &mut BTreeMap<i32, String>,
+    names: &mut BTreeMap<(i32, i32), String>,
 ) -> Result<(), MeshError> {
     let n: usize = r.num("number of physical names")?;
     for _ in 0..n {
@@ -199,15 +198,16 @@ fn read_physical_names(
             .strip_prefix('"')
             .and_then(|s| s.strip_suffix('"'))
             .ok_or_else(|| r.err(Some(nline), format!("physical name {name:?} is not quoted")))?;
-        if dim == 3 {
-            region_names.insert(tag, name.to_string());
-        }
+        names.insert((dim, tag), name.to_string());
     }
     r.expect_end("$EndPhysicalNames")
 }
 
-/// `$Entities`: the first physical tag of each volume entity.
-fn read_entities(r: &mut Reader, volume_region: &mut HashMap<i32, i32>) -> Result<(), MeshError> {
+/// `$Entities`: the physical tags of each entity, by (dimension, entity tag).
+fn read_entities(
+    r: &mut Reader,
+    groups: &mut HashMap<(i32, i32), Vec<i32>>,
+) -> Result<(), MeshError> {
     let np = r.count("number of point entities")?;
     let nc = r.count("number of curve entities")?;
     let ns = r.count("number of surface entities")?;
@@ -220,10 +220,9 @@ fn read_entities(r: &mut Reader, volume_region: &mut HashMap<i32, i32>) -> Resul
                 r.float("entity bounding box coordinate")?;
             }
             let nphys = r.count("number of physical tags")?;
-            let mut first = None;
+            let mut tags = Vec::with_capacity(cap(nphys));
             for _ in 0..nphys {
-                let p = r.int("physical tag")?;
-                first.get_or_insert(p);
+                tags.push(r.int("physical tag")?);
             }
             if dim > 0 {
                 let nb = r.count("number of bounding entities")?;
@@ -231,9 +230,7 @@ fn read_entities(r: &mut Reader, volume_region: &mut HashMap<i32, i32>) -> Resul
                     r.int("bounding entity tag")?;
                 }
             }
-            if dim == 3 {
-                volume_region.insert(tag, first.unwrap_or(0));
-            }
+            groups.insert((dim, tag), tags);
         }
     }
     r.expect_end("$EndEntities")
@@ -287,46 +284,59 @@ fn read_nodes(r: &mut Reader, path: &Path, m: &mut MshContents) -> Result<(), Me
     check_total(r, "Nodes", total, m.nodes.len(), total_line)
 }
 
-/// `$Elements`: the hexahedra with their regions; other element types are skipped and
-/// counted.
+/// `$Elements`: hexahedra and prisms with their regions, boundary cells into the node sets
+/// of their entity's physical groups, other volume cells counted (and refused at the end).
 fn read_elements(r: &mut Reader, path: &Path, m: &mut MshContents) -> Result<(), MeshError> {
     let (nblocks, total, total_line) = block_header(r, "element")?;
     let mut read = 0usize;
+    let mut nodes = Vec::new();
     for _ in 0..nblocks {
         let dim = r.int("element block entity dimension")?;
         let entity = r.int("element block entity tag")?;
         let etype = r.int("element type")?;
-        let nn = u32::try_from(etype)
-            .ok()
-            .and_then(gmsh_nodes_per_element)
+        let (kind, nn, name) = gmsh_type(etype)
             .ok_or_else(|| r.err_item(format!("unknown Gmsh element type {etype}")))?;
         let n = r.count("number of elements in block")?;
         read += n;
-        if etype != GMSH_HEX8 {
-            *m.other_types.entry(etype).or_insert(0) += n;
-            for _ in 0..n * (nn + 1) {
-                r.size("element data")?;
+        match kind {
+            CellKind::Unsupported => {
+                m.cells.unsupported(name.to_string(), n);
+                for _ in 0..n * (nn + 1) {
+                    r.size("element data")?;
+                }
             }
-            continue;
-        }
-        // Without $Entities there is no physical group information: region 0.
-        // With it, a block on an unlisted volume is an inconsistent file (meshio 5
-        // writes such files) and guessing would mislabel tissue.
-        let region = match m.volume_region.get(&entity) {
-            _ if dim != 3 || !m.seen_entities => 0,
-            Some(&p) => p,
-            None => {
-                return Err(r.err_item(format!(
-                    "hexahedron block on volume entity {entity}, which $Entities \
-                     does not list (so its physical group is unknown)"
-                )))
+            CellKind::Boundary { .. } => {
+                let groups: Vec<String> = m
+                    .entity_groups
+                    .get(&(dim, entity))
+                    .map(|tags| tags.iter().map(|&t| m.group_name(dim, t)).collect())
+                    .unwrap_or_default();
+                for _ in 0..n {
+                    nodes.clear();
+                    read_cell_nodes(r, path, &m.node_index, nn, false, &mut nodes)?;
+                    m.cells.boundary(name, &nodes, &groups);
+                }
             }
-        };
-        m.cells.reserve(cap(n));
-        for _ in 0..n {
-            let cell = read_hexahedron(r, path, &m.node_index)?;
-            m.cells.push(cell);
-            m.cell_regions.push(region);
+            CellKind::Hexahedron | CellKind::Prism => {
+                // Without $Entities there is no physical group information: region 0.
+                // With it, a block on an unlisted volume is an inconsistent file (meshio 5
+                // writes such files) and guessing would mislabel tissue.
+                let region = match m.entity_groups.get(&(3, entity)) {
+                    _ if dim != 3 || !m.seen_entities => 0,
+                    Some(tags) => tags.first().copied().unwrap_or(0),
+                    None => {
+                        return Err(r.err_item(format!(
+                            "{name} block on volume entity {entity}, which $Entities \
+                             does not list (so its physical group is unknown)"
+                        )))
+                    }
+                };
+                for _ in 0..n {
+                    nodes.clear();
+                    read_cell_nodes(r, path, &m.node_index, nn, true, &mut nodes)?;
+                    m.cells.volume(kind, &nodes, region, &m.nodes);
+                }
+            }
         }
     }
     check_total(r, "Elements", total, read, total_line)
@@ -360,24 +370,50 @@ fn check_total(
     r.expect_end(&format!("$End{name}"))
 }
 
-/// One hexahedron of an element block: its tag and eight distinct known node tags.
-fn read_hexahedron(
+/// One element of a block: its tag and `n` known node tags (appended to `out` as
+/// indices), distinct if `distinct`.
+pub(super) fn read_cell_nodes(
     r: &mut Reader,
     path: &Path,
     node_index: &HashMap<u64, u32>,
-) -> Result<[u32; 8], MeshError> {
+    n: usize,
+    distinct: bool,
+    out: &mut Vec<u32>,
+) -> Result<u64, MeshError> {
     let etag = r.size("element tag")?;
-    let mut cell = [0u32; 8];
+    read_element_nodes(r, path, node_index, etag, n, distinct, false, out)?;
+    Ok(etag)
+}
+
+/// The `n` node tags of element `etag` (appended to `out` as indices), distinct if
+/// `distinct`; binary tags are 4-byte `int`s if `int_tags` (MSH 2.2), else `size_t`.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn read_element_nodes(
+    r: &mut Reader,
+    path: &Path,
+    node_index: &HashMap<u64, u32>,
+    etag: u64,
+    n: usize,
+    distinct: bool,
+    int_tags: bool,
+    out: &mut Vec<u32>,
+) -> Result<(), MeshError> {
     let what = format!("node tag of element {etag}");
-    for a in 0..8 {
-        let ntag = r.size(&what)?;
+    let start = out.len();
+    for _ in 0..n {
+        let ntag = match (int_tags, r.bin) {
+            (true, Some(_)) => {
+                u64::try_from(r.int(&what)?).map_err(|_| r.err_item(format!("negative {what}")))?
+            }
+            _ => r.size(&what)?,
+        };
         let idx = *node_index.get(&ntag).ok_or(MeshError::UnknownNode {
             path: path.to_path_buf(),
             line: r.item_line(),
             element: etag,
             node: ntag,
         })?;
-        if cell[..a].contains(&idx) {
+        if distinct && out[start..].contains(&idx) {
             let at = match r.item_line() {
                 Some(l) => format!("element {etag} (line {l})"),
                 None => format!("element {etag}"),
@@ -388,9 +424,9 @@ fn read_hexahedron(
                 node: ntag,
             });
         }
-        cell[a] = idx;
+        out.push(idx);
     }
-    Ok(cell)
+    Ok(())
 }
 
 /// Skip an unknown section up to its end marker.
@@ -419,33 +455,25 @@ fn finish(r: &Reader, path: &Path, m: MshContents) -> Result<Mesh, MeshError> {
     if !m.seen_nodes {
         return Err(r.err(None, "no $Nodes section"));
     }
-    if m.cells.is_empty() {
-        let detail = if !m.seen_elements {
-            "the file has no $Elements section".to_string()
-        } else if m.other_types.is_empty() {
-            "the $Elements section is empty".to_string()
-        } else {
-            let types: Vec<String> = m
-                .other_types
-                .iter()
-                .map(|(t, n)| format!("{n} of Gmsh type {t}"))
-                .collect();
-            format!("elements are {} (hexahedron is type 5)", types.join(", "))
-        };
+    if !m.seen_elements {
         return Err(MeshError::NoHexahedra {
             path: path.to_path_buf(),
-            detail,
+            detail: "the file has no $Elements section".to_string(),
         });
     }
-
-    let mesh = Mesh {
+    let mut mesh = Mesh {
         nodes: m.nodes,
         node_tags: m.node_tags,
-        cells: m.cells,
-        cell_regions: m.cell_regions,
-        region_names: m.region_names,
+        region_names: m
+            .physical_names
+            .iter()
+            .filter(|((dim, _), _)| *dim == 3)
+            .map(|((_, tag), name)| (*tag, name.clone()))
+            .collect(),
         source: path.display().to_string(),
+        ..Mesh::default()
     };
+    m.cells.finish(path, &mut mesh, "MSH")?;
     mesh.validate()?;
     Ok(mesh)
 }

@@ -1,11 +1,18 @@
-//! The legacy VTK unstructured-grid reader: a structural walk of the text that locates
-//! faults by line, then `vtkio` for the data.
+//! The VTK unstructured-grid readers: legacy VTK (versions up to 5.1, ASCII or binary) and
+//! XML `.vtu` (ASCII, binary or appended data, zlib or LZ4 compressed), both through
+//! `vtkio`. For ASCII legacy files a structural walk of the text first locates faults by
+//! line (vtkio's own errors carry no position, and it silently drops a cell data array cut
+//! short by truncation).
+//!
+//! What the cells become is [`CellCollector`]'s rule: hexahedra and wedges are the cells,
+//! boundary cells (vertices, lines, triangles, quads) tagged in the region array give node
+//! sets named "ARRAY VALUE" (e.g. "gmsh:physical 2"), other volume cells are refused.
+//! One-component integer point data gives the node set of its non-zero nodes, named as the
+//! array.
 
+use super::cells::{vtk_type, CellCollector, CellKind};
 use super::*;
-use vtkio::model::{Attribute, CellType, Cells, DataSet, IOBuffer, Piece, UnstructuredGridPiece};
-
-/// `VTK_HEXAHEDRON`.
-const VTK_HEXAHEDRON: u8 = 12;
+use vtkio::model::{Attribute, Cells, DataSet, IOBuffer, Piece, UnstructuredGridPiece};
 
 /// Names of cell data arrays taken as the region tag, in order of preference; otherwise the
 /// first one-component integer cell array is used.
@@ -17,11 +24,12 @@ const REGION_ARRAY_NAMES: [&str; 5] = [
     "CellEntityIds",
 ];
 
-/// Parse the bytes of a legacy VTK unstructured grid of `VTK_HEXAHEDRON` cells (ASCII or
+/// Parse the bytes of a legacy VTK unstructured grid (any version up to 5.1, ASCII or
 /// big-endian binary, as the format prescribes). `path` is used for error messages only.
 /// Region tags come from the integer cell array named `region` (or `Region`,
 /// `gmsh:physical`, `PhysicalGroup`, `CellEntityIds`, else the first one-component integer
-/// cell array); without one every cell is in region 0. Node tags are 1-based indices.
+/// cell array, as plain data or in a FIELD), of any integer type; without one every cell is
+/// in region 0. Node tags are 1-based indices.
 pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
     // vtkio reports neither where nor what went wrong, and silently drops a cell data array
     // cut short by a truncated file, so walk the ASCII structure first: it finds those faults
@@ -29,20 +37,112 @@ pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
     if std::str::from_utf8(bytes).is_ok() {
         walk_vtk(&mut Reader::new(path, bytes))?;
     }
-    let piece = read_piece(path, bytes)?;
+    let bytes = legacy_type_names(bytes);
+    let vtk = vtkio::Vtk::parse_legacy_be(&bytes[..]).map_err(|e| {
+        perr(
+            path,
+            None,
+            format!(
+                "not a readable legacy VTK unstructured grid (vtkio: {})",
+                vtkio_message(e)
+            ),
+        )
+    })?;
+    grid_mesh(path, vtk.data, "legacy VTK")
+}
+
+/// Parse the bytes of an XML VTK unstructured grid (`.vtu`): one piece, data inline or
+/// appended, raw or base64, uncompressed, zlib or LZ4. Regions, node sets and node tags as
+/// for [`parse_vtk`].
+pub fn parse_vtu(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
+    let vtk = vtkio::Vtk::parse_xml(bytes).map_err(|e| {
+        perr(
+            path,
+            None,
+            format!(
+                "not a readable VTK XML unstructured grid (vtkio: {})",
+                vtkio_message(e)
+            ),
+        )
+    })?;
+    grid_mesh(path, vtk.data, "VTU")
+}
+
+/// VTK 5.1's data type names (`vtktypeint64`, ...) on FIELD array and attribute header
+/// lines replaced by the legacy names vtkio knows (`long`, ...): VTK and meshio write them,
+/// vtkio 0.7 reads them only in OFFSETS/CONNECTIVITY. Only a text line whose last token is
+/// such a name and that has the shape of a header (`NAME COMPONENTS TUPLES TYPE`, or
+/// `SCALARS|VECTORS|NORMALS|TENSORS NAME TYPE [N]`) is changed, so binary data is left alone.
+fn legacy_type_names(bytes: &[u8]) -> std::borrow::Cow<'_, [u8]> {
+    const NAMES: [(&str, &str); 9] = [
+        ("vtktypeint8", "char"),
+        ("vtktypeuint8", "unsigned_char"),
+        ("vtktypeint16", "short"),
+        ("vtktypeint32", "int"),
+        ("vtktypeuint32", "unsigned_int"),
+        ("vtktypeint64", "long"),
+        ("vtktypeuint64", "unsigned_long"),
+        ("vtktypefloat32", "float"),
+        ("vtktypefloat64", "double"),
+    ];
+    if !bytes.windows(7).any(|w| w == b"vtktype") {
+        return std::borrow::Cow::Borrowed(bytes);
+    }
+    let mut out = Vec::with_capacity(bytes.len());
+    for (k, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        if k > 0 {
+            out.push(b'\n');
+        }
+        let replaced = std::str::from_utf8(line).ok().and_then(|text| {
+            let mut t: Vec<&str> = text.split_whitespace().collect();
+            let ty_at = match t.as_slice() {
+                ["SCALARS", _, _] | ["SCALARS", _, _, _] => 2,
+                ["VECTORS" | "NORMALS" | "TENSORS", _, _] => 2,
+                [_, c, n, _] if c.parse::<u32>().is_ok() && n.parse::<u64>().is_ok() => 3,
+                _ => return None,
+            };
+            t[ty_at] = NAMES.iter().find(|(n, _)| *n == t[ty_at])?.1;
+            Some(t.join(" "))
+        });
+        match replaced {
+            Some(r) => out.extend_from_slice(r.as_bytes()),
+            None => out.extend_from_slice(line),
+        }
+    }
+    std::borrow::Cow::Owned(out)
+}
+
+fn vtkio_message(e: vtkio::Error) -> String {
+    match e {
+        vtkio::Error::Unknown => "incomplete input".to_string(),
+        other => other.to_string(),
+    }
+}
+
+/// The mesh of a data set that must be one inline unstructured grid piece.
+fn grid_mesh(path: &Path, data: DataSet, format: &str) -> Result<Mesh, MeshError> {
+    let piece = one_piece(path, data)?;
     let nodes = piece_nodes(path, piece.points)?;
     let node_tags: Vec<u64> = (1..=nodes.len() as u64).collect();
-    let cells = piece_cells(path, piece.cells, nodes.len())?;
-    let cell_regions = piece_regions(path, piece.data.cell, cells.len())?;
-
-    let mesh = Mesh {
+    let n_cells = piece.cells.types.len();
+    let regions = region_array(path, &piece.data.cell, n_cells)?;
+    let mut cells = CellCollector::default();
+    collect_cells(path, piece.cells, &nodes, regions.as_ref(), &mut cells)?;
+    for (name, values) in point_tags(&piece.data.point, nodes.len()) {
+        let set = values
+            .iter()
+            .enumerate()
+            .filter(|(_, &v)| v != 0)
+            .map(|(i, _)| i as u32);
+        cells.node_set(name, set);
+    }
+    let mut mesh = Mesh {
         nodes,
         node_tags,
-        cells,
-        cell_regions,
-        region_names: BTreeMap::new(),
         source: path.display().to_string(),
+        ..Mesh::default()
     };
+    cells.finish(path, &mut mesh, format)?;
     mesh.validate()?;
     Ok(mesh)
 }
@@ -56,20 +156,9 @@ fn perr(path: &Path, line: Option<usize>, msg: String) -> MeshError {
     }
 }
 
-/// The one inline unstructured grid piece of the file, through vtkio.
-fn read_piece(path: &Path, bytes: &[u8]) -> Result<UnstructuredGridPiece, MeshError> {
-    let vtk = vtkio::Vtk::parse_legacy_be(bytes).map_err(|e| MeshError::Parse {
-        path: path.to_path_buf(),
-        line: None,
-        msg: format!(
-            "not a readable legacy VTK unstructured grid (vtkio: {})",
-            match e {
-                vtkio::Error::Unknown => "incomplete input".to_string(),
-                other => other.to_string(),
-            }
-        ),
-    })?;
-    let pieces = match vtk.data {
+/// The one inline unstructured grid piece of the data set.
+fn one_piece(path: &Path, data: DataSet) -> Result<UnstructuredGridPiece, MeshError> {
+    let pieces = match data {
         DataSet::UnstructuredGrid { pieces, .. } => pieces,
         _ => {
             return Err(perr(
@@ -132,10 +221,21 @@ fn piece_nodes(path: &Path, points: IOBuffer) -> Result<Vec<[f64; 3]>, MeshError
     Ok(nodes)
 }
 
-/// The cells, all hexahedra of eight distinct nodes among the `n_nodes`.
-fn piece_cells(path: &Path, cells: Cells, n_nodes: usize) -> Result<Vec<[u32; 8]>, MeshError> {
+/// Every cell into the collector: hexahedra and wedges with their region tags, boundary
+/// cells into the node set of their tag, the rest counted as unsupported.
+fn collect_cells(
+    path: &Path,
+    cells: Cells,
+    nodes: &[[f64; 3]],
+    regions: Option<&(String, Vec<i64>)>,
+    out: &mut CellCollector,
+) -> Result<(), MeshError> {
     let types = cells.types;
-    let (connectivity, offsets) = cells.cell_verts.into_xml();
+    let (connectivity, mut offsets) = cells.cell_verts.into_xml();
+    // Legacy 5.1 OFFSETS start with the 0 the XML form leaves out.
+    if offsets.len() == types.len() + 1 && offsets.first() == Some(&0) {
+        offsets.remove(0);
+    }
     if offsets.len() != types.len() {
         return Err(perr(
             path,
@@ -143,22 +243,9 @@ fn piece_cells(path: &Path, cells: Cells, n_nodes: usize) -> Result<Vec<[u32; 8]
             format!("{} cells but {} CELL_TYPES", offsets.len(), types.len()),
         ));
     }
-    if types.is_empty() {
-        return Err(MeshError::NoHexahedra {
-            path: path.to_path_buf(),
-            detail: "the file has no cells".to_string(),
-        });
-    }
-    let mut cells = Vec::with_capacity(types.len());
     let mut start = 0usize;
+    let mut verts32 = Vec::with_capacity(8);
     for (ci, (&ty, &end)) in types.iter().zip(&offsets).enumerate() {
-        if ty != CellType::Hexahedron {
-            return Err(MeshError::NonHexCell {
-                path: path.to_path_buf(),
-                cell: ci,
-                cell_type: format!("{} ({ty:?})", ty as u8),
-            });
-        }
         let end = end as usize;
         let verts = connectivity.get(start..end).ok_or_else(|| {
             perr(
@@ -167,83 +254,123 @@ fn piece_cells(path: &Path, cells: Cells, n_nodes: usize) -> Result<Vec<[u32; 8]
                 format!("cell {ci}: connectivity offsets out of range"),
             )
         })?;
-        if verts.len() != 8 {
+        start = end;
+        let (kind, count, name) = vtk_type(ty as u8);
+        if let Some(n) = count.filter(|&n| n != verts.len()) {
             return Err(perr(
                 path,
                 None,
                 format!(
-                    "cell {ci} is VTK_HEXAHEDRON ({VTK_HEXAHEDRON}) but has {} points",
+                    "cell {ci} is {name} but has {} points (expected {n})",
                     verts.len()
                 ),
             ));
         }
-        let mut cell = [0u32; 8];
-        for (a, &v) in verts.iter().enumerate() {
-            if v as usize >= n_nodes {
+        verts32.clear();
+        for &v in verts {
+            if v as usize >= nodes.len() {
                 return Err(MeshError::NodeIndexOutOfRange {
                     path: path.to_path_buf(),
                     cell: ci,
                     index: u32::try_from(v).unwrap_or(u32::MAX),
-                    nodes: n_nodes,
+                    nodes: nodes.len(),
                 });
             }
-            if cell[..a].contains(&(v as u32)) {
-                return Err(MeshError::RepeatedNode {
-                    path: path.to_path_buf(),
-                    item: format!("cell {ci}"),
-                    node: v + 1,
-                });
-            }
-            cell[a] = v as u32;
+            verts32.push(v as u32);
         }
-        cells.push(cell);
-        start = end;
+        let tag = regions.map(|(_, v)| v[ci]).unwrap_or(0);
+        match kind {
+            CellKind::Unsupported => out.unsupported(name, 1),
+            CellKind::Boundary { .. } => {
+                let groups = match regions {
+                    Some((array, _)) if tag != 0 => vec![format!("{array} {tag}")],
+                    _ => Vec::new(),
+                };
+                out.boundary(&name, &verts32, &groups);
+            }
+            CellKind::Hexahedron | CellKind::Prism => {
+                for (a, &v) in verts32.iter().enumerate() {
+                    if verts32[..a].contains(&v) {
+                        return Err(MeshError::RepeatedNode {
+                            path: path.to_path_buf(),
+                            item: format!("cell {ci}"),
+                            node: v as u64 + 1,
+                        });
+                    }
+                }
+                let region = i32::try_from(tag).map_err(|_| {
+                    perr(
+                        path,
+                        None,
+                        format!("cell {ci}: region {tag} out of i32 range"),
+                    )
+                })?;
+                out.volume(kind, &verts32, region, nodes);
+            }
+        }
     }
-    Ok(cells)
+    Ok(())
 }
 
-/// Region tags from an integer cell data array (see [`REGION_ARRAY_NAMES`]); 0 for every
-/// cell without one.
-fn piece_regions(
+/// Whether the buffer holds integers.
+fn is_int(b: &IOBuffer) -> bool {
+    matches!(
+        b,
+        IOBuffer::I8(_)
+            | IOBuffer::U8(_)
+            | IOBuffer::I16(_)
+            | IOBuffer::U16(_)
+            | IOBuffer::I32(_)
+            | IOBuffer::U32(_)
+            | IOBuffer::I64(_)
+            | IOBuffer::U64(_)
+    )
+}
+
+/// The one-component arrays of a data section, plain or inside FIELDs: (name, components,
+/// values).
+fn arrays(data: &[Attribute]) -> Vec<(&str, usize, &IOBuffer)> {
+    let mut out = Vec::new();
+    for a in data {
+        match a {
+            Attribute::DataArray(d) => {
+                out.push((d.name.as_str(), d.elem.num_comp() as usize, &d.data))
+            }
+            Attribute::Field { data_array, .. } => {
+                for f in data_array {
+                    out.push((f.name.as_str(), f.elem as usize, &f.data));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The region array (see [`REGION_ARRAY_NAMES`]) with its name, as i64, or `None`.
+fn region_array(
     path: &Path,
-    cell_data: Vec<Attribute>,
+    cell_data: &[Attribute],
     n_cells: usize,
-) -> Result<Vec<i32>, MeshError> {
-    let arrays: Vec<_> = cell_data
-        .into_iter()
-        .filter_map(|a| match a {
-            Attribute::DataArray(d) => Some(d),
-            Attribute::Field { .. } => None,
-        })
-        .collect();
-    let is_int = |b: &IOBuffer| {
-        matches!(
-            b,
-            IOBuffer::I8(_)
-                | IOBuffer::U8(_)
-                | IOBuffer::I16(_)
-                | IOBuffer::U16(_)
-                | IOBuffer::I32(_)
-                | IOBuffer::U32(_)
-                | IOBuffer::I64(_)
-                | IOBuffer::U64(_)
-        )
-    };
+) -> Result<Option<(String, Vec<i64>)>, MeshError> {
+    let all = arrays(cell_data);
     let chosen = REGION_ARRAY_NAMES
         .iter()
-        .find_map(|n| arrays.iter().find(|a| a.name == *n))
+        .find_map(|n| all.iter().find(|a| a.0 == *n))
         .or_else(|| {
-            arrays
-                .iter()
-                .find(|a| is_int(&a.data) && a.data.len() == n_cells)
+            all.iter()
+                .find(|a| a.1 == 1 && is_int(a.2) && a.2.len() == n_cells)
         });
-    let Some(a) = chosen else {
-        return Ok(vec![0; n_cells]);
+    let Some(&(name, comps, data)) = chosen else {
+        return Ok(None);
     };
-    let name = a.name.clone();
-    let vals = a
-        .data
-        .clone()
+    if comps != 1 {
+        return Err(perr(
+            path,
+            None,
+            format!("cell data {name:?} has {comps} components, a region tag has 1"),
+        ));
+    }
+    let vals = data
         .cast_into::<i64>()
         .ok_or_else(|| perr(path, None, format!("cell data {name:?} is not numeric")))?;
     if vals.len() != n_cells {
@@ -254,10 +381,15 @@ fn piece_regions(
             got: vals.len(),
         });
     }
-    vals.into_iter()
-        .map(|v| {
-            i32::try_from(v).map_err(|_| perr(path, None, format!("region {v} out of i32 range")))
-        })
+    Ok(Some((name.to_string(), vals)))
+}
+
+/// One-component integer point arrays of one value per node: the tags that give node sets.
+fn point_tags(point_data: &[Attribute], n_nodes: usize) -> Vec<(String, Vec<i64>)> {
+    arrays(point_data)
+        .into_iter()
+        .filter(|a| a.1 == 1 && is_int(a.2) && a.2.len() == n_nodes)
+        .filter_map(|(name, _, data)| Some((name.to_string(), data.cast_into::<i64>()?)))
         .collect()
 }
 
@@ -265,7 +397,9 @@ fn piece_regions(
 /// CELL_DATA/POINT_DATA with SCALARS, VECTORS, NORMALS, FIELD), checking the counts and that
 /// every value is a number. Stops without error at the first keyword it does not know.
 fn walk_vtk(r: &mut Reader<'_>) -> Result<(), MeshError> {
-    walk_vtk_header(r)?;
+    if !walk_vtk_header(r)? {
+        return Ok(());
+    }
     let mut attr_count = 0usize;
     loop {
         let (kw, l) = match r.token("keyword") {
@@ -362,8 +496,9 @@ fn walk_vtk(r: &mut Reader<'_>) -> Result<(), MeshError> {
     }
 }
 
-/// The four header lines: version, title, ASCII, `DATASET UNSTRUCTURED_GRID`.
-fn walk_vtk_header(r: &mut Reader<'_>) -> Result<(), MeshError> {
+/// The four header lines: version, title, ASCII, `DATASET UNSTRUCTURED_GRID`; false for a
+/// BINARY file (not walked).
+fn walk_vtk_header(r: &mut Reader<'_>) -> Result<bool, MeshError> {
     let (l, head) = r.next_line().ok_or_else(|| r.err(Some(1), "empty file"))?;
     if !head.starts_with("# vtk DataFile Version") {
         return Err(r.err(
@@ -379,6 +514,10 @@ fn walk_vtk_header(r: &mut Reader<'_>) -> Result<(), MeshError> {
     let (l, enc) = r
         .next_line()
         .ok_or_else(|| r.err(Some(r.eof_line()), "file ends after the title"))?;
+    if enc == "BINARY" {
+        // Binary data is for vtkio alone.
+        return Ok(false);
+    }
     if enc != "ASCII" {
         return Err(r.err(
             Some(l),
@@ -397,5 +536,5 @@ fn walk_vtk_header(r: &mut Reader<'_>) -> Result<(), MeshError> {
             ),
         ));
     }
-    Ok(())
+    Ok(true)
 }
