@@ -41,8 +41,8 @@ pub fn write_surface_series(d: &Path, pr: &Problem, frames: &[SurfaceFrame]) -> 
     std::fs::create_dir_all(d)?;
     let (local, quads) = surface_numbering(pr);
     let reference: Vec<[f64; 3]> = local.iter().map(|&g| pr.mesh.nodes[g as usize]).collect();
-    let groups = surface_groups(pr);
-    let mut w = SurfaceSeriesWriter::new(d, reference, quads, groups)?;
+    let regions = surface_regions(pr);
+    let mut w = SurfaceSeriesWriter::new(d, reference, quads, regions, &pr.mesh.region_names)?;
     for f in frames {
         let u: Vec<[f64; 3]> = local.iter().map(|&g| f.u[g as usize]).collect();
         w.write_frame(f.time_s, &u)?;
@@ -70,11 +70,20 @@ fn surface_numbering(pr: &Problem) -> (Vec<u32>, Vec<[u32; 4]>) {
     (local, quads)
 }
 
-/// Region group of each boundary quad (its cell's region, as a small index).
-fn surface_groups(pr: &Problem) -> Vec<u8> {
+/// Region of each boundary quad: the region tag of the cell it bounds (named by the mesh's
+/// `region_names`).
+fn surface_regions(pr: &Problem) -> Vec<i32> {
     pr.surface_face_cells
         .iter()
-        .map(|c| pr.mesh.cell_regions[*c as usize].clamp(0, 255) as u8)
+        .map(|c| pr.mesh.cell_regions.get(*c as usize).copied().unwrap_or(0))
+        .collect()
+}
+
+/// Colour group of each boundary quad for the picture: its region, as a small index.
+fn surface_groups(pr: &Problem) -> Vec<u8> {
+    surface_regions(pr)
+        .into_iter()
+        .map(|r| r.clamp(0, 255) as u8)
         .collect()
 }
 

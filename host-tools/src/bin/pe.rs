@@ -9,7 +9,7 @@ use host_tools::problem::Problem;
 use host_tools::scene::builtin::builtin_scene;
 use host_tools::scene::settings::{IntegrationArg, PrecisionArg};
 use host_tools::scene::Scene;
-use host_tools::solver::{self, Observer};
+use host_tools::solver::{self, Observer, StepState};
 
 #[derive(Parser)]
 #[command(name = "pe", version, about = "Soft-tissue simulator host tools")]
@@ -189,14 +189,14 @@ struct Progress {
 }
 
 impl Observer for Progress {
-    fn after_step(&mut self, step: u64, time_s: f64, total: u64, u: &dyn Fn() -> Vec<[f64; 3]>) {
+    fn after_step(&mut self, step: u64, time_s: f64, total: u64, state: &dyn StepState) {
         if let Some(b) = &self.bar {
             if step.is_multiple_of(64) || step == total {
                 b.set_position(step);
             }
         }
         if let Some(f) = &mut self.frames {
-            if let Err(e) = f.maybe_write(step, time_s, total, u) {
+            if let Err(e) = f.maybe_write(step, time_s, total, state) {
                 self.error.get_or_insert(e);
             }
         }

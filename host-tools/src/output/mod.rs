@@ -11,7 +11,8 @@ use std::path::Path;
 use anyhow::{Context, Result};
 
 use crate::mesh::Mesh;
-use crate::output::vtk::VtkSeriesWriter;
+use crate::output::vtk::{PointField, VtkSeriesWriter, VELOCITY};
+use crate::solver::StepState;
 
 /// `node,x,y,z,ux,uy,uz`: every mesh node once, in mesh node order (node = its tag).
 /// Values are written with 17 significant digits so the CSV round-trips f64 exactly.
@@ -79,7 +80,9 @@ pub fn progress_bar(total: u64) -> indicatif::ProgressBar {
     b
 }
 
-/// Writes a frame every `interval_s` of simulated time (and the last one).
+/// Writes a frame every `interval_s` of simulated time (and the last one): the reference
+/// points with `displacement_m` and `velocity_m_per_s` (see [`vtk`]'s conventions), from
+/// rest at time 0.
 pub struct FrameWriter {
     writer: VtkSeriesWriter,
     every_steps: u64,
@@ -89,24 +92,36 @@ impl FrameWriter {
     pub fn new(dir: &Path, mesh: &Mesh, interval_s: f64, dt_s: f64) -> Result<Self> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         let mut writer = VtkSeriesWriter::new(dir, mesh)?;
-        writer.write_frame(0.0, &vec![[0.0; 3]; mesh.nodes.len()])?;
+        let rest = vec![[0.0; 3]; mesh.nodes.len()];
+        writer.write_frame_with(0.0, &rest, &[(VELOCITY, PointField::Vector(&rest))])?;
         Ok(FrameWriter {
             writer,
             every_steps: ((interval_s / dt_s).round() as u64).max(1),
         })
     }
 
+    /// After step `step` of `total`: a frame if one is due, of the state `state` gives.
     pub fn maybe_write(
         &mut self,
         step: u64,
         time_s: f64,
         total: u64,
-        u: &dyn Fn() -> Vec<[f64; 3]>,
+        state: &dyn StepState,
     ) -> Result<()> {
         if step.is_multiple_of(self.every_steps) || step == total {
-            self.writer.write_frame(time_s, &u())?;
+            let v = state.velocities();
+            self.writer.write_frame_with(
+                time_s,
+                &state.displacements(),
+                &[(VELOCITY, PointField::Vector(&v))],
+            )?;
         }
         Ok(())
+    }
+
+    /// Number of frames written so far (the rest frame included).
+    pub fn frame_count(&self) -> usize {
+        self.writer.frame_count()
     }
 
     pub fn finish(self) -> Result<()> {

@@ -81,17 +81,29 @@ pub struct RunOutput {
 
 /// Called every step with the model's state after the step (for progress and frames).
 pub trait Observer {
-    fn after_step(
-        &mut self,
-        step: u64,
-        time_s: f64,
-        steps_total: u64,
-        u: &dyn Fn() -> Vec<[f64; 3]>,
-    );
+    fn after_step(&mut self, step: u64, time_s: f64, steps_total: u64, state: &dyn StepState);
 }
 
 impl Observer for () {
-    fn after_step(&mut self, _: u64, _: f64, _: u64, _: &dyn Fn() -> Vec<[f64; 3]>) {}
+    fn after_step(&mut self, _: u64, _: f64, _: u64, _: &dyn StepState) {}
+}
+
+/// The state after a step, computed only when an observer asks for it.
+pub trait StepState {
+    /// Displacement of every node (m).
+    fn displacements(&self) -> Vec<[f64; 3]>;
+    /// Velocity of every node (m/s): the central difference's `(u_n − u_{n−1})/dt` over the
+    /// last step.
+    fn velocities(&self) -> Vec<[f64; 3]>;
+}
+
+impl<T: Real> StepState for Model<'_, T> {
+    fn displacements(&self) -> Vec<[f64; 3]> {
+        Model::displacements(self)
+    }
+    fn velocities(&self) -> Vec<[f64; 3]> {
+        Model::velocities(self)
+    }
 }
 
 /// Runs the problem to its end in its scene's precision, on this thread.
@@ -155,8 +167,7 @@ pub fn run_typed<T: Real>(
                 }
             }
         }
-        let m = &model;
-        observer.after_step(m.step, m.time_s(), steps, &|| m.displacements());
+        observer.after_step(model.step, model.time_s(), steps, &model);
     }
     let wall_s = start.elapsed().as_secs_f64();
     let displacements = model.displacements();
