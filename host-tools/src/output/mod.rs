@@ -1,5 +1,9 @@
 //! Run outputs shared by `pe solve` and board-sim: the nodes CSV (and the CSV writer every
 //! table goes through), ParaView frames and the progress bar.
+//!
+//! Every CSV column that has a unit carries it as the suffix of its name, in SI (`x_m`,
+//! `ux_m`, `time_s`, `fx_n`, `energy_j`); ids, counts and ratios have none. The ParaView
+//! frames name their arrays the same way (see [`vtk`]).
 
 pub mod font;
 pub mod render;
@@ -14,8 +18,13 @@ use crate::mesh::Mesh;
 use crate::output::vtk::{PointField, VtkSeriesWriter, VELOCITY};
 use crate::solver::StepState;
 
-/// `node,x,y,z,ux,uy,uz`: every mesh node once, in mesh node order (node = its tag).
-/// Values are written with 17 significant digits so the CSV round-trips f64 exactly.
+/// The nodes CSV's header: the node tag, the initial position and the displacement, with
+/// their units (m).
+pub const NODES_CSV_HEADER: [&str; 7] = ["node", "x_m", "y_m", "z_m", "ux_m", "uy_m", "uz_m"];
+
+/// `node,x_m,y_m,z_m,ux_m,uy_m,uz_m`: every mesh node once, in mesh node order (node = its
+/// tag): initial position and displacement, m. Values are written with 17 significant
+/// digits so the CSV round-trips f64 exactly.
 pub fn write_nodes_csv(path: &Path, mesh: &Mesh, u: &[[f64; 3]]) -> Result<()> {
     let rows = mesh.nodes.iter().zip(u).enumerate().map(|(k, (p, d))| {
         let tag = mesh.node_tags.get(k).copied().unwrap_or(k as u64 + 1);
@@ -23,7 +32,7 @@ pub fn write_nodes_csv(path: &Path, mesh: &Mesh, u: &[[f64; 3]]) -> Result<()> {
         row.extend(p.iter().chain(d).map(|v| format!("{v:.17e}")));
         row
     });
-    write_csv(path, &["node", "x", "y", "z", "ux", "uy", "uz"], rows)
+    write_csv(path, &NODES_CSV_HEADER, rows)
 }
 
 /// Writes the CSV file `path`: the header, then one record per row. The fields come

@@ -71,6 +71,43 @@ pub struct ContactReport {
     pub active_contacts_final: u32,
 }
 
+impl RunReport {
+    /// The console summary of `pe solve`: steps, speed, largest displacement and kinetic
+    /// energy; the reaction of the prescribed nodes when there are any
+    /// (`prescribed_nodes`), and each tool's force at the end and its peak when the scene
+    /// has tools.
+    pub fn console_summary(&self, prescribed_nodes: usize) -> String {
+        let r = self;
+        let mut s = format!(
+            "{} steps in {:.2} s on {} thread(s), {} kernel: {:.3e} element-steps/s, real-time factor {:.3}; max |u| = {:.4e} m at node {}; KE = {:.3e} J",
+            r.steps, r.wall_s, r.threads, r.kernel, r.element_steps_per_s, r.real_time_factor,
+            r.max_displacement, r.max_displacement_node, r.kinetic_energy_final
+        );
+        if prescribed_nodes > 0 {
+            let f = r.prescribed_reaction_n;
+            s += &format!(
+                "\n  prescribed reaction ({prescribed_nodes} prescribed nodes on the tissue, at the end) = [{:.4e}, {:.4e}, {:.4e}] N",
+                f[0], f[1], f[2]
+            );
+        }
+        if let Some(c) = &r.contact {
+            for (k, name) in c.tools.iter().enumerate() {
+                let f = c.tool_force_final_n.get(k).copied().unwrap_or([0.0; 3]);
+                let peak = c.tool_force_peak_n.get(k).copied().unwrap_or(0.0);
+                s += &format!(
+                    "\n  tool {name:?}: force of the tissue at the end [{:.4e}, {:.4e}, {:.4e}] N (|F| = {:.4e} N), peak |F| = {peak:.4e} N",
+                    f[0], f[1], f[2], norm3(f)
+                );
+            }
+        }
+        s
+    }
+}
+
+fn norm3(f: [f64; 3]) -> f64 {
+    (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt()
+}
+
 /// Result of a run: final displacements (f64) and the report.
 pub struct RunOutput {
     pub displacements: Vec<[f64; 3]>,
