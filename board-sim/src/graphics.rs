@@ -36,19 +36,20 @@ pub fn surface_frames(pr: &Problem, out: &board_sim::SimOutput) -> Vec<SurfaceFr
         .collect()
 }
 
-/// The assembled surface frames as a ParaView series in `d`.
-pub fn write_surface_series(d: &Path, pr: &Problem, frames: &[SurfaceFrame]) -> Result<()> {
+/// The assembled surface frames as a ParaView series in `d`; returns the number of frames.
+pub fn write_surface_series(d: &Path, pr: &Problem, frames: &[SurfaceFrame]) -> Result<usize> {
     std::fs::create_dir_all(d)?;
     let (local, quads) = surface_numbering(pr);
     let reference: Vec<[f64; 3]> = local.iter().map(|&g| pr.mesh.nodes[g as usize]).collect();
-    let groups = surface_groups(pr);
-    let mut w = SurfaceSeriesWriter::new(d, reference, quads, groups)?;
+    let regions = surface_regions(pr);
+    let mut w = SurfaceSeriesWriter::new(d, reference, quads, regions, &pr.mesh.region_names)?;
     for f in frames {
         let u: Vec<[f64; 3]> = local.iter().map(|&g| f.u[g as usize]).collect();
         w.write_frame(f.time_s, &u)?;
     }
+    let n = w.frame_count();
     w.finish()?;
-    Ok(())
+    Ok(n)
 }
 
 /// Surface nodes (mesh indices, ascending) and the boundary quads in that numbering.
@@ -70,11 +71,20 @@ fn surface_numbering(pr: &Problem) -> (Vec<u32>, Vec<[u32; 4]>) {
     (local, quads)
 }
 
-/// Region group of each boundary quad (its cell's region, as a small index).
-fn surface_groups(pr: &Problem) -> Vec<u8> {
+/// Region of each boundary quad: the region tag of the cell it bounds (named by the mesh's
+/// `region_names`).
+fn surface_regions(pr: &Problem) -> Vec<i32> {
     pr.surface_face_cells
         .iter()
-        .map(|c| pr.mesh.cell_regions[*c as usize].clamp(0, 255) as u8)
+        .map(|c| pr.mesh.cell_regions.get(*c as usize).copied().unwrap_or(0))
+        .collect()
+}
+
+/// Colour group of each boundary quad for the picture: its region, as a small index.
+fn surface_groups(pr: &Problem) -> Vec<u8> {
+    surface_regions(pr)
+        .into_iter()
+        .map(|r| r.clamp(0, 255) as u8)
         .collect()
 }
 
@@ -140,13 +150,14 @@ pub fn render_frame(
 }
 
 /// Without a graphics stream: the whole mesh every `frame_every` steps (the frames board-sim
-/// kept), from rest to the final state, as a ParaView series in `d`.
+/// kept), from rest to the final state, as a ParaView series in `d`; returns the number of
+/// frames.
 pub fn write_volume_series(
     d: &Path,
     pr: &Problem,
     out: &board_sim::SimOutput,
     dt_s: f64,
-) -> Result<()> {
+) -> Result<usize> {
     std::fs::create_dir_all(d)?;
     let mut w = VtkSeriesWriter::new(d, &pr.mesh)?;
     w.write_frame(0.0, &vec![[0.0; 3]; pr.mesh.nodes.len()])?;
@@ -154,6 +165,7 @@ pub fn write_volume_series(
         w.write_frame(*s as f64 * dt_s, u)?;
     }
     w.write_frame(out.steps as f64 * dt_s, &out.displacements)?;
+    let n = w.frame_count();
     w.finish()?;
-    Ok(())
+    Ok(n)
 }

@@ -19,7 +19,8 @@ mod graphics;
 #[command(
     name = "board-sim",
     version,
-    about = "Run a compiled board array on host threads over emulated links"
+    about = "Run a compiled board array on host threads over emulated links",
+    after_help = "Examples:\n  board-sim builtin --level coarse --out out/builtin\n  pe compile --builtin --level coarse --boards 2x2x2 -o out/compiled\n  board-sim run out/compiled --vtk out/frames --tool-force out/tool_force.csv"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -29,6 +30,9 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Run the images of DIR (written by `pe compile`).
+    #[command(
+        after_help = "Example:\n  pe compile --builtin --level coarse --boards 2x2x2 -o out/compiled\n  board-sim run out/compiled --vtk out/frames --tool-force out/tool_force.csv --report out/report.json"
+    )]
     Run {
         dir: PathBuf,
         #[command(flatten)]
@@ -36,6 +40,9 @@ enum Command {
     },
     /// Benchmark: steps per second of the serial solver and of board-sim on the same scene,
     /// in one run, as a ratio.
+    #[command(
+        after_help = "Example:\n  board-sim bench --level coarse --boards 2x2x2 --steps 500"
+    )]
     Bench {
         #[arg(long, default_value = "medium")]
         level: String,
@@ -46,6 +53,7 @@ enum Command {
     },
     /// The main job: compile the built-in scene (uterus, tubes, probe) for a board mesh and
     /// run it, writing OUT/images, OUT/frames (ParaView), OUT/report.json and a summary.
+    #[command(after_help = "Example:\n  board-sim builtin --level coarse --out out/builtin")]
     Builtin {
         /// Mesh level: coarse | medium | fine.
         #[arg(long, default_value = "medium")]
@@ -66,7 +74,7 @@ enum Command {
 
 #[derive(clap::Args, Default)]
 struct RunArgs {
-    /// node,x,y,z,ux,uy,uz of every mesh node at the end.
+    /// node,x_m,y_m,z_m,ux_m,uy_m,uz_m of every mesh node at the end.
     #[arg(long)]
     output_nodes: Option<PathBuf>,
     /// Run report (JSON): as `pe solve`, plus per-link traffic, waiting and the link model.
@@ -79,7 +87,7 @@ struct RunArgs {
     /// PNG of the last surface frame the graphics engine received.
     #[arg(long)]
     png: Option<PathBuf>,
-    /// step,time_s,tool,fx,fy,fz: the force of the tissue on each tool every step, as the
+    /// step,time_s,tool,fx_n,fy_n,fz_n: the force of the tissue on each tool every step, as the
     /// host summed it from the boards' packets (what a haptic device renders).
     #[arg(long)]
     tool_force: Option<PathBuf>,
@@ -292,13 +300,27 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
         .map(|(k, u)| (k, (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()))
         .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
     println!(
-        "{} steps on {} boards in {:.2} s: {:.1} steps/s, real-time factor {:.3}; max |u| = {:.4e} m; prescribed reaction = [{:.4e}, {:.4e}, {:.4e}] N",
+        "{} steps on {} boards in {:.2} s: {:.1} steps/s, real-time factor {:.3}; max |u| = {:.4e} m",
         out.steps, out.boards.len(), out.wall_s, out.steps as f64 / out.wall_s, sim_s / out.wall_s, max.1,
-        out.reaction_prescribed[0], out.reaction_prescribed[1], out.reaction_prescribed[2]
     );
+    let prescribed = problem
+        .node_kind
+        .iter()
+        .filter(|k| matches!(k, host_tools::problem::NodeKind::Prescribed(_)))
+        .count();
+    if prescribed > 0 {
+        let f = out.reaction_prescribed;
+        println!(
+            "  prescribed reaction ({prescribed} prescribed nodes on the tissue, at the end) = [{:.4e}, {:.4e}, {:.4e}] N",
+            f[0], f[1], f[2]
+        );
+    }
     let modelled = link_model(dir, &manifest, &a)?;
-    write_outputs(&a, &problem, &out, &manifest, graphics_stream)?;
-    let global = global_summary(&out, sim_s);
+    // The frames the graphics engine could assemble (every surface node received): the
+    // ones written to the ParaView series and counted in the summary and the report.
+    let frames = graphics::surface_frames(&problem, &out);
+    let paraview_frames = write_outputs(&a, &problem, &out, &frames, &manifest, graphics_stream)?;
+    let global = global_summary(&out, sim_s, frames.len());
     if let Some(g) = &global {
         println!("{}", g.text);
     }
@@ -307,6 +329,7 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
             elements,
             sim_s,
             max_displacement: max.1,
+            paraview_frames,
         };
         write_report(p, &manifest, &out, &facts, &modelled, global.as_ref())?;
     }
@@ -393,25 +416,27 @@ fn link_model(
     Ok(modelled)
 }
 
-/// Nodes CSV, ParaView series, PNG of the last frame and tool forces, as asked.
+/// Nodes CSV, ParaView series, PNG of the last frame and tool forces, as asked; returns the
+/// number of frames in the ParaView series (None without `--vtk`).
 fn write_outputs(
     a: &RunArgs,
     problem: &Problem,
     out: &board_sim::SimOutput,
+    frames: &[graphics::SurfaceFrame],
     manifest: &host_tools::compile::Manifest,
     graphics_stream: bool,
-) -> Result<()> {
+) -> Result<Option<usize>> {
     if let Some(p) = &a.output_nodes {
         write_nodes_csv(p, &problem.mesh, &out.displacements)?;
     }
-    let frames = graphics::surface_frames(problem, out);
+    let mut written = None;
     if let Some(d) = &a.vtk {
-        if graphics_stream {
+        written = Some(if graphics_stream {
             // What the graphics engine received.
-            graphics::write_surface_series(d, problem, &frames)?;
+            graphics::write_surface_series(d, problem, frames)?
         } else {
-            graphics::write_volume_series(d, problem, out, manifest.dt_s)?;
-        }
+            graphics::write_volume_series(d, problem, out, manifest.dt_s)?
+        });
     }
     if let Some(p) = &a.png {
         if let Some(last) = frames.last() {
@@ -421,10 +446,10 @@ fn write_outputs(
     if let Some(p) = &a.tool_force {
         write_tool_force(p, out)?;
     }
-    Ok(())
+    Ok(written)
 }
 
-/// step,time_s,tool,fx,fy,fz: the force on each tool every step.
+/// step,time_s,tool,fx_n,fy_n,fz_n: the force on each tool every step (N).
 fn write_tool_force(p: &std::path::Path, out: &board_sim::SimOutput) -> Result<()> {
     let rows = out.tool_force.iter().enumerate().map(|(k, f)| {
         let (step, t) = (k / out.tools.max(1), k % out.tools.max(1));
@@ -437,7 +462,7 @@ fn write_tool_force(p: &std::path::Path, out: &board_sim::SimOutput) -> Result<(
             format!("{:e}", f[2]),
         ]
     });
-    host_tools::output::write_csv(p, &["step", "time_s", "tool", "fx", "fy", "fz"], rows)
+    host_tools::output::write_csv(p, &["step", "time_s", "tool", "fx_n", "fy_n", "fz_n"], rows)
 }
 
 /// Figures of a run the report states besides the run's own output.
@@ -445,6 +470,8 @@ struct RunFacts {
     elements: usize,
     sim_s: f64,
     max_displacement: f64,
+    /// Frames in the ParaView series (`--vtk`).
+    paraview_frames: Option<usize>,
 }
 
 /// The run report (JSON): as `pe solve`'s, plus per-link traffic, waiting and the link model.
@@ -460,6 +487,7 @@ fn write_report(
         elements,
         sim_s,
         max_displacement,
+        paraview_frames,
     } = *facts;
     let links: Vec<serde_json::Value> = out
         .boards
@@ -488,6 +516,7 @@ fn write_report(
         "boards": links,
         "link_model": modelled,
         "faults_injected": out.injected,
+        "paraview_frames": paraview_frames,
         "global_network": global.map(|g| &g.json),
     });
     std::fs::write(p, serde_json::to_string_pretty(&rep)?)
@@ -500,8 +529,15 @@ struct GlobalSummary {
 }
 
 /// Global-network figures of a run beside the seed's (about 300 collision vectors per
-/// step, 72 MB/s, and 18 MB/s of graphics for its 2000-element model).
-fn global_summary(out: &board_sim::SimOutput, sim_s: f64) -> Option<GlobalSummary> {
+/// step, 72 MB/s, and 18 MB/s of graphics for its 2000-element model). `complete`: the
+/// graphics frames with every surface node received (the surface series' frames); the
+/// others were started too close to the end of the run to finish (a frame's chunks are
+/// spread over several steps).
+fn global_summary(
+    out: &board_sim::SimOutput,
+    sim_s: f64,
+    complete: usize,
+) -> Option<GlobalSummary> {
     let g: Vec<&pe_firmware::runtime::GlobalStats> = out.boards.iter().map(|b| &b.global).collect();
     let packets: u64 = g.iter().map(|s| s.packets_sent).sum();
     if packets == 0 {
@@ -529,11 +565,15 @@ fn global_summary(out: &board_sim::SimOutput, sim_s: f64) -> Option<GlobalSummar
     } else {
         vec![]
     };
+    let incomplete = out.graphics.len().saturating_sub(complete);
     let text = format!(
-        "global network: {packets} packets, {:.1} MB/s in all; contact: {vectors:.1} node vectors per step ({:.1} MB/s at this step rate; the seed: ~300 vectors, 72 MB/s), {boxes} bounding-box packets over {checks} checks, at most {cand} candidates on a board; graphics: {} frames, {:.2} MB/s (the seed: 18 MB/s); tool force at the end {:?} N, peak {:?} N",
+        "global network: {packets} packets, {:.1} MB/s in all; contact: {vectors:.1} node vectors per step ({:.1} MB/s at this step rate; the seed: ~300 vectors, 72 MB/s), {boxes} bounding-box packets over {checks} checks, at most {cand} candidates on a board; graphics: {complete} complete frames (the surface series' frames){}, {:.2} MB/s (the seed: 18 MB/s); tool force at the end {:?} N, peak {:?} N",
         bytes / sim_s / 1e6,
         vectors * 28.0 / (sim_s / steps) / 1e6,
-        out.graphics.len(),
+        match incomplete {
+            0 => String::new(),
+            n => format!(" and {n} started too close to the end to complete"),
+        },
         gbytes / sim_s / 1e6,
         last,
         peak
@@ -548,7 +588,8 @@ fn global_summary(out: &board_sim::SimOutput, sim_s: f64) -> Option<GlobalSummar
         "box_packets": boxes,
         "checks": checks,
         "candidates_max": cand,
-        "graphics_frames": out.graphics.len(),
+        "graphics_frames": complete,
+        "graphics_frames_incomplete": incomplete,
         "graphics_bytes_per_s": gbytes / sim_s,
         "seed_graphics_bytes_per_s": 18e6,
         "tool_force_final_n": last,

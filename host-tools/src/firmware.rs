@@ -210,13 +210,23 @@ pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<Imag
 }
 
 /// Final displacements by mesh node index, from a nodes CSV (`pe solve --output-nodes`,
-/// rows in mesh node order) or a board report (semihosting lines `u,GLOBAL,UX,UY,UZ` with
-/// the f64 bits in hex, between `pe-board: begin nodes` and `pe-board: end nodes`).
+/// header `node,x_m,y_m,z_m,ux_m,uy_m,uz_m` or the unit-less one of earlier versions, rows
+/// in mesh node order) or a board report (semihosting lines `u,GLOBAL,UX,UY,UZ` with the
+/// f64 bits in hex, between `pe-board: begin nodes` and `pe-board: end nodes`).
 pub fn read_displacements(path: &Path) -> Result<Vec<Option<[f64; 3]>>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let mut out: Vec<Option<[f64; 3]>> = Vec::new();
     if text.starts_with("node,") {
+        let header = text.lines().next().unwrap_or_default().trim();
+        let legacy = "node,x,y,z,ux,uy,uz";
+        if header != crate::output::NODES_CSV_HEADER.join(",") && header != legacy {
+            bail!(
+                "{}:1: header {header:?} is not a nodes CSV's ({:?}, or {legacy:?})",
+                path.display(),
+                crate::output::NODES_CSV_HEADER.join(",")
+            );
+        }
         for (k, line) in text.lines().skip(1).enumerate() {
             let f: Vec<&str> = line.split(',').collect();
             if f.len() != 7 {
@@ -358,9 +368,28 @@ mod tests {
         let csv = d.join("ref.csv");
         std::fs::write(
             &csv,
+            "node,x_m,y_m,z_m,ux_m,uy_m,uz_m\n1,0,0,0,1.5e-3,0,-2.0e-4\n2,0,0,0,0,0,0\n",
+        )
+        .unwrap();
+        // A nodes CSV of an earlier version (no units in the header) reads the same; a
+        // header that is neither is refused rather than read by position.
+        let legacy = d.join("legacy.csv");
+        std::fs::write(
+            &legacy,
             "node,x,y,z,ux,uy,uz\n1,0,0,0,1.5e-3,0,-2.0e-4\n2,0,0,0,0,0,0\n",
         )
         .unwrap();
+        let (a, b) = (
+            read_displacements(&csv).unwrap(),
+            read_displacements(&legacy).unwrap(),
+        );
+        assert_eq!(a.len(), 2);
+        assert_eq!(a[0], Some([1.5e-3, 0.0, -2.0e-4]), "non-zero row read");
+        assert_eq!(a, b);
+        let other = d.join("other.csv");
+        std::fs::write(&other, "node,ux_m,uy_m,uz_m,x_m,y_m,z_m\n1,0,0,0,0,0,0\n").unwrap();
+        let e = read_displacements(&other).unwrap_err().to_string();
+        assert!(e.contains("other.csv:1: header"), "{e}");
         let bits = |v: f64| format!("{:016x}", v.to_bits());
         let log = |uz: f64| {
             format!(

@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use host_tools::mesh::io::{generate_box, load_mesh};
 use host_tools::mesh::{Mesh, MeshError};
-use host_tools::output::vtk::{PointField, VtkSeriesWriter};
+use host_tools::output::vtk::{self, PointField, VtkSeriesWriter};
 
 // ---------------------------------------------------------------------------------------
 // helpers
@@ -660,9 +660,12 @@ fn error_vtk_garbage() {
 // ParaView output
 // ---------------------------------------------------------------------------------------
 
-/// Frames written by `VtkSeriesWriter` read back with vtkio's XML reader give the deformed
-/// points, the same connectivity, hex cell types, the regions and the displacement field; the
-/// .pvd lists every frame with its time.
+/// Frames written by `VtkSeriesWriter` read back with vtkio's XML reader give the reference
+/// points in every frame (ParaView's Warp By Vector on `displacement_m` adds the motion, so
+/// the points must not carry it too), the same connectivity, hex cell types, the regions
+/// with their names in the field data, and `displacement_m` then the extra field; the .pvd
+/// lists every frame with its time. Numbers are written shortest-round-trip, so they read
+/// back exactly.
 #[test]
 fn vtu_series_round_trip() {
     use vtkio::model::{Attribute, CellType, DataSet, Piece};
@@ -679,7 +682,7 @@ fn vtu_series_round_trip() {
             .collect();
         let s: Vec<f64> = (0..mesh.nodes.len()).map(|i| i as f64 * 0.5).collect();
         let path = w
-            .write_frame_with(t, &u, &[("stress", PointField::Scalar(&s))])
+            .write_frame_with(t, &u, &[("stress_pa", PointField::Scalar(&s))])
             .unwrap();
         assert_eq!(path, dir.join(format!("frame_{f:05}.vtu")));
 
@@ -690,14 +693,17 @@ fn vtu_series_round_trip() {
         let Some(Piece::Inline(p)) = pieces.into_iter().next() else {
             panic!("no inline piece")
         };
+        if f > 0 {
+            // Moved frames: "points = reference" below is then a real check.
+            assert!(u.iter().flatten().map(|x| x.abs()).fold(0.0, f64::max) > 1e-6);
+        }
         let pts = p.points.cast_into::<f64>().unwrap();
         assert_eq!(pts.len(), 3 * mesh.nodes.len());
-        for (i, (x, d)) in mesh.nodes.iter().zip(&u).enumerate() {
-            for k in 0..3 {
-                // {:e} formatting is shortest round-trip, so the sum comes back exactly.
-                assert_eq!(pts[3 * i + k], x[k] + d[k]);
-            }
-        }
+        assert_eq!(
+            pts,
+            mesh.nodes.iter().flatten().copied().collect::<Vec<f64>>(),
+            "frame {f}: the points are the reference positions"
+        );
         let (conn, offsets) = p.cells.cell_verts.into_xml();
         let expect: Vec<u64> = mesh.cells.iter().flatten().map(|&i| i as u64).collect();
         assert_eq!(conn, expect);
@@ -720,11 +726,18 @@ fn vtu_series_round_trip() {
             .expect("cell data region");
         assert_eq!(region.cast_into::<i32>().unwrap(), mesh.cell_regions);
         let names: Vec<&str> = p.data.point.iter().map(|a| a.name()).collect();
-        assert_eq!(names, ["displacement", "stress"]);
+        assert_eq!(names, [vtk::DISPLACEMENT, "stress_pa"]);
         let disp = match &p.data.point[0] {
             Attribute::DataArray(d) => d.data.clone().cast_into::<f64>().unwrap(),
-            _ => panic!("displacement is not a data array"),
+            _ => panic!("displacement_m is not a data array"),
         };
+        let text = std::fs::read_to_string(&path).unwrap();
+        let used: BTreeSet<i32> = mesh.cell_regions.iter().copied().collect();
+        let want: Vec<String> = used
+            .iter()
+            .map(|r| mesh.region_names.get(r).cloned().unwrap_or_default())
+            .collect();
+        assert_eq!(vtk::field_strings(&text, vtk::REGION_NAME), Some(want));
         assert_eq!(disp, u.iter().flatten().copied().collect::<Vec<f64>>());
     }
     assert_eq!(w.frame_count(), 3);
@@ -767,7 +780,9 @@ fn vtu_rejects_wrong_displacement_length() {
     assert_eq!(w.frame_count(), 0);
 }
 
-/// A real mesh writes and reads back too (regions 1..5 survive, sizes match).
+/// A real mesh writes and reads back too: sizes match, the points stay at the reference
+/// positions under a non-zero displacement, and its five named regions (the .msh file's
+/// physical names) are the lookup, in tag order.
 #[test]
 fn vtu_real_mesh_round_trip() {
     use vtkio::model::{DataSet, Piece};
@@ -775,9 +790,17 @@ fn vtu_real_mesh_round_trip() {
     let dir = temp_dir("vtureal");
     let mut w = VtkSeriesWriter::new(&dir, &mesh).unwrap();
     let path = w
-        .write_frame(0.0, &vec![[0.0; 3]; mesh.nodes.len()])
+        .write_frame(0.1, &vec![[1e-3, -2e-3, 5e-4]; mesh.nodes.len()])
         .unwrap();
     w.finish().unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    let names = vtk::field_strings(&text, vtk::REGION_NAME).expect("region_name lookup");
+    assert_eq!(names.len(), 5, "{names:?}");
+    assert!(names.iter().all(|n| !n.is_empty()), "{names:?}");
+    assert_eq!(
+        names,
+        mesh.region_names.values().cloned().collect::<Vec<_>>()
+    );
     let vtk = vtkio::Vtk::import(&path).unwrap();
     let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
         panic!("not an unstructured grid")

@@ -9,10 +9,15 @@ use host_tools::problem::Problem;
 use host_tools::scene::builtin::builtin_scene;
 use host_tools::scene::settings::{IntegrationArg, PrecisionArg};
 use host_tools::scene::Scene;
-use host_tools::solver::{self, Observer};
+use host_tools::solver::{self, Observer, StepState};
 
 #[derive(Parser)]
-#[command(name = "pe", version, about = "Soft-tissue simulator host tools")]
+#[command(
+    name = "pe",
+    version,
+    about = "Soft-tissue simulator host tools",
+    after_help = "Examples:\n  pe solve --builtin --level coarse --vtk out/frames --output-nodes out/nodes.csv\n  pe compile --builtin --level coarse --boards 2x2x2 -o out/compiled\n  board-sim run out/compiled --output-nodes out/board.csv\n  pe compare out/nodes.csv out/board.csv"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -52,6 +57,9 @@ impl SceneArgs {
 #[derive(Subcommand)]
 enum Command {
     /// Run a scene on this machine (the reference solver every board run is compared with).
+    #[command(
+        after_help = "Example:\n  pe solve scenes/liver.toml --vtk out/frames --output-nodes out/nodes.csv --report out/report.json\n  (open out/frames/series.pvd in ParaView; Warp By Vector on displacement_m shows the deformed shape)"
+    )]
     Solve {
         #[command(flatten)]
         scene: SceneArgs,
@@ -59,7 +67,7 @@ enum Command {
         /// whatever the count.
         #[arg(long)]
         threads: Option<usize>,
-        /// Final nodal positions and displacements: node,x,y,z,ux,uy,uz.
+        /// Final nodal positions and displacements: node,x_m,y_m,z_m,ux_m,uy_m,uz_m.
         #[arg(long)]
         output_nodes: Option<PathBuf>,
         /// Run report (JSON).
@@ -82,11 +90,15 @@ enum Command {
         quiet: bool,
     },
     /// Print a scene (e.g. the built-in one) as TOML, to start a scene file from.
+    #[command(after_help = "Example:\n  pe scene --builtin --level coarse > my_scene.toml")]
     Scene {
         #[command(flatten)]
         scene: SceneArgs,
     },
     /// Partition a scene onto a board mesh and write one schedule image per board.
+    #[command(
+        after_help = "Example:\n  pe compile --builtin --level coarse --boards 2x2x2 -o out/compiled"
+    )]
     Compile {
         #[command(flatten)]
         scene: SceneArgs,
@@ -112,6 +124,7 @@ enum Command {
     /// Flashable artefacts per board of a compiled schedule: the firmware ELF with the
     /// board's position, the schedule blob, and OUT/manifest.json with the commands that
     /// flash (probe-rs) or run (QEMU) each board.
+    #[command(after_help = "Example:\n  pe image out/compiled -o out/flash")]
     Image {
         /// Directory written by `pe compile`.
         dir: PathBuf,
@@ -126,8 +139,10 @@ enum Command {
     /// Compare final displacements bit for bit: REFERENCE is a nodes CSV (`pe solve
     /// --output-nodes`), OTHER a nodes CSV (board-sim) or a board's semihosting report.
     /// Fails on any difference.
+    #[command(after_help = "Example:\n  pe compare out/nodes.csv out/board-sim.csv")]
     Compare { reference: PathBuf, other: PathBuf },
     /// Show a board's compiled schedule: batches and exchange lists.
+    #[command(after_help = "Example:\n  pe inspect out/compiled --board 1,0,0")]
     Inspect {
         /// Directory written by `pe compile`.
         dir: PathBuf,
@@ -136,6 +151,7 @@ enum Command {
         board: String,
     },
     /// Measure ns per element-step and the flop count of one element-step.
+    #[command(after_help = "Example:\n  pe bench --elements 2000 --precision f32 --threads 1")]
     Bench {
         /// Elements of the benchmark mesh (a box).
         #[arg(long, default_value_t = 2000)]
@@ -158,6 +174,7 @@ enum Command {
     },
     /// Run a scene over a grid of solver configurations; write cost and error against the
     /// most accurate configuration to DIR/tradeoff.csv, .md and .png.
+    #[command(after_help = "Example:\n  pe tradeoff --builtin --level coarse -o out/tradeoff")]
     Tradeoff {
         #[command(flatten)]
         scene: SceneArgs,
@@ -169,6 +186,7 @@ enum Command {
         fine: bool,
     },
     /// Run the stability suite and write a readable report.
+    #[command(after_help = "Example:\n  pe stability --only poisson -o out/stability.md")]
     Stability {
         /// Markdown report (printed when not given).
         #[arg(short, long)]
@@ -189,14 +207,14 @@ struct Progress {
 }
 
 impl Observer for Progress {
-    fn after_step(&mut self, step: u64, time_s: f64, total: u64, u: &dyn Fn() -> Vec<[f64; 3]>) {
+    fn after_step(&mut self, step: u64, time_s: f64, total: u64, state: &dyn StepState) {
         if let Some(b) = &self.bar {
             if step.is_multiple_of(64) || step == total {
                 b.set_position(step);
             }
         }
         if let Some(f) = &mut self.frames {
-            if let Err(e) = f.maybe_write(step, time_s, total, u) {
+            if let Err(e) = f.maybe_write(step, time_s, total, state) {
                 self.error.get_or_insert(e);
             }
         }
@@ -387,13 +405,12 @@ fn solve(scene: &SceneArgs, overrides: &Overrides, outputs: SolveOutputs) -> Res
     if let Some(f) = obs.frames.take() {
         f.finish()?;
     }
-    let r = &out.report;
-    println!(
-        "{} steps in {:.2} s on {} thread(s), {} kernel: {:.3e} element-steps/s, real-time factor {:.3}; max |u| = {:.4e} m at node {}; KE = {:.3e} J; probe/prescribed reaction = [{:.4e}, {:.4e}, {:.4e}] N",
-        r.steps, r.wall_s, r.threads, r.kernel, r.element_steps_per_s, r.real_time_factor, r.max_displacement,
-        r.max_displacement_node, r.kinetic_energy_final,
-        r.prescribed_reaction_n[0], r.prescribed_reaction_n[1], r.prescribed_reaction_n[2]
-    );
+    let prescribed = problem
+        .node_kind
+        .iter()
+        .filter(|k| matches!(k, host_tools::problem::NodeKind::Prescribed(_)))
+        .count();
+    println!("{}", out.report.console_summary(prescribed));
     if let Some(p) = outputs.output_nodes {
         output::write_nodes_csv(&p, &problem.mesh, &out.displacements)?;
     }

@@ -1,5 +1,9 @@
 //! Run outputs shared by `pe solve` and board-sim: the nodes CSV (and the CSV writer every
 //! table goes through), ParaView frames and the progress bar.
+//!
+//! Every CSV column that has a unit carries it as the suffix of its name, in SI (`x_m`,
+//! `ux_m`, `time_s`, `fx_n`, `energy_j`); ids, counts and ratios have none. The ParaView
+//! frames name their arrays the same way (see [`vtk`]).
 
 pub mod font;
 pub mod render;
@@ -11,10 +15,16 @@ use std::path::Path;
 use anyhow::{Context, Result};
 
 use crate::mesh::Mesh;
-use crate::output::vtk::VtkSeriesWriter;
+use crate::output::vtk::{PointField, VtkSeriesWriter, VELOCITY};
+use crate::solver::StepState;
 
-/// `node,x,y,z,ux,uy,uz`: every mesh node once, in mesh node order (node = its tag).
-/// Values are written with 17 significant digits so the CSV round-trips f64 exactly.
+/// The nodes CSV's header: the node tag, the initial position and the displacement, with
+/// their units (m).
+pub const NODES_CSV_HEADER: [&str; 7] = ["node", "x_m", "y_m", "z_m", "ux_m", "uy_m", "uz_m"];
+
+/// `node,x_m,y_m,z_m,ux_m,uy_m,uz_m`: every mesh node once, in mesh node order (node = its
+/// tag): initial position and displacement, m. Values are written with 17 significant
+/// digits so the CSV round-trips f64 exactly.
 pub fn write_nodes_csv(path: &Path, mesh: &Mesh, u: &[[f64; 3]]) -> Result<()> {
     let rows = mesh.nodes.iter().zip(u).enumerate().map(|(k, (p, d))| {
         let tag = mesh.node_tags.get(k).copied().unwrap_or(k as u64 + 1);
@@ -22,7 +32,7 @@ pub fn write_nodes_csv(path: &Path, mesh: &Mesh, u: &[[f64; 3]]) -> Result<()> {
         row.extend(p.iter().chain(d).map(|v| format!("{v:.17e}")));
         row
     });
-    write_csv(path, &["node", "x", "y", "z", "ux", "uy", "uz"], rows)
+    write_csv(path, &NODES_CSV_HEADER, rows)
 }
 
 /// Writes the CSV file `path`: the header, then one record per row. The fields come
@@ -79,7 +89,9 @@ pub fn progress_bar(total: u64) -> indicatif::ProgressBar {
     b
 }
 
-/// Writes a frame every `interval_s` of simulated time (and the last one).
+/// Writes a frame every `interval_s` of simulated time (and the last one): the reference
+/// points with `displacement_m` and `velocity_m_per_s` (see [`vtk`]'s conventions), from
+/// rest at time 0.
 pub struct FrameWriter {
     writer: VtkSeriesWriter,
     every_steps: u64,
@@ -89,24 +101,36 @@ impl FrameWriter {
     pub fn new(dir: &Path, mesh: &Mesh, interval_s: f64, dt_s: f64) -> Result<Self> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         let mut writer = VtkSeriesWriter::new(dir, mesh)?;
-        writer.write_frame(0.0, &vec![[0.0; 3]; mesh.nodes.len()])?;
+        let rest = vec![[0.0; 3]; mesh.nodes.len()];
+        writer.write_frame_with(0.0, &rest, &[(VELOCITY, PointField::Vector(&rest))])?;
         Ok(FrameWriter {
             writer,
             every_steps: ((interval_s / dt_s).round() as u64).max(1),
         })
     }
 
+    /// After step `step` of `total`: a frame if one is due, of the state `state` gives.
     pub fn maybe_write(
         &mut self,
         step: u64,
         time_s: f64,
         total: u64,
-        u: &dyn Fn() -> Vec<[f64; 3]>,
+        state: &dyn StepState,
     ) -> Result<()> {
         if step.is_multiple_of(self.every_steps) || step == total {
-            self.writer.write_frame(time_s, &u())?;
+            let v = state.velocities();
+            self.writer.write_frame_with(
+                time_s,
+                &state.displacements(),
+                &[(VELOCITY, PointField::Vector(&v))],
+            )?;
         }
         Ok(())
+    }
+
+    /// Number of frames written so far (the rest frame included).
+    pub fn frame_count(&self) -> usize {
+        self.writer.frame_count()
     }
 
     pub fn finish(self) -> Result<()> {

@@ -1,15 +1,43 @@
 //! ParaView output: a time series of XML unstructured-grid files (`frame_NNNNN.vtu`, ASCII)
 //! plus a `series.pvd` collection that lists every frame with its time.
 //!
-//! Each frame holds the deformed points (initial positions + displacement), the hexahedra
-//! (`VTK_HEXAHEDRON` = 12), the point vector "displacement", any extra point fields, the
-//! cell data "region" and the time as field data "TimeValue". Open `series.pvd` in ParaView.
+//! Conventions, the same in every frame `pe solve` and board-sim write (volume and surface):
+//!
+//! - The points are the **reference (initial) positions**, the same in every frame; the
+//!   motion is the point vector `displacement_m`. ParaView's *Warp By Vector* on
+//!   `displacement_m` (scale 1) therefore shows the deformed shape, once.
+//! - **Units are in the array names**, as the suffix of the SI unit: `displacement_m` (m),
+//!   `velocity_m_per_s` (m/s; `pe solve` only: the central difference's velocity over the
+//!   last step, `(u_n − u_{n−1})/dt`; board-sim's boards send displacements only). Extra
+//!   point fields are named by their writer the same way. Ids and counts have no unit.
+//!   The one exception is the field data `TimeValue` (s), the name ParaView reads a frame's
+//!   time from.
+//! - Cell data `region` (Int32): the mesh's region (physical group) tag of each cell; on a
+//!   surface, the region of the cell the face bounds. Its names are a lookup in the field
+//!   data: `region_id` (Int32) and `region_name` (String, empty when the mesh names none),
+//!   in the same order, one entry per region present (ParaView: *Spreadsheet View*,
+//!   *Field Data*).
+//!
+//! Hexahedra are `VTK_HEXAHEDRON` (12), surface quads `VTK_QUAD` (9). Open `series.pvd` in
+//! ParaView.
 
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::fs;
 use std::path::{Path, PathBuf};
 
 use crate::mesh::{Mesh, MeshError};
+
+/// Point vector: displacement from the reference position (m).
+pub const DISPLACEMENT: &str = "displacement_m";
+/// Point vector: velocity (m/s).
+pub const VELOCITY: &str = "velocity_m_per_s";
+/// Cell data: region tag of each cell (or of the cell a surface face bounds).
+pub const REGION: &str = "region";
+/// Field data: the region tags of the lookup, in the order of [`REGION_NAME`].
+pub const REGION_ID: &str = "region_id";
+/// Field data: the name of each region of [`REGION_ID`] (String array).
+pub const REGION_NAME: &str = "region_name";
 
 /// Extra per-node data for a frame.
 #[derive(Clone, Copy, Debug)]
@@ -31,7 +59,8 @@ impl PointField<'_> {
 
 /// Writes `DIR/frame_00000.vtu`, `DIR/frame_00001.vtu`, ... and, on
 /// [`finish`](VtkSeriesWriter::finish) (or [`write_pvd`](VtkSeriesWriter::write_pvd)),
-/// `DIR/series.pvd`. Existing files of those names in `DIR` are overwritten.
+/// `DIR/series.pvd`. Existing files of those names in `DIR` are overwritten. The arrays
+/// follow the module's conventions.
 #[derive(Debug)]
 pub struct VtkSeriesWriter {
     /// Reference positions: every mesh node; cells with their region sections.
@@ -39,20 +68,22 @@ pub struct VtkSeriesWriter {
 }
 
 /// What a series of `.vtu` frames shares: the directory, the reference positions, the cell
-/// sections (the same in every frame) and the frames written so far.
+/// sections and region lookup (the same in every frame) and the frames written so far.
 #[derive(Debug)]
 struct FrameSeries {
     dir: PathBuf,
     reference: Vec<[f64; 3]>,
     /// Connectivity, offsets, types and cell data sections, the same in every frame.
     cells_xml: String,
+    /// The region lookup arrays of the field data, the same in every frame.
+    field_xml: String,
     n_cells: usize,
     frames: Vec<(f64, String)>,
 }
 
 impl FrameSeries {
-    /// Writes `DIR/{prefix}_NNNNN.vtu`: the reference positions + `displacement` (one per
-    /// reference point), with the extra point data; returns its path.
+    /// Writes `DIR/{prefix}_NNNNN.vtu`: the reference positions, `displacement_m` (one per
+    /// reference point) and the extra point data; returns its path.
     fn write_frame(
         &mut self,
         prefix: &str,
@@ -91,8 +122,11 @@ impl FrameSeries {
             time_s,
             &self.reference,
             displacement,
-            &self.cells_xml,
-            self.n_cells,
+            &Sections {
+                cells: &self.cells_xml,
+                n_cells: self.n_cells,
+                field: &self.field_xml,
+            },
             extra,
         );
         fs::write(&path, s).map_err(io_err(&path))?;
@@ -137,7 +171,6 @@ impl VtkSeriesWriter {
             mesh.cells.iter().map(|c| &c[..]),
             8,
             12,
-            "region",
             mesh.cell_regions.iter().map(|r| r.to_string()),
         );
         Ok(VtkSeriesWriter {
@@ -145,6 +178,7 @@ impl VtkSeriesWriter {
                 dir: dir.to_path_buf(),
                 reference: mesh.nodes.clone(),
                 cells_xml: c,
+                field_xml: region_lookup_xml(&mesh.cell_regions, &mesh.region_names),
                 n_cells: mesh.cells.len(),
                 frames: Vec::new(),
             },
@@ -156,7 +190,7 @@ impl VtkSeriesWriter {
         self.series.frames.len()
     }
 
-    /// Write the next frame: points at initial position + `displacement` (one per node).
+    /// Write the next frame: the reference points with `displacement_m` (one per node).
     /// Returns the path of the written `.vtu`.
     pub fn write_frame(
         &mut self,
@@ -167,7 +201,8 @@ impl VtkSeriesWriter {
     }
 
     /// Like [`write_frame`](Self::write_frame) with extra named point data (one value or
-    /// vector per node each), e.g. `("von_mises", PointField::Scalar(&s))`.
+    /// vector per node each), e.g. `(VELOCITY, PointField::Vector(&v))`. Name a field with
+    /// its unit, as the module's conventions say (`von_mises_pa`).
     pub fn write_frame_with(
         &mut self,
         time_s: f64,
@@ -193,13 +228,12 @@ impl VtkSeriesWriter {
 }
 
 /// The `<Cells>` and `<CellData>` sections (the same in every frame): connectivity of
-/// `per_cell` nodes each, offsets, VTK type `vtk_type`, and one Int32 cell field `data_name`.
+/// `per_cell` nodes each, offsets, VTK type `vtk_type`, and the Int32 cell data `region`.
 fn cells_xml<'a>(
     cells: impl ExactSizeIterator<Item = &'a [u32]>,
     per_cell: usize,
     vtk_type: u8,
-    data_name: &str,
-    data: impl Iterator<Item = String>,
+    regions: impl Iterator<Item = String>,
 ) -> String {
     let n = cells.len();
     let mut c = String::new();
@@ -233,12 +267,12 @@ fn cells_xml<'a>(
     }
     let _ = writeln!(c, "        </DataArray>");
     let _ = writeln!(c, "      </Cells>");
-    let _ = writeln!(c, "      <CellData Scalars=\"{data_name}\">");
+    let _ = writeln!(c, "      <CellData Scalars=\"{REGION}\">");
     let _ = writeln!(
         c,
-        "        <DataArray type=\"Int32\" Name=\"{data_name}\" format=\"ascii\">"
+        "        <DataArray type=\"Int32\" Name=\"{REGION}\" format=\"ascii\">"
     );
-    let data: Vec<String> = data.collect();
+    let data: Vec<String> = regions.collect();
     for chunk in data.chunks(32) {
         let _ = writeln!(c, "          {}", chunk.join(" "));
     }
@@ -247,19 +281,67 @@ fn cells_xml<'a>(
     c
 }
 
-/// One frame's `.vtu` text: deformed points (`reference + displacement`), the fixed cell
-/// sections, the point vector "displacement" and any extra point fields, the time as field
-/// data "TimeValue".
+/// The region lookup of the field data: `region_id` (Int32) and `region_name` (String),
+/// one entry per region tag that some cell has, ascending, named from `names` (empty when
+/// unnamed).
+fn region_lookup_xml(cell_regions: &[i32], names: &BTreeMap<i32, String>) -> String {
+    let ids: std::collections::BTreeSet<i32> = cell_regions.iter().copied().collect();
+    let names: Vec<&str> = ids
+        .iter()
+        .map(|r| names.get(r).map_or("", String::as_str))
+        .collect();
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "      <DataArray type=\"Int32\" Name=\"{REGION_ID}\" NumberOfTuples=\"{}\" format=\"ascii\">",
+        ids.len()
+    );
+    let ids: Vec<String> = ids.iter().map(i32::to_string).collect();
+    for chunk in ids.chunks(32) {
+        let _ = writeln!(s, "        {}", chunk.join(" "));
+    }
+    s.push_str("      </DataArray>\n");
+    let _ = writeln!(
+        s,
+        "      <DataArray type=\"String\" Name=\"{REGION_NAME}\" NumberOfTuples=\"{}\" format=\"ascii\">",
+        names.len()
+    );
+    for name in names {
+        let _ = writeln!(s, "        {}", ascii_string(name));
+    }
+    s.push_str("      </DataArray>\n");
+    s
+}
+
+/// A string as VTK's XML writer spells it in an ASCII `String` array: each byte as a
+/// (signed char) number, then the terminating 0.
+fn ascii_string(name: &str) -> String {
+    let mut v: Vec<String> = name.bytes().map(|b| (b as i8).to_string()).collect();
+    v.push("0".into());
+    v.join(" ")
+}
+
+/// The parts of a frame that are the same in every frame.
+struct Sections<'a> {
+    /// `<Cells>` and `<CellData>`.
+    cells: &'a str,
+    n_cells: usize,
+    /// Field data arrays besides `TimeValue`.
+    field: &'a str,
+}
+
+/// One frame's `.vtu` text: the reference points, the fixed cell sections, the point
+/// vector `displacement_m` and any extra point fields, the time as field data `TimeValue`
+/// next to the region lookup.
 fn frame_xml(
     time_s: f64,
     reference: &[[f64; 3]],
     displacement: &[[f64; 3]],
-    cells_xml: &str,
-    n_cells: usize,
+    fixed: &Sections<'_>,
     extra: &[(&str, PointField<'_>)],
 ) -> String {
     let n = reference.len();
-    let mut s = String::with_capacity(128 * n + cells_xml.len() + 1024);
+    let mut s = String::with_capacity(128 * n + fixed.cells.len() + fixed.field.len() + 1024);
     s.push_str("<?xml version=\"1.0\"?>\n");
     s.push_str("<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n");
     s.push_str("  <UnstructuredGrid>\n");
@@ -269,23 +351,26 @@ fn frame_xml(
          format=\"ascii\">\n        ",
     );
     num(&mut s, time_s);
-    s.push_str("\n      </DataArray>\n    </FieldData>\n");
+    s.push_str("\n      </DataArray>\n");
+    s.push_str(fixed.field);
+    s.push_str("    </FieldData>\n");
     let _ = writeln!(
         s,
-        "    <Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n_cells}\">"
+        "    <Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{}\">",
+        fixed.n_cells
     );
     s.push_str("      <Points>\n");
     s.push_str(
         "        <DataArray type=\"Float64\" Name=\"Points\" NumberOfComponents=\"3\" \
          format=\"ascii\">\n",
     );
-    for (p, u) in reference.iter().zip(displacement) {
-        vec3_line(&mut s, [p[0] + u[0], p[1] + u[1], p[2] + u[2]]);
+    for p in reference {
+        vec3_line(&mut s, *p);
     }
     s.push_str("        </DataArray>\n      </Points>\n");
-    s.push_str(cells_xml);
-    s.push_str("      <PointData Vectors=\"displacement\">\n");
-    write_vectors(&mut s, "displacement", displacement);
+    s.push_str(fixed.cells);
+    let _ = writeln!(s, "      <PointData Vectors=\"{DISPLACEMENT}\">");
+    write_vectors(&mut s, DISPLACEMENT, displacement);
     for (fname, field) in extra {
         match field {
             PointField::Vector(v) => write_vectors(&mut s, fname, v),
@@ -355,32 +440,36 @@ fn write_vectors(s: &mut String, name: &str, v: &[[f64; 3]]) {
 
 /// ParaView series of a surface (quads): `DIR/surface_NNNNN.vtu` + `DIR/series.pvd`.
 ///
-/// Each frame holds the deformed points (reference + displacement), the quads
-/// (`VTK_QUAD` = 9), the point vector "displacement", the cell data "group" and the time as
-/// field data "TimeValue". Existing files of those names in `DIR` are overwritten.
+/// Each frame holds the reference points, the quads (`VTK_QUAD` = 9), the point vector
+/// `displacement_m`, the cell data `region` with its `region_id`/`region_name` lookup and
+/// the time as field data `TimeValue` (the module's conventions). Existing files of those
+/// names in `DIR` are overwritten.
 #[derive(Debug)]
 pub struct SurfaceSeriesWriter {
-    /// Reference positions: the surface's nodes; quads with their group section.
+    /// Reference positions: the surface's nodes; quads with their region section.
     series: FrameSeries,
 }
 
 impl SurfaceSeriesWriter {
-    /// `reference`: initial positions of the surface's nodes (surface-local numbering), `quads` in that numbering.
+    /// `reference`: initial positions of the surface's nodes (surface-local numbering),
+    /// `quads` in that numbering, `quad_regions` the region tag of each quad (of the cell
+    /// it bounds) and `region_names` the names of the tags (a mesh's `region_names`).
     ///
     /// Creates `dir` (and parents) if needed. The reference positions must be finite, every
-    /// quad index must be below `reference.len()` and there must be one group per quad.
+    /// quad index must be below `reference.len()` and there must be one region per quad.
     pub fn new(
         dir: &Path,
         reference: Vec<[f64; 3]>,
         quads: Vec<[u32; 4]>,
-        quad_groups: Vec<u8>,
+        quad_regions: Vec<i32>,
+        region_names: &BTreeMap<i32, String>,
     ) -> Result<Self, MeshError> {
-        if quad_groups.len() != quads.len() {
+        if quad_regions.len() != quads.len() {
             return Err(MeshError::LengthMismatch {
                 path: dir.to_path_buf(),
-                what: "quad_groups".into(),
+                what: "quad_regions".into(),
                 expected: quads.len(),
-                got: quad_groups.len(),
+                got: quad_regions.len(),
             });
         }
         for (i, p) in reference.iter().enumerate() {
@@ -407,14 +496,14 @@ impl SurfaceSeriesWriter {
             quads.iter().map(|q| &q[..]),
             4,
             9,
-            "group",
-            quad_groups.iter().map(|g| g.to_string()),
+            quad_regions.iter().map(|g| g.to_string()),
         );
         Ok(SurfaceSeriesWriter {
             series: FrameSeries {
                 dir: dir.to_path_buf(),
                 reference,
                 cells_xml: c,
+                field_xml: region_lookup_xml(&quad_regions, region_names),
                 n_cells: quads.len(),
                 frames: Vec::new(),
             },
@@ -445,6 +534,32 @@ impl SurfaceSeriesWriter {
     }
 }
 
+/// Reads the field data String array `name` of a `.vtu` text written here (or by VTK in
+/// ASCII): the strings in order. None when the array is absent or not a String array of
+/// byte values.
+pub fn field_strings(vtu: &str, name: &str) -> Option<Vec<String>> {
+    let field = vtu
+        .split("<FieldData>")
+        .nth(1)?
+        .split("</FieldData>")
+        .next()?;
+    let tag = format!("Name=\"{}\"", xml_attr(name));
+    let (_, rest) = field
+        .split("<DataArray")
+        .filter_map(|a| a.split_once('>'))
+        .find(|(attrs, _)| attrs.contains(&tag) && attrs.contains("type=\"String\""))?;
+    let mut out = Vec::new();
+    let mut cur = Vec::new();
+    for t in rest.split("</DataArray>").next()?.split_whitespace() {
+        match t.parse::<i16>().ok()? {
+            0 => out.push(String::from_utf8(std::mem::take(&mut cur)).ok()?),
+            // A signed char's bits are the byte.
+            b => cur.push(b as u8),
+        }
+    }
+    cur.is_empty().then_some(out)
+}
+
 #[cfg(test)]
 mod surface_series_tests {
     use super::*;
@@ -459,28 +574,38 @@ mod surface_series_tests {
         crate::mesh::cube_surface(0.01)
     }
 
-    /// Two frames of a cube's surface read back with vtkio: 8 points, 6 quads, the groups,
-    /// and the second frame's points are reference + displacement.
+    /// Two frames of a cube's surface read back with vtkio: 8 points, 6 quads, the regions
+    /// with their names in the field data, and the second frame's points are the reference
+    /// positions (not moved: Warp By Vector on `displacement_m` moves them, once) with the
+    /// displacement as `displacement_m`. Coordinates and displacements are written
+    /// shortest-round-trip, so they read back exactly.
     #[test]
     fn surface_series_round_trip() {
         use vtkio::model::{Attribute, CellType, DataSet, Piece};
 
         let (nodes, quads) = cube();
-        let groups = vec![0u8, 0, 1, 1, 2, 7];
+        let regions = vec![3, 3, 1, 1, 2, 7];
+        let names: BTreeMap<i32, String> = [(1, "uterus"), (3, "right tube"), (9, "unused")]
+            .map(|(r, n)| (r, n.to_string()))
+            .into();
         let dir = temp_dir("surface");
         let mut w =
-            SurfaceSeriesWriter::new(&dir, nodes.clone(), quads.clone(), groups.clone()).unwrap();
+            SurfaceSeriesWriter::new(&dir, nodes.clone(), quads.clone(), regions.clone(), &names)
+                .unwrap();
         let zero = vec![[0.0; 3]; 8];
         let u: Vec<[f64; 3]> = nodes
             .iter()
             .enumerate()
             .map(|(i, p)| [0.1 * p[2], -1e-4 * i as f64, 3e-5])
             .collect();
+        // The displacement is far from zero, so "points = reference" is a real check.
+        assert!(u.iter().flatten().map(|x| x.abs()).sum::<f64>() > 1e-4);
         w.write_frame(0.0, &zero).unwrap();
         w.write_frame(0.002, &u).unwrap();
         assert_eq!(w.frame_count(), 2);
 
-        let vtk = vtkio::Vtk::import(dir.join("surface_00001.vtu")).unwrap();
+        let path = dir.join("surface_00001.vtu");
+        let vtk = vtkio::Vtk::import(&path).unwrap();
         let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
             panic!("not an unstructured grid")
         };
@@ -489,35 +614,44 @@ mod surface_series_tests {
         };
         let pts = p.points.cast_into::<f64>().unwrap();
         assert_eq!(pts.len(), 3 * 8, "8 points");
-        for (i, (x, d)) in nodes.iter().zip(&u).enumerate() {
-            for k in 0..3 {
-                assert!((pts[3 * i + k] - (x[k] + d[k])).abs() <= 1e-12, "point {i}");
-            }
-        }
+        assert_eq!(pts, nodes.iter().flatten().copied().collect::<Vec<f64>>());
         assert_eq!(p.cells.types.len(), 6, "6 cells");
         assert!(p.cells.types.iter().all(|&t| t == CellType::Quad));
         let (conn, offsets) = p.cells.cell_verts.into_xml();
         let expect: Vec<u64> = quads.iter().flatten().map(|&i| i as u64).collect();
         assert_eq!(conn, expect);
         assert_eq!(offsets, [4, 8, 12, 16, 20, 24]);
-        let group = p
+        let region = p
             .data
             .cell
             .iter()
             .find_map(|a| match a {
-                Attribute::DataArray(d) if d.name == "group" => Some(d.data.clone()),
+                Attribute::DataArray(d) if d.name == REGION => Some(d.data.clone()),
                 _ => None,
             })
-            .expect("cell data group");
-        let want: Vec<i32> = groups.iter().map(|&g| g as i32).collect();
-        assert_eq!(group.cast_into::<i32>().unwrap(), want);
+            .expect("cell data region");
+        assert_eq!(region.cast_into::<i32>().unwrap(), regions);
+        let names_read: Vec<&str> = p.data.point.iter().map(|a| a.name()).collect();
+        assert_eq!(names_read, [DISPLACEMENT]);
         let disp = match &p.data.point[0] {
-            Attribute::DataArray(d) if d.name == "displacement" => {
-                d.data.clone().cast_into::<f64>().unwrap()
-            }
-            _ => panic!("displacement is not the first point data array"),
+            Attribute::DataArray(d) => d.data.clone().cast_into::<f64>().unwrap(),
+            _ => panic!("displacement_m is not a data array"),
         };
         assert_eq!(disp, u.iter().flatten().copied().collect::<Vec<f64>>());
+
+        // The lookup: one entry per region present (1, 2, 3, 7), named where the mesh
+        // names it; the unused name 9 is left out.
+        let text = fs::read_to_string(&path).unwrap();
+        assert_eq!(
+            field_strings(&text, REGION_NAME).unwrap(),
+            ["uterus", "", "right tube", ""]
+        );
+        assert!(
+            text.contains(&format!(
+                "Name=\"{REGION_ID}\" NumberOfTuples=\"4\" format=\"ascii\">\n        1 2 3 7\n"
+            )),
+            "{text}"
+        );
 
         let pvd = w.finish().unwrap();
         assert_eq!(pvd, dir.join("series.pvd"));
@@ -530,15 +664,36 @@ mod surface_series_tests {
         let _ = fs::remove_dir_all(&dir);
     }
 
+    /// A name is spelt as VTK's writer spells an ASCII String array: its bytes (as signed
+    /// chars), then 0; the reader takes back what the writer wrote, non-ASCII included.
+    #[test]
+    fn string_array_spelling() {
+        assert_eq!(ascii_string("ab"), "97 98 0");
+        assert_eq!(ascii_string(""), "0");
+        let names: BTreeMap<i32, String> =
+            [(1, "ovary é".to_string()), (2, "tube".to_string())].into();
+        let xml = format!(
+            "<FieldData>\n{}</FieldData>",
+            region_lookup_xml(&[2, 1, 2], &names)
+        );
+        assert!(xml.contains("-61 -87 0"), "é is the bytes C3 A9: {xml}");
+        assert_eq!(
+            field_strings(&xml, REGION_NAME).unwrap(),
+            ["ovary é", "tube"]
+        );
+        assert_eq!(field_strings(&xml, REGION_ID), None, "not a String array");
+    }
+
     #[test]
     fn surface_series_rejects_bad_input() {
         let (nodes, quads) = cube();
         let dir = temp_dir("surface-bad");
-        let e = SurfaceSeriesWriter::new(&dir, nodes.clone(), quads.clone(), vec![0; 5]);
+        let none = BTreeMap::new();
+        let e = SurfaceSeriesWriter::new(&dir, nodes.clone(), quads.clone(), vec![0; 5], &none);
         assert!(matches!(e, Err(MeshError::LengthMismatch { .. })), "{e:?}");
         let mut q = quads.clone();
         q[3][2] = 8;
-        let e = SurfaceSeriesWriter::new(&dir, nodes.clone(), q, vec![0; 6]);
+        let e = SurfaceSeriesWriter::new(&dir, nodes.clone(), q, vec![0; 6], &none);
         assert!(
             matches!(
                 e,
@@ -550,7 +705,7 @@ mod surface_series_tests {
             ),
             "{e:?}"
         );
-        let mut w = SurfaceSeriesWriter::new(&dir, nodes, quads, vec![0; 6]).unwrap();
+        let mut w = SurfaceSeriesWriter::new(&dir, nodes, quads, vec![0; 6], &none).unwrap();
         let e = w.write_frame(0.0, &[[0.0; 3]; 7]).unwrap_err();
         assert!(e.to_string().contains("surface_00000.vtu"), "{e}");
         assert!(w.write_frame(f64::NAN, &[[0.0; 3]; 8]).is_err());

@@ -19,7 +19,8 @@ mod run;
 
 pub use monitor::{DtMonitor, Energies};
 pub use run::{
-    describe_step_error, run, run_threads, run_typed, ContactReport, Observer, RunOutput, RunReport,
+    describe_step_error, run, run_threads, run_typed, ContactReport, Observer, RunOutput,
+    RunReport, StepState,
 };
 
 /// Serial explicit model in scalar type `T`.
@@ -448,5 +449,15 @@ impl<'p, T: Real> Model<'p, T> {
     /// Displacements as `f64`.
     pub fn displacements(&self) -> Vec<[f64; 3]> {
         self.u.iter().map(|u| u.map(|v| v.to_f64())).collect()
+    }
+
+    /// Velocities as `f64` (m/s): the central difference's `(u − u_prev)/dt` over the last
+    /// step, the velocity at half a step before [`time_s`](Self::time_s) (zero at rest).
+    pub fn velocities(&self) -> Vec<[f64; 3]> {
+        self.u
+            .iter()
+            .zip(&self.u_prev)
+            .map(|(u, p)| core::array::from_fn(|i| (u[i].to_f64() - p[i].to_f64()) / self.dt_s))
+            .collect()
     }
 }

@@ -71,6 +71,43 @@ pub struct ContactReport {
     pub active_contacts_final: u32,
 }
 
+impl RunReport {
+    /// The console summary of `pe solve`: steps, speed, largest displacement and kinetic
+    /// energy; the reaction of the prescribed nodes when there are any
+    /// (`prescribed_nodes`), and each tool's force at the end and its peak when the scene
+    /// has tools.
+    pub fn console_summary(&self, prescribed_nodes: usize) -> String {
+        let r = self;
+        let mut s = format!(
+            "{} steps in {:.2} s on {} thread(s), {} kernel: {:.3e} element-steps/s, real-time factor {:.3}; max |u| = {:.4e} m at node {}; KE = {:.3e} J",
+            r.steps, r.wall_s, r.threads, r.kernel, r.element_steps_per_s, r.real_time_factor,
+            r.max_displacement, r.max_displacement_node, r.kinetic_energy_final
+        );
+        if prescribed_nodes > 0 {
+            let f = r.prescribed_reaction_n;
+            s += &format!(
+                "\n  prescribed reaction ({prescribed_nodes} prescribed nodes on the tissue, at the end) = [{:.4e}, {:.4e}, {:.4e}] N",
+                f[0], f[1], f[2]
+            );
+        }
+        if let Some(c) = &r.contact {
+            for (k, name) in c.tools.iter().enumerate() {
+                let f = c.tool_force_final_n.get(k).copied().unwrap_or([0.0; 3]);
+                let peak = c.tool_force_peak_n.get(k).copied().unwrap_or(0.0);
+                s += &format!(
+                    "\n  tool {name:?}: force of the tissue at the end [{:.4e}, {:.4e}, {:.4e}] N (|F| = {:.4e} N), peak |F| = {peak:.4e} N",
+                    f[0], f[1], f[2], norm3(f)
+                );
+            }
+        }
+        s
+    }
+}
+
+fn norm3(f: [f64; 3]) -> f64 {
+    (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt()
+}
+
 /// Result of a run: final displacements (f64) and the report.
 pub struct RunOutput {
     pub displacements: Vec<[f64; 3]>,
@@ -81,17 +118,29 @@ pub struct RunOutput {
 
 /// Called every step with the model's state after the step (for progress and frames).
 pub trait Observer {
-    fn after_step(
-        &mut self,
-        step: u64,
-        time_s: f64,
-        steps_total: u64,
-        u: &dyn Fn() -> Vec<[f64; 3]>,
-    );
+    fn after_step(&mut self, step: u64, time_s: f64, steps_total: u64, state: &dyn StepState);
 }
 
 impl Observer for () {
-    fn after_step(&mut self, _: u64, _: f64, _: u64, _: &dyn Fn() -> Vec<[f64; 3]>) {}
+    fn after_step(&mut self, _: u64, _: f64, _: u64, _: &dyn StepState) {}
+}
+
+/// The state after a step, computed only when an observer asks for it.
+pub trait StepState {
+    /// Displacement of every node (m).
+    fn displacements(&self) -> Vec<[f64; 3]>;
+    /// Velocity of every node (m/s): the central difference's `(u_n − u_{n−1})/dt` over the
+    /// last step.
+    fn velocities(&self) -> Vec<[f64; 3]>;
+}
+
+impl<T: Real> StepState for Model<'_, T> {
+    fn displacements(&self) -> Vec<[f64; 3]> {
+        Model::displacements(self)
+    }
+    fn velocities(&self) -> Vec<[f64; 3]> {
+        Model::velocities(self)
+    }
 }
 
 /// Runs the problem to its end in its scene's precision, on this thread.
@@ -155,8 +204,7 @@ pub fn run_typed<T: Real>(
                 }
             }
         }
-        let m = &model;
-        observer.after_step(m.step, m.time_s(), steps, &|| m.displacements());
+        observer.after_step(model.step, model.time_s(), steps, &model);
     }
     let wall_s = start.elapsed().as_secs_f64();
     let displacements = model.displacements();
