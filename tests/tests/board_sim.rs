@@ -143,6 +143,36 @@ fn machines_equal_serial_on_a_real_mesh() {
     }
 }
 
+/// Prisms on the boards: Gmsh's hex-and-prism beam (prisms as degenerate hexahedra, a
+/// node repeated in every prism) sagging from its physical surface "clamped": one board
+/// bit-identical to the serial run, two boards within 1e-12 (their partial sums meet in
+/// another order), with a tip motion far from zero.
+#[test]
+fn machines_equal_serial_on_a_hex_and_prism_mesh() {
+    let (p, src) = file_problem("beam_mixed.toml");
+    let prisms = p
+        .mesh
+        .cells
+        .iter()
+        .filter(|c| host_tools::mesh::is_prism(c))
+        .count();
+    assert!(prisms >= 20, "{prisms} prisms");
+    let serial = solver::run(&p, "serial", &mut ()).unwrap().displacements;
+    let u_max = serial.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(u_max > 1e-3, "the beam sags: max |u| {u_max} m");
+    for m in ["1x1x1", "2x1x1"] {
+        let dir = compile(&p, &src, m, &format!("beam-mixed-{m}"));
+        let out = sim(&dir, &SimOptions::default());
+        assert_eq!(serial.len(), out.displacements.len());
+        let d = max_rel_diff(&serial, &out.displacements);
+        println!("{m}: max relative difference {d:e}");
+        if m == "1x1x1" {
+            assert_eq!(d, 0.0);
+        }
+        assert!(d < 1e-12, "{m}: {d:e}");
+    }
+}
+
 /// Two runs give identical bytes whatever the threads' timing: every sum's order is fixed
 /// by the schedule, not by arrival.
 #[test]

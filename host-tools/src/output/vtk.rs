@@ -18,8 +18,8 @@
 //!   in the same order, one entry per region present (ParaView: *Spreadsheet View*,
 //!   *Field Data*).
 //!
-//! Hexahedra are `VTK_HEXAHEDRON` (12), surface quads `VTK_QUAD` (9). Open `series.pvd` in
-//! ParaView.
+//! Hexahedra are `VTK_HEXAHEDRON` (12), prisms `VTK_WEDGE` (13), surface quads `VTK_QUAD` (9)
+//! (a prism's triangles `VTK_TRIANGLE`, 5). Open `series.pvd` in ParaView.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -169,8 +169,6 @@ impl VtkSeriesWriter {
         fs::create_dir_all(dir).map_err(io_err(dir))?;
         let c = cells_xml(
             mesh.cells.iter().map(|c| &c[..]),
-            8,
-            12,
             mesh.cell_regions.iter().map(|r| r.to_string()),
         );
         Ok(VtkSeriesWriter {
@@ -227,22 +225,51 @@ impl VtkSeriesWriter {
     }
 }
 
-/// The `<Cells>` and `<CellData>` sections (the same in every frame): connectivity of
-/// `per_cell` nodes each, offsets, VTK type `vtk_type`, and the Int32 cell data `region`.
+/// A mesh cell as VTK writes it: a hexahedron (`VTK_HEXAHEDRON`, 12), a prism stored as a
+/// degenerate hexahedron as a `VTK_WEDGE` (13) in VTK's order (the first triangle's normal
+/// pointing away from the second); a surface quadrilateral (`VTK_QUAD`, 9), or a prism's
+/// triangle (a quadrilateral with one node repeated) as a `VTK_TRIANGLE` (5).
+fn vtk_cell(nodes: &[u32]) -> (Vec<u32>, u8) {
+    match nodes {
+        [c0, c1, c2, c3, c4, c5, c6, c7] => {
+            let c = [*c0, *c1, *c2, *c3, *c4, *c5, *c6, *c7];
+            if crate::mesh::is_prism(&c) {
+                (vec![c[0], c[2], c[1], c[4], c[6], c[5]], 13)
+            } else {
+                (c.to_vec(), 12)
+            }
+        }
+        [_, _, _, _] => {
+            let mut distinct: Vec<u32> = Vec::with_capacity(4);
+            for (k, &n) in nodes.iter().enumerate() {
+                if n != nodes[(k + 3) % 4] {
+                    distinct.push(n);
+                }
+            }
+            if distinct.len() == 3 {
+                (distinct, 5)
+            } else {
+                (nodes.to_vec(), 9)
+            }
+        }
+        _ => (nodes.to_vec(), 0),
+    }
+}
+
+/// The `<Cells>` and `<CellData>` sections (the same in every frame): each cell's
+/// connectivity, offsets and VTK type (see [`vtk_cell`]), and the Int32 cell data `region`.
 fn cells_xml<'a>(
     cells: impl ExactSizeIterator<Item = &'a [u32]>,
-    per_cell: usize,
-    vtk_type: u8,
     regions: impl Iterator<Item = String>,
 ) -> String {
-    let n = cells.len();
+    let cells: Vec<(Vec<u32>, u8)> = cells.map(vtk_cell).collect();
     let mut c = String::new();
     let _ = writeln!(c, "      <Cells>");
     let _ = writeln!(
         c,
         "        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">"
     );
-    for cell in cells {
+    for (cell, _) in &cells {
         let line: Vec<String> = cell.iter().map(|i| i.to_string()).collect();
         let _ = writeln!(c, "          {}", line.join(" "));
     }
@@ -251,19 +278,24 @@ fn cells_xml<'a>(
         c,
         "        <DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">"
     );
-    for chunk in (1..=n).collect::<Vec<_>>().chunks(16) {
-        let line: Vec<String> = chunk.iter().map(|i| (per_cell * i).to_string()).collect();
-        let _ = writeln!(c, "          {}", line.join(" "));
+    let offsets: Vec<String> = cells
+        .iter()
+        .scan(0usize, |end, (cell, _)| {
+            *end += cell.len();
+            Some(end.to_string())
+        })
+        .collect();
+    for chunk in offsets.chunks(16) {
+        let _ = writeln!(c, "          {}", chunk.join(" "));
     }
     let _ = writeln!(c, "        </DataArray>");
     let _ = writeln!(
         c,
         "        <DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">"
     );
-    let t = vtk_type.to_string();
-    for k in (0..n).step_by(32) {
-        let line = vec![t.as_str(); (n - k).min(32)];
-        let _ = writeln!(c, "          {}", line.join(" "));
+    let types: Vec<String> = cells.iter().map(|(_, t)| t.to_string()).collect();
+    for chunk in types.chunks(32) {
+        let _ = writeln!(c, "          {}", chunk.join(" "));
     }
     let _ = writeln!(c, "        </DataArray>");
     let _ = writeln!(c, "      </Cells>");
@@ -494,8 +526,6 @@ impl SurfaceSeriesWriter {
         fs::create_dir_all(dir).map_err(io_err(dir))?;
         let c = cells_xml(
             quads.iter().map(|q| &q[..]),
-            4,
-            9,
             quad_regions.iter().map(|g| g.to_string()),
         );
         Ok(SurfaceSeriesWriter {

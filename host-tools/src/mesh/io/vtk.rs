@@ -289,8 +289,11 @@ fn collect_cells(
                 out.boundary(&name, &verts32, &groups);
             }
             CellKind::Hexahedron | CellKind::Prism => {
+                // A hexahedron written as a degenerate prism (corner 3 on 2, 7 on 6) is one.
+                let degenerate_prism = verts32.len() == 8
+                    && crate::mesh::is_prism(&core::array::from_fn(|a| verts32[a]));
                 for (a, &v) in verts32.iter().enumerate() {
-                    if verts32[..a].contains(&v) {
+                    if verts32[..a].contains(&v) && !degenerate_prism {
                         return Err(MeshError::RepeatedNode {
                             path: path.to_path_buf(),
                             item: format!("cell {ci}"),
