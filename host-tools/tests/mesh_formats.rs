@@ -463,3 +463,15 @@ fn our_vtu_frame_reads_back_as_the_mesh_it_was_written_from() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Two different nodes of one cell at the same point (a duplicate node a writer did not
+/// merge) are refused naming the cell and both nodes: run as is, the cell would be
+/// degenerate, or look like a prism whose collapsed corners could come apart.
+#[test]
+fn unmerged_duplicate_nodes_in_a_cell_are_refused() {
+    let mut m = generate_box([1.0; 3], [1, 1, 1]);
+    m.validate().expect("the cube is valid");
+    m.nodes[3] = m.nodes[2];
+    let e = m.validate().expect_err("duplicate refused").to_string();
+    assert!(e.contains("cell 0") && e.contains("nodes 3 and 4"), "{e}");
+}

@@ -227,6 +227,25 @@ impl Mesh {
                 }
             }
         }
+        // Two different nodes of a cell at the same point: an unmerged duplicate node (the
+        // cell would be degenerate, or a prism whose collapsed corners could come apart).
+        for (ci, cell) in self.cells.iter().enumerate() {
+            for a in 0..8 {
+                for b in 0..a {
+                    let (i, j) = (cell[a], cell[b]);
+                    if i != j && self.nodes[i as usize] == self.nodes[j as usize] {
+                        let (ti, tj) = (self.node_tags[i as usize], self.node_tags[j as usize]);
+                        return Err(MeshError::InvalidInput {
+                            path,
+                            msg: format!(
+                                "cell {ci}: nodes {} and {} are different nodes at the same point {:?} (duplicate nodes not merged?)",
+                                ti.min(tj), ti.max(tj), self.nodes[i as usize]
+                            ),
+                        });
+                    }
+                }
+            }
+        }
         for (name, set) in &self.node_sets {
             if let Some(&idx) = set.iter().find(|&&i| i as usize >= n) {
                 return Err(MeshError::InvalidInput {
