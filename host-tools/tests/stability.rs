@@ -92,10 +92,17 @@ fn distorted_strong_skew() {
     stability::distorted_skew().unwrap().assert_passed();
 }
 
-/// The stable step under large deformation, re-estimated during the run.
+/// The stable step under large deformation, tracked element by element during the run.
 #[test]
 fn sagging_cantilever_critical_step_recheck() {
     stability::sagging_cantilever().unwrap().assert_passed();
+}
+
+/// The soft cantilever under sudden gravity at the documented defaults: completes,
+/// settles where a small constant step does; tracking off stops as an unstable step.
+#[test]
+fn sudden_gravity_on_a_soft_cantilever_at_the_defaults() {
+    stability::sudden_gravity().unwrap().assert_passed();
 }
 
 /// Speed, NaN and J ≤ 0 guards each name the step and the node or element.

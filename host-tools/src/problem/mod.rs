@@ -404,7 +404,7 @@ fn check_solver(s: &SolverSpec, has_contact: bool) -> Result<()> {
     if !(s.dt_safety > 0.0) || !(s.hourglass >= 0.0) || !(s.damping >= 0.0) {
         bail!("[solver] dt_safety must be > 0, hourglass and damping >= 0");
     }
-    if has_contact && s.adapt_dt {
+    if has_contact && s.adapt_dt == Some(true) {
         bail!("[solver] adapt_dt with contact is not supported: the contact penalty and search interval follow from the step (lower dt_safety instead)");
     }
     if s.dt_recheck_interval == Some(0) {

@@ -297,17 +297,26 @@ pub struct SolverSpec {
     pub graphics_interval: f64,
     /// Each update is spread over at most this many steps (the seed: 20).
     pub graphics_spread_steps: u32,
+    /// Every this many steps, bound the critical step of the current (deformed) state
+    /// element by element (`solver::stable_step`), a few percent of a step's cost; `0`:
+    /// never (the step found at rest is kept). Large deformation shrinks the stable step.
+    pub dt_track_interval: u64,
     /// Every this many steps, re-estimate the critical step about the current (deformed)
-    /// state by a warm-started power iteration; `None`: never (the step found at rest is
-    /// kept). Large deformation can shrink the stable step (compressed elements).
+    /// state by a warm-started power iteration, which also recalibrates the element
+    /// tracker; `None`: never.
     pub dt_recheck_interval: Option<u64>,
     /// Power iterations per re-check (warm-started from the previous estimate's vector).
     pub dt_recheck_iterations: usize,
-    /// When a re-check finds `dt` above `dt_safety ×` the new critical step: `false` stops
-    /// the run with an error naming the step and the new critical step; `true` lowers `dt`
-    /// to `dt_safety ×` the new critical step (the central-difference history is rescaled).
-    pub adapt_dt: bool,
+    /// When a check finds `dt` above `dt_safety ×` the new critical step: `false` stops
+    /// the run with an error naming the step, the cell and the new critical step; `true`
+    /// lowers `dt` to `dt_safety ×` the new critical step (the central-difference history
+    /// is rescaled). Default (`None`): lower it, except with contact (whose penalty follows
+    /// from the step), which stops.
+    pub adapt_dt: Option<bool>,
 }
+
+/// Steps between two element-by-element bounds of the stable step (`dt_track_interval`).
+pub const DEFAULT_DT_TRACK_INTERVAL: u64 = 20;
 
 impl Default for SolverSpec {
     fn default() -> Self {
@@ -326,9 +335,10 @@ impl Default for SolverSpec {
             output_interval: 0.04,
             graphics_interval: 0.04,
             graphics_spread_steps: 20,
+            dt_track_interval: DEFAULT_DT_TRACK_INTERVAL,
             dt_recheck_interval: None,
             dt_recheck_iterations: 20,
-            adapt_dt: false,
+            adapt_dt: None,
         }
     }
 }

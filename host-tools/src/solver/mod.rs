@@ -16,8 +16,9 @@ pub mod batched;
 mod monitor;
 mod nodes;
 mod run;
+pub mod stable_step;
 
-pub use monitor::{DtMonitor, Energies};
+pub use monitor::{DtChange, DtMonitor, Energies};
 pub use run::{
     describe_step_error, run, run_threads, run_typed, ContactReport, Observer, RunOutput,
     RunReport, StepState,

@@ -1,81 +1,206 @@
-//! Watching a run's stability: the critical step re-estimated during the run, the highest
+//! Watching a run's stability: the critical step tracked during the run, the highest
 //! frequency of the linearised model, and the energy terms.
 
 use anyhow::{anyhow, Result};
 use pe_firmware::physics::Real;
 use serde::Serialize;
 
+use super::stable_step::{StableStepTracker, TrackedStep};
 use super::Model;
 use crate::problem::{frequency, Problem};
 
-/// Re-estimates the critical step during a run (`[solver] dt_recheck_interval`).
+/// One change of `dt` during a run.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct DtChange {
+    pub step: u64,
+    pub time_s: f64,
+    pub dt_s: f64,
+    /// The critical step found about the state at that step, and the cell setting it.
+    pub dt_critical_s: f64,
+    pub cell: usize,
+}
+
+/// Watches the critical step during a run: the element-by-element bound every
+/// `dt_track_interval` steps ([`StableStepTracker`]), and the power iteration every
+/// `dt_recheck_interval` steps, which can only lower the tracker's calibration.
 pub struct DtMonitor {
+    track_interval: u64,
+    tracker: Option<StableStepTracker>,
     interval: Option<u64>,
     iterations: usize,
+    adapt: bool,
+    has_contact: bool,
     /// Warm start of the power iteration: the last dominant mode.
     vector: Option<Vec<[f64; 3]>>,
     pub dt_critical_initial_s: f64,
     pub dt_critical_min_s: f64,
+    /// Element bounds and power iterations done, and how many checks lowered `dt`.
+    pub tracks: u64,
     pub rechecks: u64,
     pub reductions: u64,
+    /// Wall time spent in the checks (s).
+    pub wall_s: f64,
+    pub history: Vec<DtChange>,
+    /// The tracker's calibration at rest (0 without tracking).
+    pub calibration_initial: f64,
+    /// The last element bound: step and critical step.
+    last_tracked: Option<(u64, f64)>,
 }
 
 impl DtMonitor {
     pub fn new(problem: &Problem, dt_critical_s: f64) -> Self {
+        let s = &problem.solver;
+        // A forced step (`force_dt`) is the user's on purpose: not tracked.
+        let track = s.dt_track_interval > 0 && !s.force_dt;
+        let tracker = track.then(|| StableStepTracker::new(problem));
         DtMonitor {
-            interval: problem.solver.dt_recheck_interval,
-            iterations: problem.solver.dt_recheck_iterations.max(1),
+            calibration_initial: tracker.as_ref().map_or(0.0, |t| t.calibration),
+            track_interval: s.dt_track_interval,
+            tracker,
+            interval: s.dt_recheck_interval,
+            iterations: s.dt_recheck_iterations.max(1),
+            adapt: s.adapt_dt.unwrap_or(problem.contact.is_none()),
+            has_contact: problem.contact.is_some(),
             vector: None,
             dt_critical_initial_s: dt_critical_s,
             dt_critical_min_s: dt_critical_s,
+            tracks: 0,
             rechecks: 0,
             reductions: 0,
+            wall_s: 0.0,
+            history: Vec::new(),
+            last_tracked: None,
         }
     }
 
-    pub fn due(&self, step: u64) -> bool {
+    /// The tracker's calibration now (0 without tracking).
+    pub fn calibration(&self) -> f64 {
+        self.tracker.as_ref().map_or(0.0, |t| t.calibration)
+    }
+
+    fn track_due(&self, step: u64) -> bool {
+        self.tracker.is_some() && step.is_multiple_of(self.track_interval.max(1))
+    }
+
+    fn recheck_due(&self, step: u64) -> bool {
         self.interval.is_some_and(|n| step.is_multiple_of(n))
     }
 
-    /// The critical step about the model's current state: `2/ω_max` by a warm-started
-    /// power iteration, never above the initial critical step (which may be the smaller
-    /// `L_e/c` estimate). Returns the step to continue with: `None` to keep `dt`, or a
-    /// lower one (`adapt_dt`); without `adapt_dt`, a step above `dt_safety ×` the new
-    /// critical step (explicit `dt`: above the critical step) is an error. 1% of slack
-    /// absorbs the estimate's own noise.
+    pub fn due(&self, step: u64) -> bool {
+        self.track_due(step) || self.recheck_due(step)
+    }
+
+    /// The element tracker's critical step about the model's state now, if tracking.
+    pub fn tracked<T: Real>(&self, model: &Model<'_, T>) -> Option<TrackedStep> {
+        let t = self.tracker.as_ref()?;
+        Some(t.bound(&model.u, model.pool.as_ref()))
+    }
+
+    /// The critical step about the model's current state: the element bound
+    /// ([`StableStepTracker`]) when due, and `2/ω_max` by a warm-started power iteration
+    /// when due (never above the initial critical step, which may be the smaller `L_e/c`
+    /// estimate); a power estimate below the tracker's lowers the tracker's calibration.
+    /// Returns the step to continue with: `None` to keep `dt`, or `dt_safety ×` the new
+    /// critical step when `dt` is above it (explicit `dt`: the critical step itself), with
+    /// 1% of slack for the estimates' own noise, when adapting; without adapting, a step
+    /// above the critical step itself (by the next check) is an error naming the step and
+    /// the cell.
     pub fn check<T: Real>(&mut self, model: &Model<'_, T>) -> Result<Option<f64>> {
+        let start = std::time::Instant::now();
+        let r = self.check_inner(model);
+        self.wall_s += start.elapsed().as_secs_f64();
+        r
+    }
+
+    fn check_inner<T: Real>(&mut self, model: &Model<'_, T>) -> Result<Option<f64>> {
         let p = model.problem;
-        let mut v = self.vector.take().unwrap_or_else(|| model.start_vector());
-        // A cold start needs more iterations to find the top of the spectrum.
-        let iters = if self.rechecks == 0 {
-            self.iterations.max(100)
-        } else {
-            self.iterations
-        };
-        let omega = model.max_frequency_from(&mut v, iters)?;
-        self.vector = Some(v);
-        self.rechecks += 1;
-        let crit = if omega > 0.0 {
-            (2.0 / omega).min(self.dt_critical_initial_s)
-        } else {
-            self.dt_critical_initial_s
-        };
+        let step = model.step;
+        let mut tracked = None;
+        if self.track_due(step) || self.recheck_due(step) {
+            tracked = self.tracked(model);
+            if tracked.is_some() {
+                self.tracks += 1;
+            }
+        }
+        let mut crit = tracked.map_or(f64::INFINITY, |t| t.dt_critical_s);
+        let mut cell = tracked.map_or(0, |t| t.limiting_cell);
+        // Look one interval ahead: where the bound is falling, assume it goes on falling
+        // as fast until the next check (never below half of it), so `dt` comes down
+        // before the state gets there.
+        let mut ahead = crit;
+        if let Some(t) = tracked {
+            if let Some((s0, c0)) = self.last_tracked {
+                if c0 > t.dt_critical_s && step > s0 {
+                    let fall =
+                        (c0 - t.dt_critical_s) * self.track_interval as f64 / (step - s0) as f64;
+                    ahead = (t.dt_critical_s - fall).max(0.5 * t.dt_critical_s);
+                }
+            }
+            self.last_tracked = Some((step, t.dt_critical_s));
+        }
+        if self.recheck_due(step) {
+            let mut v = self.vector.take().unwrap_or_else(|| model.start_vector());
+            // A cold start needs more iterations to find the top of the spectrum.
+            let iters = if self.rechecks == 0 {
+                self.iterations.max(100)
+            } else {
+                self.iterations
+            };
+            let omega = model.max_frequency_from(&mut v, iters)?;
+            self.vector = Some(v);
+            self.rechecks += 1;
+            let power = if omega > 0.0 {
+                (2.0 / omega).min(self.dt_critical_initial_s)
+            } else {
+                self.dt_critical_initial_s
+            };
+            if let (Some(tr), Some(t)) = (self.tracker.as_mut(), tracked) {
+                if power < t.dt_critical_s {
+                    tr.calibration *= power / t.dt_critical_s;
+                }
+            }
+            if power < crit {
+                crit = power;
+                ahead = ahead.min(power);
+                cell = tracked.map_or(0, |t| t.limiting_cell);
+            }
+        }
+        if !crit.is_finite() {
+            return Ok(None);
+        }
         self.dt_critical_min_s = self.dt_critical_min_s.min(crit);
         let safety = if p.solver.dt.is_some() {
             1.0
         } else {
             p.solver.dt_safety
         };
-        if model.dt_s <= 1.01 * safety * crit {
+        if model.dt_s <= 1.01 * safety * ahead {
             return Ok(None);
         }
-        if p.solver.adapt_dt {
-            self.reductions += 1;
-            return Ok(Some(safety * crit));
+        // Not adapting, the safety margin may be eaten: stop only when dt would be above
+        // the critical step itself by the next check.
+        if !self.adapt && model.dt_s <= ahead {
+            return Ok(None);
         }
+        if self.adapt {
+            self.reductions += 1;
+            let dt = safety * ahead;
+            self.history.push(DtChange {
+                step,
+                time_s: model.time_s(),
+                dt_s: dt,
+                dt_critical_s: crit,
+                cell,
+            });
+            return Ok(Some(dt));
+        }
+        let why = if self.has_contact && p.solver.adapt_dt.is_none() {
+            "with contact dt is not lowered during a run (the penalty follows from the step): lower dt_safety"
+        } else {
+            "lower dt_safety, or set adapt_dt = true"
+        };
         anyhow::bail!(
-            "step {}: t = {:.4e} s: the critical step about the deformed state has fallen to {crit:.4e} s ({:.3} of the {:.4e} s at rest); dt = {:.4e} s is above {safety} of it: the run would go unstable. Lower dt_safety, or set adapt_dt = true",
-            model.step,
+            "step {step}: t = {:.4e} s: unstable step ahead: the critical step about the deformed state has fallen to {crit:.4e} s (falling to {ahead:.4e} s by the next check) ({:.3} of the {:.4e} s at rest; cell {cell} sets it) and dt = {:.4e} s is above it: the run would go unstable; {why}",
             model.time_s(),
             crit / self.dt_critical_initial_s,
             self.dt_critical_initial_s,

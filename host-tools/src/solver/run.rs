@@ -42,12 +42,23 @@ pub struct RunReport {
     pub fixed_reaction_n: [f64; 3],
     /// Step at the end (differs from `dt_s` only when `adapt_dt` lowered it).
     pub dt_final_s: f64,
-    /// Smallest critical step found by the re-checks (`dt_recheck_interval`), s; the
-    /// initial one when re-checks are off.
+    /// Smallest critical step found during the run (element tracking and re-checks), s;
+    /// the initial one when both are off.
     pub dt_critical_min_s: f64,
-    /// Re-checks done and how many of them lowered `dt`.
+    /// Element-by-element bounds (`dt_track_interval`) and power re-checks
+    /// (`dt_recheck_interval`) done, and how many checks lowered `dt`.
+    pub dt_tracks: u64,
     pub dt_rechecks: u64,
     pub dt_reductions: u64,
+    /// Wall time of those checks (s) and its share of the run's wall time.
+    pub dt_tracking_s: f64,
+    pub dt_tracking_fraction: f64,
+    /// The element tracker's calibration `κ` at rest and at the end (lowered only by a
+    /// power re-check that found a smaller critical step); 0 when tracking is off.
+    pub dt_calibration_initial: f64,
+    pub dt_calibration_final: f64,
+    /// Every change of `dt`: step, time, new step, the critical step found and its cell.
+    pub dt_history: Vec<super::DtChange>,
     /// Contact figures (absent without contact).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub contact: Option<ContactReport>,
@@ -83,6 +94,16 @@ impl RunReport {
             r.steps, r.wall_s, r.threads, r.kernel, r.element_steps_per_s, r.real_time_factor,
             r.max_displacement, r.max_displacement_node, r.kinetic_energy_final
         );
+        if r.dt_reductions > 0 {
+            s += &format!(
+                "\n  dt lowered {} times as the stable step shrank under deformation: {:.4e} s at rest, {:.4e} s at the end (smallest critical step {:.4e} s; tracking took {:.1}% of the run)",
+                r.dt_reductions,
+                r.dt_s,
+                r.dt_final_s,
+                r.dt_critical_min_s,
+                100.0 * r.dt_tracking_fraction
+            );
+        }
         if prescribed_nodes > 0 {
             let f = r.prescribed_reaction_n;
             s += &format!(
@@ -180,9 +201,13 @@ pub fn run_typed<T: Real>(
     let mut peak: Vec<f64> = Vec::new();
     let mut pair_rel: f64 = 0.0;
     while model.step < steps {
-        model
-            .advance()
-            .map_err(|e| anyhow!("{name}: {}", describe_step_error(problem, &e)))?;
+        if let Err(e) = model.advance() {
+            return Err(anyhow!(
+                "{name}: {}{}",
+                describe_step_error(problem, &e),
+                instability_note(&monitor, &model)
+            ));
+        }
         if let Some(c) = &model.contact {
             tool_force.extend_from_slice(&c.tool_force);
             peak.resize(c.tool_force.len(), 0.0);
@@ -242,8 +267,14 @@ pub fn run_typed<T: Real>(
         fixed_reaction_n: model.reaction_fixed,
         dt_final_s: model.dt_s,
         dt_critical_min_s: monitor.dt_critical_min_s,
+        dt_tracks: monitor.tracks,
         dt_rechecks: monitor.rechecks,
         dt_reductions: monitor.reductions,
+        dt_tracking_s: monitor.wall_s,
+        dt_tracking_fraction: monitor.wall_s / wall_s.max(1e-12),
+        dt_calibration_initial: monitor.calibration_initial,
+        dt_calibration_final: monitor.calibration(),
+        dt_history: monitor.history.clone(),
         contact: model.contact.as_ref().map(|c| ContactReport {
             tools: problem
                 .contact
@@ -266,6 +297,30 @@ pub fn run_typed<T: Real>(
         report,
         tool_force,
     })
+}
+
+/// When a step failed: whether the step was unstable, from the element bound about the
+/// last good state (`u` is still the state the failed step started from): ": an unstable
+/// step: dt = … above the critical step … of the deformed state (cell …)", or nothing.
+fn instability_note<T: Real>(monitor: &DtMonitor, model: &Model<'_, T>) -> String {
+    let tracked = monitor.tracked(model).or_else(|| {
+        // Tracking off: bound the step about the last good state once, now.
+        Some(super::stable_step::StableStepTracker::new(model.problem).bound(&model.u, None))
+    });
+    match tracked {
+        Some(t) if model.dt_s > t.dt_critical_s => format!(
+            "\n  an unstable step: dt = {:.4e} s is above the critical step of the deformed state, {:.4e} s (cell {} sets it; {:.4e} s at rest); {}",
+            model.dt_s,
+            t.dt_critical_s,
+            t.limiting_cell,
+            monitor.dt_critical_initial_s,
+            match model.problem.solver.dt_track_interval {
+                0 => "dt_track_interval = 0 turned the tracking off: leave it at its default".to_string(),
+                n => format!("the element bound ran every {n} steps (dt_track_interval): lower it or dt_safety"),
+            }
+        ),
+        _ => String::new(),
+    }
 }
 
 /// A step failure in words a user can act on: the step and time, and the mesh's own name

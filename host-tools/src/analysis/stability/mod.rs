@@ -274,6 +274,7 @@ pub fn cases() -> Vec<CaseFn> {
         c("distorted_aspect_10", false, distorted_aspect),
         c("distorted_skew", false, distorted_skew),
         c("sagging_cantilever_dt", false, sagging_cantilever),
+        c("sudden_gravity_soft_cantilever", false, sudden_gravity),
         c("runtime_guards", false, guards),
     ]
 }
