@@ -146,8 +146,8 @@ damping = 300.0
         .collect();
     let mut f = vec![[0.0; 3]; p.mesh.nodes.len()];
     for l in &p.loads {
-        for i in 0..3 {
-            f[l.node as usize][i] += l.force[i];
+        for (fi, li) in f[l.node as usize].iter_mut().zip(l.force) {
+            *fi += li;
         }
     }
     let tip_nodes: Vec<usize> = (0..p.mesh.nodes.len())
