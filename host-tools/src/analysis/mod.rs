@@ -1,6 +1,7 @@
 //! Analyses built on the serial solver: the element-kernel benchmark, the stability
-//! checks and the precision/integration trade-off study.
+//! checks, the precision/integration trade-off study and the hourglass calibration.
 
 pub mod bench;
+pub mod hourglass;
 pub mod stability;
 pub mod tradeoff;

@@ -198,6 +198,20 @@ enum Command {
         #[arg(long)]
         only: Option<String>,
     },
+    /// Calibrate the hourglass coefficient: tip errors of MacNeal-Harder's cantilever,
+    /// Cook's membrane and a compressed block against closed forms, per coefficient.
+    #[command(
+        name = "hourglass-study",
+        after_help = "Example:\n  pe hourglass-study -o docs/measurements/hourglass-tables.md"
+    )]
+    HourglassStudy {
+        /// Markdown tables (printed when not given).
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+        /// Coefficients to sweep (default 0.01,0.03,0.05,0.1,0.2,0.3,0.5).
+        #[arg(long, value_delimiter = ',')]
+        coefficients: Vec<f64>,
+    },
 }
 
 struct Progress {
@@ -352,6 +366,22 @@ fn main() -> Result<()> {
         }
         Command::Stability { output, long, only } => {
             host_tools::analysis::stability::run_cli(output.as_deref(), long, only.as_deref())?
+        }
+        Command::HourglassStudy {
+            output,
+            coefficients,
+        } => {
+            let c = if coefficients.is_empty() {
+                host_tools::analysis::hourglass::COEFFICIENTS.to_vec()
+            } else {
+                coefficients
+            };
+            let tables = host_tools::analysis::hourglass::study(&c)?;
+            match output {
+                Some(path) => std::fs::write(&path, tables)
+                    .with_context(|| format!("writing {}", path.display()))?,
+                None => print!("{tables}"),
+            }
         }
     }
     Ok(())
