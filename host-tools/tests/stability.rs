@@ -111,7 +111,7 @@ fn runtime_guards_name_the_fault() {
     stability::guards().unwrap().assert_passed();
 }
 
-/// Changing dt mid-run keeps the half-step velocity (`u_prev` rescaled), so an undamped
+/// Changing dt mid-run keeps the half-step velocity (`du` rescaled), so an undamped
 /// vibrating beam keeps its energy across the change: the mean total energy after halving
 /// dt is within 1% of the peak stored energy of the mean before (the scheme's own band is
 /// ~1e-5). Without the rescale the velocity would double and the kinetic energy jump ×4:
@@ -153,10 +153,10 @@ acceleration = [0.0, 0.0, -9.81]
         let mut m = Model::<f64>::new(&p, dt);
         // Half a bending period or so at each step size, averaged.
         let (before, smax) = band(&mut m, 3000);
-        let saved = m.u_prev.clone();
+        let saved = m.du.clone();
         m.set_dt(0.5 * dt);
         if !rescale {
-            m.u_prev = saved;
+            m.du = saved;
         }
         let (after, _) = band(&mut m, 6000);
         let t_expected = 3000.0 * dt + 6000.0 * 0.5 * dt;

@@ -42,7 +42,9 @@ pub struct Model<'p, T: Real> {
     /// Gravity force per node (true mass), N.
     gravity_force: Vec<[T; 3]>,
     pub u: Vec<[T; 3]>,
-    pub u_prev: Vec<[T; 3]>,
+    /// The last step's increment `du = u_n − u_{n−1}`: the central difference's state
+    /// besides `u` (it runs in increment form, [`CentralDifference`]).
+    pub du: Vec<[T; 3]>,
     /// Internal forces: summed by the element phase, consumed (and zeroed, ready for the
     /// next step) by the node update.
     pub f_int: Vec<[T; 3]>,
@@ -240,7 +242,7 @@ impl<'p, T: Real> Model<'p, T> {
             gain,
             ke_mass,
             u: vec![[T::ZERO; 3]; n],
-            u_prev: vec![[T::ZERO; 3]; n],
+            du: vec![[T::ZERO; 3]; n],
             f_int: vec![[T::ZERO; 3]; n],
             f_int_zero: true,
             f_ext: gravity_force.clone(),
@@ -316,16 +318,13 @@ impl<'p, T: Real> Model<'p, T> {
     }
 
     /// Changes the time step mid-run. The central difference keeps the half-step velocity
-    /// `v = (u − u_prev)/dt` in its history, so the previous state is rescaled to keep it:
-    /// `u_prev := u − (dt_new/dt_old)(u − u_prev)`; the update coefficients and the per-node
-    /// gains are rebuilt for the new step.
+    /// `v = du/dt` in its history, so the increment is rescaled to keep it:
+    /// `du := (dt_new/dt_old) du`; the update coefficients and the per-node gains are
+    /// rebuilt for the new step.
     pub fn set_dt(&mut self, dt_new: f64) {
         let r = dt_new / self.dt_s;
-        for (u, up) in self.u.iter().zip(self.u_prev.iter_mut()) {
-            *up = core::array::from_fn(|i| {
-                let (a, b) = (u[i].to_f64(), up[i].to_f64());
-                T::from_f64(a - r * (a - b))
-            });
+        for du in self.du.iter_mut() {
+            *du = du.map(|d| T::from_f64(r * d.to_f64()));
         }
         self.time_base_s = self.time_s();
         self.step_base = self.step;
@@ -406,12 +405,12 @@ impl<'p, T: Real> Model<'p, T> {
         let parts = self
             .u
             .chunks_mut(NODE_BLOCK)
-            .zip(self.u_prev.chunks_mut(NODE_BLOCK))
+            .zip(self.du.chunks_mut(NODE_BLOCK))
             .zip(self.f_int.chunks_mut(NODE_BLOCK))
             .enumerate()
-            .map(|(k, ((u, u_prev), f_int))| (k * NODE_BLOCK, u, u_prev, f_int));
-        let block = |(first, u, u_prev, f_int): (usize, &mut [[T; 3]], &mut _, &mut _)| {
-            nodes.block(first, u, u_prev, f_int)
+            .map(|(k, ((u, du), f_int))| (k * NODE_BLOCK, u, du, f_int));
+        let block = |(first, u, du, f_int): (usize, &mut [[T; 3]], &mut _, &mut _)| {
+            nodes.block(first, u, du, f_int)
         };
         let sums: Vec<nodes::BlockSums> = match pool {
             Some(pool) => {
@@ -452,13 +451,22 @@ impl<'p, T: Real> Model<'p, T> {
         self.u.iter().map(|u| u.map(|v| v.to_f64())).collect()
     }
 
-    /// Velocities as `f64` (m/s): the central difference's `(u − u_prev)/dt` over the last
-    /// step, the velocity at half a step before [`time_s`](Self::time_s) (zero at rest).
+    /// Velocities as `f64` (m/s): the central difference's `du/dt = (u_n − u_{n−1})/dt`
+    /// over the last step, the velocity at half a step before [`time_s`](Self::time_s)
+    /// (zero at rest).
     pub fn velocities(&self) -> Vec<[f64; 3]> {
+        self.du
+            .iter()
+            .map(|d| d.map(|v| v.to_f64() / self.dt_s))
+            .collect()
+    }
+
+    /// The previous state `u_{n−1} = u_n − du`, as `f64`.
+    pub fn previous_displacements(&self) -> Vec<[f64; 3]> {
         self.u
             .iter()
-            .zip(&self.u_prev)
-            .map(|(u, p)| core::array::from_fn(|i| (u[i].to_f64() - p[i].to_f64()) / self.dt_s))
+            .zip(&self.du)
+            .map(|(u, d)| core::array::from_fn(|i| u[i].to_f64() - d[i].to_f64()))
             .collect()
     }
 }

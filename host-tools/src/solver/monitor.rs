@@ -235,7 +235,7 @@ impl<'p, T: Real> Model<'p, T> {
     }
 }
 
-/// Energy terms at the time of the previous state `u_prev` (where the central velocity of
+/// Energy terms at the time of the previous state `u − du` (where the central velocity of
 /// the last step is known), J.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct Energies {
@@ -255,16 +255,17 @@ impl<'p, T: Real> Model<'p, T> {
     /// Energies at `t_{n}` after the step that produced `u_{n+1}`: the kinetic energy of
     /// the central velocity and the stored and gravity energy of `u_n`.
     pub fn energies(&self) -> Result<Energies> {
+        let prev = self.previous_displacements();
+        let prev_t: Vec<[T; 3]> = prev.iter().map(|u| u.map(T::from_f64)).collect();
         let stored = self
             .elements
-            .stored_energy(&self.laws, &self.u_prev)
+            .stored_energy(&self.laws, &prev_t)
             .map_err(|e| anyhow!("{e}"))?;
         let g = self.problem.gravity;
-        let gravity = self
-            .u_prev
+        let gravity = prev
             .iter()
             .zip(&self.problem.mass)
-            .map(|(u, m)| -m * (0..3).map(|i| g[i] * u[i].to_f64()).sum::<f64>())
+            .map(|(u, m)| -m * (0..3).map(|i| g[i] * u[i]).sum::<f64>())
             .sum();
         Ok(Energies {
             kinetic: self.kinetic_energy,

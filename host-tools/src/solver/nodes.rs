@@ -3,18 +3,19 @@
 //! so the compiler vectorises it.
 //!
 //! A run of [`RUN`] nodes goes in three passes: (1) every component as if the node were
-//! free, [`CentralDifference::advance_component`] and [`speed_component_squared`], into
-//! scratch arrays (vectorised: the components are independent); (2) node by node, in
-//! order, a held node's `u⁺` and speed replaced by its path's, the reactions, the guards
-//! ([`check_node`]) and the kinetic energy summed in node order; (3) `u⁻ := u`, `u := u⁺`,
-//! and `f_int` zeroed for the next step's element phase.
+//! free, [`CentralDifference::advance_component`] (`du⁺ = B du + gain r`, `u⁺ = u + du⁺`)
+//! and [`speed_component_squared`], into scratch arrays (vectorised: the components are
+//! independent); (2) node by node, in order, a held node's `u⁺`, increment
+//! ([`held_increment`]) and speed replaced by its path's, the reactions, the guards
+//! ([`check_node`]) and the kinetic energy summed in node order; (3) `du := du⁺`,
+//! `u := u⁺`, and `f_int` zeroed for the next step's element phase.
 //! A node that fails its guards stops the block with its error before (3): the nodes of
 //! earlier runs are updated, the rest are not.
 //!
 //! [`update_node`]: pe_firmware::physics::explicit::update_node
 
 use multiversion::multiversion;
-use pe_firmware::physics::explicit::{check_node, speed_component_squared};
+use pe_firmware::physics::explicit::{check_node, held_increment, speed_component_squared};
 use pe_firmware::physics::{CentralDifference, PhysicsError, Real};
 
 use crate::problem::{NodeKind, Problem};
@@ -47,37 +48,39 @@ pub(super) struct BlockSums {
 }
 
 impl<T: Real> NodeStep<'_, T> {
-    /// Updates the nodes `first..first + u.len()` (`u`, `u_prev`, `f_int` are theirs) and
-    /// zeroes their `f_int`.
+    /// Updates the nodes `first..first + u.len()` (`u`, their last increments `du`, `f_int`
+    /// are theirs) and zeroes their `f_int`.
     pub fn block(
         &self,
         first: usize,
         u: &mut [[T; 3]],
-        u_prev: &mut [[T; 3]],
+        du: &mut [[T; 3]],
         f_int: &mut [[T; 3]],
     ) -> BlockSums {
         let mut sums = BlockSums::default();
         let mut next = [[T::ZERO; 3]; RUN];
+        let mut next_du = [[T::ZERO; 3]; RUN];
         let mut sq = [[0.0f64; 3]; RUN];
         let runs = u
             .chunks_mut(RUN)
-            .zip(u_prev.chunks_mut(RUN))
+            .zip(du.chunks_mut(RUN))
             .zip(f_int.chunks_mut(RUN));
-        for (r, ((u, u_prev), f_int)) in runs.enumerate() {
+        for (r, ((u, du), f_int)) in runs.enumerate() {
             let first = first + r * RUN;
             let len = u.len();
-            let (next, sq) = (&mut next[..len], &mut sq[..len]);
+            let (next, next_du, sq) = (&mut next[..len], &mut next_du[..len], &mut sq[..len]);
             let range = first..first + len;
             // (1) Every component as if free.
             advance_flat(
                 &self.cd,
                 u.as_flattened(),
-                u_prev.as_flattened(),
+                du.as_flattened(),
                 self.gain[3 * first..3 * (first + len)].as_ref(),
                 self.f_ext[range.clone()].as_flattened(),
                 f_int.as_flattened(),
                 self.inv_2dt_per_s,
                 next.as_flattened_mut(),
+                next_du.as_flattened_mut(),
                 sq.as_flattened_mut(),
             );
             // (2) Node by node, in order.
@@ -99,8 +102,9 @@ impl<T: Real> NodeStep<'_, T> {
                         reaction[i] += (fi[i] - fe[i]).to_f64();
                     }
                     next[j] = at;
+                    next_du[j] = held_increment(&at, &u[j]);
                     sq[j] = core::array::from_fn(|i| {
-                        speed_component_squared(at[i], u_prev[j][i], self.inv_2dt_per_s)
+                        speed_component_squared(next_du[j][i], du[j][i], self.inv_2dt_per_s)
                     });
                 }
                 let v2 = sq[j][0] + sq[j][1] + sq[j][2];
@@ -112,7 +116,7 @@ impl<T: Real> NodeStep<'_, T> {
                 sums.kinetic_energy += self.ke_mass[n] * v2;
             }
             // (3) The new state.
-            u_prev.copy_from_slice(u);
+            du.copy_from_slice(next_du);
             u.copy_from_slice(next);
             f_int.fill([T::ZERO; 3]);
         }
@@ -120,9 +124,9 @@ impl<T: Real> NodeStep<'_, T> {
     }
 }
 
-/// Pass (1) over components: `next = A u − B u⁻ + gain (f_ext − f_int)` and the squared
-/// speed component of each, the board's operations in its order (no FMA: Rust does not
-/// contract), vectorised by the compiler for the instruction sets below.
+/// Pass (1) over components: `next_du = B du + gain (f_ext − f_int)`, `next = u + next_du`
+/// and the squared speed component of each, the board's operations in its order (no FMA:
+/// Rust does not contract), vectorised by the compiler for the instruction sets below.
 #[multiversion(targets(
     "x86_64+avx512f+avx512vl+avx2+avx",
     "x86_64+avx2+avx",
@@ -133,20 +137,22 @@ impl<T: Real> NodeStep<'_, T> {
 fn advance_flat<T: Real>(
     cd: &CentralDifference<T>,
     u: &[T],
-    u_prev: &[T],
+    du: &[T],
     gain: &[T],
     f_ext: &[T],
     f_int: &[T],
     inv_2dt_per_s: f64,
     next: &mut [T],
+    next_du: &mut [T],
     sq: &mut [f64],
 ) {
     let n = u.len();
-    let (u_prev, gain, f_ext, f_int) = (&u_prev[..n], &gain[..n], &f_ext[..n], &f_int[..n]);
-    let (next, sq) = (&mut next[..n], &mut sq[..n]);
+    let (du, gain, f_ext, f_int) = (&du[..n], &gain[..n], &f_ext[..n], &f_int[..n]);
+    let (next, next_du, sq) = (&mut next[..n], &mut next_du[..n], &mut sq[..n]);
     for k in 0..n {
-        let x = cd.advance_component(u[k], u_prev[k], gain[k], f_ext[k] - f_int[k]);
+        let (x, d) = cd.advance_component(u[k], du[k], gain[k], f_ext[k] - f_int[k]);
         next[k] = x;
-        sq[k] = speed_component_squared(x, u_prev[k], inv_2dt_per_s);
+        next_du[k] = d;
+        sq[k] = speed_component_squared(d, du[k], inv_2dt_per_s);
     }
 }

@@ -74,7 +74,7 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         exchange.index(&c.rounds);
         let (nn, nc) = (c.nodes as usize, c.contact_nodes as usize);
         // The update leaves the forces zero for the next step; the first starts from here.
-        for u in [&mut st.u, &mut st.u_prev, &mut st.force] {
+        for u in [&mut st.u, &mut st.du, &mut st.force] {
             u.iter_mut().take(nn).for_each(|x| *x = [T::ZERO; 3]);
         }
         clear_contact(&mut st, nc)?;

@@ -331,7 +331,7 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         let Storage {
             nodes,
             u,
-            u_prev,
+            du,
             force,
             path_points,
             ..
@@ -341,9 +341,9 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         // Each array cut to the nodes (the loader checked they hold them): one count.
         let all = (nodes.get(..n).unwrap_or(&[]).iter())
             .zip(u.get_mut(..n).unwrap_or(&mut []))
-            .zip(u_prev.get_mut(..n).unwrap_or(&mut []))
+            .zip(du.get_mut(..n).unwrap_or(&mut []))
             .zip(force.get_mut(..n).unwrap_or(&mut []));
-        for (((rec, u), u_prev), f) in all {
+        for (((rec, u), du), f) in all {
             let total = *f;
             *f = [T::ZERO; 3];
             let mv = match rec.motion {
@@ -365,7 +365,7 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
                 }
             };
             let v2 =
-                update_node(&cd, u, u_prev, mv, inv_2dt, limit, rec.global).map_err(|e| Fault {
+                update_node(&cd, u, du, mv, inv_2dt, limit, rec.global).map_err(|e| Fault {
                     board,
                     step,
                     kind: FaultKind::Physics(e),

@@ -170,7 +170,9 @@ pub struct Storage<'a, T, E> {
     pub boxes: &'a mut [HexBox<T>],
     pub nodes: &'a mut [NodeRecord<T>],
     pub u: &'a mut [[T; 3]],
-    pub u_prev: &'a mut [[T; 3]],
+    /// The last step's increment `u − u⁻` of each node (the central difference's state
+    /// besides `u`).
+    pub du: &'a mut [[T; 3]],
     pub force: &'a mut [[T; 3]],
     pub sends: &'a mut [u16],
     pub recvs: &'a mut [RecvEntry],
@@ -287,7 +289,7 @@ pub struct StorageBuf<
     boxes: S::Of<HexBox<T>, NB>,
     nodes: S::Of<NodeRecord<T>, NN>,
     u: S::Of<[T; 3], NN>,
-    u_prev: S::Of<[T; 3], NN>,
+    du: S::Of<[T; 3], NN>,
     force: S::Of<[T; 3], NN>,
     sends: S::Of<u16, NX>,
     recvs: S::Of<RecvEntry, NX>,
@@ -334,7 +336,7 @@ impl<
             boxes: S::empty(),
             nodes: S::empty(),
             u: S::empty(),
-            u_prev: S::empty(),
+            du: S::empty(),
             force: S::empty(),
             sends: S::empty(),
             recvs: S::empty(),
@@ -371,7 +373,7 @@ impl<
         put::<S, _, NB>(&mut self.boxes, caps.boxes)?;
         put::<S, _, NN>(&mut self.nodes, caps.nodes)?;
         put::<S, _, NN>(&mut self.u, caps.nodes)?;
-        put::<S, _, NN>(&mut self.u_prev, caps.nodes)?;
+        put::<S, _, NN>(&mut self.du, caps.nodes)?;
         put::<S, _, NN>(&mut self.force, caps.nodes)?;
         put::<S, _, NX>(&mut self.sends, caps.exchange)?;
         put::<S, _, NX>(&mut self.recvs, caps.exchange)?;
@@ -396,7 +398,7 @@ impl<
             boxes: &mut self.boxes,
             nodes: &mut self.nodes,
             u: &mut self.u,
-            u_prev: &mut self.u_prev,
+            du: &mut self.du,
             force: &mut self.force,
             sends: &mut self.sends,
             recvs: &mut self.recvs,

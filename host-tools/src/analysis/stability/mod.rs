@@ -185,7 +185,7 @@ fn energy_band<T: Real>(
         m.advance()
             .map_err(|e| anyhow!("{}", solver::describe_step_error(m.problem, &e)))?;
         if k >= from && k % every == 0 {
-            let up: Vec<[f64; 3]> = m.u_prev.iter().map(|u| u.map(|v| v.to_f64())).collect();
+            let up: Vec<[f64; 3]> = m.previous_displacements();
             let stored = ev
                 .stored_energy(&m.problem.laws, &up)
                 .map_err(|e| anyhow!("{e}"))?;

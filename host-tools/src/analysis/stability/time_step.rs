@@ -298,7 +298,7 @@ pub fn guards() -> Result<Case> {
                     .map_err(|e| anyhow!("{}", solver::describe_step_error(&p, &e)))?;
             }
             let victim = node_near(&p, [0.05, 0.01, 0.01]);
-            m.u_prev[victim][1] = f64::NAN;
+            m.du[victim][1] = f64::NAN;
             match m.advance() {
                 Err(e) => {
                     let msg = solver::describe_step_error(&p, &e);
