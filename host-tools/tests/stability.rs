@@ -105,6 +105,12 @@ fn sudden_gravity_on_a_soft_cantilever_at_the_defaults() {
     stability::sudden_gravity().unwrap().assert_passed();
 }
 
+/// f32 settles where f64 does at the documented defaults (within 0.1% of the tip).
+#[test]
+fn f32_statics_at_the_defaults() {
+    stability::f32_statics().unwrap().assert_passed();
+}
+
 /// Speed, NaN and J ≤ 0 guards each name the step and the node or element.
 #[test]
 fn runtime_guards_name_the_fault() {

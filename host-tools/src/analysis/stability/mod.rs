@@ -275,6 +275,7 @@ pub fn cases() -> Vec<CaseFn> {
         c("distorted_skew", false, distorted_skew),
         c("sagging_cantilever_dt", false, sagging_cantilever),
         c("sudden_gravity_soft_cantilever", false, sudden_gravity),
+        c("f32_statics", false, f32_statics),
         c("runtime_guards", false, guards),
     ]
 }
