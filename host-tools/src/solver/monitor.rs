@@ -23,9 +23,9 @@ pub struct DtChange {
 /// Watches the critical step during a run: the element-by-element bound every
 /// `dt_track_interval` steps ([`StableStepTracker`]), and the power iteration every
 /// `dt_recheck_interval` steps, which can only lower the tracker's calibration.
-pub struct DtMonitor {
+pub struct DtMonitor<'p> {
     track_interval: u64,
-    tracker: Option<StableStepTracker>,
+    tracker: Option<StableStepTracker<'p>>,
     interval: Option<u64>,
     iterations: usize,
     adapt: bool,
@@ -47,8 +47,8 @@ pub struct DtMonitor {
     last_tracked: Option<(u64, f64)>,
 }
 
-impl DtMonitor {
-    pub fn new(problem: &Problem, dt_critical_s: f64) -> Self {
+impl<'p> DtMonitor<'p> {
+    pub fn new(problem: &'p Problem, dt_critical_s: f64) -> Self {
         let s = &problem.solver;
         // A forced step (`force_dt`) is the user's on purpose: not tracked.
         let track = s.dt_track_interval > 0 && !s.force_dt;

@@ -302,7 +302,7 @@ pub fn run_typed<T: Real>(
 /// When a step failed: whether the step was unstable, from the element bound about the
 /// last good state (`u` is still the state the failed step started from): ": an unstable
 /// step: dt = … above the critical step … of the deformed state (cell …)", or nothing.
-fn instability_note<T: Real>(monitor: &DtMonitor, model: &Model<'_, T>) -> String {
+fn instability_note<T: Real>(monitor: &DtMonitor<'_>, model: &Model<'_, T>) -> String {
     let tracked = monitor.tracked(model).or_else(|| {
         // Tracking off: bound the step about the last good state once, now.
         Some(super::stable_step::StableStepTracker::new(model.problem).bound(&model.u, None))

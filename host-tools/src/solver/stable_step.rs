@@ -36,7 +36,8 @@
 //! kernel; at the default interval it is a few percent of a step (measured in the run
 //! report's `dt_tracking_s`).
 
-use pe_firmware::physics::{MaterialLaw, Real, Volumetric};
+use pe_firmware::physics::hex::deformation_gradient;
+use pe_firmware::physics::{tensor, MaterialLaw, Real, Volumetric};
 use rayon::prelude::*;
 
 use crate::problem::Problem;
@@ -48,14 +49,11 @@ pub struct TrackedStep {
     pub limiting_cell: usize,
 }
 
-/// Element-by-element bound on the critical step of the deformed state.
-pub struct StableStepTracker {
-    cells: Vec<[u32; 8]>,
-    gradients: Vec<[[f64; 3]; 8]>,
+/// Element-by-element bound on the critical step of the deformed state of `problem`.
+pub struct StableStepTracker<'p> {
+    problem: &'p Problem,
     /// `G = Σ_a B_a B_aᵀ` per cell.
     gradient_products: Vec<[[f64; 3]; 3]>,
-    material: Vec<u16>,
-    laws: Vec<MaterialLaw<f64>>,
     /// `1 / (ρ₀ · mass_scaling)` per material.
     inverse_density: Vec<f64>,
     /// `κ`: the critical step at rest over the uncalibrated bound at rest.
@@ -73,14 +71,13 @@ pub const DIRECTIONAL_WEIGHT: f64 = 1.0;
 /// Cells per parallel task: large enough that the split costs nothing.
 const CHUNK: usize = 1024;
 
-impl StableStepTracker {
+impl<'p> StableStepTracker<'p> {
     /// The tracker of `problem`, calibrated so that it gives the problem's critical step
     /// (`time_step.critical`) at rest.
-    pub fn new(problem: &Problem) -> Self {
+    pub fn new(problem: &'p Problem) -> Self {
         let ms = problem.solver.mass_scaling;
         let mut t = StableStepTracker {
-            cells: problem.mesh.cells.clone(),
-            gradients: problem.reference.iter().map(|r| r.mean_gradients).collect(),
+            problem,
             gradient_products: problem
                 .reference
                 .iter()
@@ -92,8 +89,6 @@ impl StableStepTracker {
                     })
                 })
                 .collect(),
-            material: problem.cell_material.clone(),
-            laws: problem.laws.clone(),
             inverse_density: problem.densities.iter().map(|r| 1.0 / (r * ms)).collect(),
             calibration: 1.0,
         };
@@ -109,28 +104,16 @@ impl StableStepTracker {
     /// `ω_e²` bound of cell `e` at displacements `u` (see the module doc); zero for an
     /// inverted cell, which the element phase reports as such.
     fn omega_sq<T: Real>(&self, e: usize, u: &[[T; 3]]) -> f64 {
-        let (cell, g) = (&self.cells[e], &self.gradients[e]);
-        // F = I + Σ_a u_a ⊗ B_a.
-        let mut f = [[0.0f64; 3]; 3];
-        for (n, ga) in cell.iter().zip(g) {
-            let ua = u.get(*n as usize).copied().unwrap_or([T::ZERO; 3]);
-            for i in 0..3 {
-                let ui = ua[i].to_f64();
-                for j in 0..3 {
-                    f[i][j] += ui * ga[j];
-                }
-            }
-        }
-        for (i, row) in f.iter_mut().enumerate() {
-            row[i] += 1.0;
-        }
-        // cof F (row i, column j), J = det F; F⁻ᵀ = cof F / J.
-        let cof = |i: usize, j: usize| {
-            let (i1, i2, j1, j2) = ((i + 1) % 3, (i + 2) % 3, (j + 1) % 3, (j + 2) % 3);
-            f[i1][j1] * f[i2][j2] - f[i1][j2] * f[i2][j1]
-        };
-        let c: [[f64; 3]; 3] = core::array::from_fn(|i| core::array::from_fn(|j| cof(i, j)));
-        let jac = f[0][0] * c[0][0] + f[0][1] * c[0][1] + f[0][2] * c[0][2];
+        let p = self.problem;
+        let cell = &p.mesh.cells[e];
+        let ua: [[f64; 3]; 8] = core::array::from_fn(|a| {
+            let v = u.get(cell[a] as usize).copied().unwrap_or([T::ZERO; 3]);
+            v.map(|x| x.to_f64())
+        });
+        let f = deformation_gradient(&ua, &p.reference[e].mean_gradients);
+        // F⁻ᵀ = cof F / J, J = det F (along the first row).
+        let c = tensor::cofactor(&f);
+        let jac = tensor::dot(&f[0], &c[0]);
         if !(jac > 0.0) {
             return 0.0;
         }
@@ -147,9 +130,8 @@ impl StableStepTracker {
         }
         s = (s + DIRECTIONAL_WEIGHT * dmax) / (1.0 + DIRECTIONAL_WEIGHT / 3.0);
         s /= jac * jac;
-        let m = self.material[e] as usize;
-        let i1: f64 = f.iter().flatten().map(|x| x * x).sum();
-        let modulus = wave_modulus(&self.laws[m], jac, i1);
+        let m = p.cell_material[e] as usize;
+        let modulus = wave_modulus(&p.laws[m], jac, tensor::ddot(&f, &f));
         8.0 * modulus * self.inverse_density[m] * s
     }
 
@@ -157,12 +139,15 @@ impl StableStepTracker {
     /// `pool`'s threads when given (the maximum does not depend on the split).
     pub fn bound<T: Real>(&self, u: &[[T; 3]], pool: Option<&rayon::ThreadPool>) -> TrackedStep {
         let chunk_max = |k: usize| {
-            let (lo, hi) = (k * CHUNK, ((k + 1) * CHUNK).min(self.cells.len()));
+            let (lo, hi) = (
+                k * CHUNK,
+                ((k + 1) * CHUNK).min(self.problem.mesh.cells.len()),
+            );
             (lo..hi)
                 .map(|e| (self.omega_sq(e, u), e))
                 .fold((0.0f64, 0usize), |a, b| if b.0 > a.0 { b } else { a })
         };
-        let chunks = self.cells.len().div_ceil(CHUNK);
+        let chunks = self.problem.mesh.cells.len().div_ceil(CHUNK);
         let pick = |a: (f64, usize), b: (f64, usize)| {
             if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
                 b
