@@ -16,7 +16,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use host_tools::compile::{image_file_name, read_manifest, Manifest};
 use link_proto::Links;
 use pe_firmware::image::{
-    ElementRecord, ImageError, ImageHeader, ImageReader, Integration, Precision,
+    CompilationId, ElementRecord, ImageError, ImageHeader, ImageReader, Integration, Precision,
 };
 use pe_firmware::physics::{HexFull, HexReduced};
 use pe_firmware::runtime::{Fault, GlobalStats, LinkStats, Runtime, RuntimeConfig, WireReal};
@@ -39,6 +39,10 @@ pub struct SimOptions {
     pub workers: Option<usize>,
     /// How each board's storage is sized.
     pub storage: StorageSizing,
+    /// Check the image set against `manifest.json` before any board runs: every file's CRC
+    /// and every image's compilation id (true by default). False leaves a mixed set to the
+    /// boards' own check with their neighbours (the Hello frames), which tests exercise.
+    pub check_manifest: bool,
 }
 
 impl Default for SimOptions {
@@ -50,6 +54,7 @@ impl Default for SimOptions {
             frame_every: 0,
             workers: None,
             storage: StorageSizing::Exact,
+            check_manifest: true,
         }
     }
 }
@@ -332,9 +337,22 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
     }
 }
 
+/// One image file as read at start.
+struct ImageFile {
+    board: [usize; 3],
+    path: std::path::PathBuf,
+    bytes: Vec<u8>,
+    header: ImageHeader,
+}
+
 /// Reads every board's image named in the manifest, in board-index order, checking each
-/// against its position; returns them with the first header.
-fn read_images(dir: &Path, manifest: &Manifest) -> Result<(Vec<Vec<u8>>, ImageHeader)> {
+/// against its position and the machine (and, with `check_manifest`, the set against the
+/// manifest: [`check_set`]); returns them with the first header.
+fn read_images(
+    dir: &Path,
+    manifest: &Manifest,
+    check_manifest: bool,
+) -> Result<(Vec<Vec<u8>>, ImageHeader)> {
     let dims = manifest.machine;
     let count = dims.iter().product::<usize>();
     if manifest.boards.len() != count {
@@ -347,31 +365,161 @@ fn read_images(dir: &Path, manifest: &Manifest) -> Result<(Vec<Vec<u8>>, ImageHe
             dims[2]
         );
     }
-    let mut images = vec![Vec::new(); count];
-    let mut header = None;
+    let mut files = Vec::with_capacity(count);
     for b in &manifest.boards {
+        let [x, y, z] = b.board;
         let p = dir.join(image_file_name(b.board));
+        if (0..3).any(|a| b.board[a] >= dims[a]) {
+            bail!(
+                "{}: board ({x},{y},{z}) is outside the {}x{}x{} machine",
+                dir.join("manifest.json").display(),
+                dims[0],
+                dims[1],
+                dims[2]
+            );
+        }
         let bytes = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
-        let r = ImageReader::new(&bytes, Some(b.board.map(|c| c as u8)))
-            .map_err(|e| anyhow!("{}: {e}", p.display()))?;
+        let header = ImageReader::new(&bytes, Some(b.board.map(|c| c as u8)))
+            .map_err(|e| anyhow!("board ({x},{y},{z}): {}: {e}", p.display()))?
+            .header;
+        if header.machine.map(|c| c as usize) != dims {
+            let m = header.machine;
+            bail!(
+                "board ({x},{y},{z}): {}: image is for a {}x{}x{} machine, manifest.json says {}x{}x{}: the image is from another compilation",
+                p.display(),
+                m[0],
+                m[1],
+                m[2],
+                dims[0],
+                dims[1],
+                dims[2]
+            );
+        }
+        files.push(ImageFile {
+            board: b.board,
+            path: p,
+            bytes,
+            header,
+        });
+    }
+    if check_manifest {
+        check_set(manifest, &files)?;
+    }
+    let header = files
+        .first()
+        .map(|f| f.header)
+        .ok_or_else(|| anyhow!("{}: no boards", dir.display()))?;
+    let mut images = vec![Vec::new(); count];
+    for f in files {
+        let i = f.board[0] + dims[0] * (f.board[1] + dims[1] * f.board[2]);
+        images[i] = f.bytes;
+    }
+    Ok((images, header))
+}
+
+/// The set against the manifest: every image's compilation id is the manifest's, every
+/// file's CRC the one the manifest recorded, and the step the manifest repeats. A mixed set
+/// is refused naming each odd board, its file and both ids.
+fn check_set(manifest: &Manifest, files: &[ImageFile]) -> Result<()> {
+    let named = |f: &ImageFile| {
+        let [x, y, z] = f.board;
+        format!("board ({x},{y},{z}): {}", f.path.display())
+    };
+    let expected = u64::from_str_radix(&manifest.compilation, 16)
+        .ok()
+        .filter(|_| manifest.compilation.len() == 16)
+        .map(CompilationId::from_u64)
+        .ok_or_else(|| {
+            anyhow!(
+                "manifest.json: compilation {:?} is not 16 hex digits: recompile",
+                manifest.compilation
+            )
+        })?;
+    let odd: Vec<&ImageFile> = files
+        .iter()
+        .filter(|f| f.header.compilation != expected)
+        .collect();
+    if !odd.is_empty() {
+        let agree = files.len() - odd.len();
+        let mut msg = if agree == 0
+            && odd
+                .iter()
+                .all(|f| f.header.compilation == odd[0].header.compilation)
+        {
+            format!(
+                "manifest.json is from compilation {expected} but all {} images are from {}",
+                files.len(),
+                odd[0].header.compilation
+            )
+        } else if agree * 2 < files.len()
+            && odd
+                .iter()
+                .all(|f| f.header.compilation == odd[0].header.compilation)
+        {
+            // Most images agree among themselves: the manifest came with the few others.
+            let mut m = format!(
+                "mixed image set: manifest.json is from compilation {expected}, as are only {agree} of {} images; the other {} are from {}:",
+                files.len(),
+                odd.len(),
+                odd[0].header.compilation
+            );
+            for f in files
+                .iter()
+                .filter(|f| f.header.compilation == expected)
+                .take(8)
+            {
+                m += &format!("\n  {} is from compilation {expected}", named(f));
+            }
+            m
+        } else {
+            let mut m = format!(
+                "mixed image set: {} of {} images are not from the manifest's compilation {expected}:",
+                odd.len(),
+                files.len()
+            );
+            for f in odd.iter().take(8) {
+                m += &format!(
+                    "\n  {} is from compilation {} but the manifest (and {agree} other boards) are from {expected}",
+                    named(f),
+                    f.header.compilation
+                );
+            }
+            if odd.len() > 8 {
+                m += &format!("\n  ... and {} more", odd.len() - 8);
+            }
+            m
+        };
+        msg += "\nrecompile, or copy the whole set (images and manifest.json) from one compilation";
+        bail!(msg);
+    }
+    for (f, b) in files.iter().zip(&manifest.boards) {
+        let crc = f
+            .bytes
+            .len()
+            .checked_sub(4)
+            .map(|n| link_proto::frame::crc32(&f.bytes[..n]))
+            .unwrap_or(0);
+        if format!("{crc:08x}") != b.crc32.to_ascii_lowercase() {
+            bail!(
+                "{}: CRC {crc:08x}, but manifest.json records {} for it: the file changed after compilation {expected}; recompile or copy the whole set",
+                named(f),
+                b.crc32
+            );
+        }
         // The manifest repeats the step for its readers; the images are what runs.
-        let params = r.header.params;
+        let params = f.header.params;
         if params.dt_s != manifest.dt_s || params.steps != manifest.steps {
             bail!(
                 "{}: dt {} s and {} steps, but manifest.json says dt {} s and {} steps: the image is from another compilation",
-                p.display(),
+                named(f),
                 params.dt_s,
                 params.steps,
                 manifest.dt_s,
                 manifest.steps
             );
         }
-        header.get_or_insert(r.header);
-        let i = b.board[0] + dims[0] * (b.board[1] + dims[1] * b.board[2]);
-        images[i] = bytes;
     }
-    let header = header.ok_or_else(|| anyhow!("{}: no boards", dir.display()))?;
-    Ok((images, header))
+    Ok(())
 }
 
 fn add3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -498,7 +646,7 @@ pub fn run(
     on_progress: &mut dyn FnMut(u64, u64),
 ) -> Result<SimOutput> {
     let manifest = read_manifest(dir)?;
-    let (images, header) = read_images(dir, &manifest)?;
+    let (images, header) = read_images(dir, &manifest, opts.check_manifest)?;
     let dims = manifest.machine;
     if let Some((b, step)) = opts.faults.as_ref().and_then(|f| f.stall) {
         if (0..3).any(|a| b[a] >= dims[a]) {

@@ -42,6 +42,9 @@ pub enum FrameKind {
     Forces,
     /// Step barrier: "I finished step N"; usually no values.
     Barrier,
+    /// First exchange before step 0: the sender's compilation id (one f64 value whose
+    /// 8 bytes are the id), which the receiver compares with its own.
+    Hello,
     /// A kind this firmware does not know. Parsed, never rejected.
     Unknown(u8),
 }
@@ -53,6 +56,7 @@ impl FrameKind {
             FrameKind::Displacements => 0x01,
             FrameKind::Forces => 0x02,
             FrameKind::Barrier => 0x03,
+            FrameKind::Hello => 0x04,
             FrameKind::Unknown(c) => c,
         }
     }
@@ -63,6 +67,7 @@ impl FrameKind {
             0x01 => FrameKind::Displacements,
             0x02 => FrameKind::Forces,
             0x03 => FrameKind::Barrier,
+            0x04 => FrameKind::Hello,
             c => FrameKind::Unknown(c),
         }
     }

@@ -151,6 +151,8 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
     let dt = shared.dt_s;
     let header = ImageHeader {
         version: FORMAT_VERSION,
+        // Stamped by `compile_images` once every image of the set is written.
+        compilation: CompilationId::UNSET,
         board: bp.coords.map(|c| c as u8),
         machine: plan.machine.dims.map(|c| c as u8),
         precision: T::PRECISION,
@@ -407,8 +409,62 @@ pub fn graphics_params(problem: &Problem, dt: f64) -> GraphicsParams {
     }
 }
 
-/// Compiles every board's image.
+/// 64-bit FNV-1a: the compilation id's hash (the host computes it, boards only compare).
+struct Fnv1a(u64);
+
+impl Fnv1a {
+    fn new() -> Self {
+        Fnv1a(0xcbf2_9ce4_8422_2325)
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0 ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+}
+
+/// The id of a compilation: FNV-1a over the scene's mesh (node coordinates and cells, which
+/// the images hold only as derived records) and every image in board order, each as
+/// written with the id unset and preceded by its length. Everything a board computes with
+/// is in its image, so a different modulus, step, partition or scene gives a different id;
+/// compiling the same scene twice gives the same images and the same id.
+pub fn compilation_id(problem: &Problem, images: &[BoardImage]) -> CompilationId {
+    let mut h = Fnv1a::new();
+    h.write(b"pe compilation v1");
+    h.write(&(problem.mesh.nodes.len() as u64).to_le_bytes());
+    for p in &problem.mesh.nodes {
+        for v in p {
+            h.write(&v.to_bits().to_le_bytes());
+        }
+    }
+    h.write(&(problem.mesh.cells.len() as u64).to_le_bytes());
+    for c in &problem.mesh.cells {
+        for n in c {
+            h.write(&n.to_le_bytes());
+        }
+    }
+    h.write(&(images.len() as u64).to_le_bytes());
+    for im in images {
+        h.write(&(im.bytes.len() as u64).to_le_bytes());
+        h.write(&im.bytes);
+    }
+    CompilationId::from_u64(h.0)
+}
+
+/// Compiles every board's image, each stamped with the set's [`compilation_id`].
 pub fn compile_images(problem: &Problem, plan: &Plan) -> Result<Vec<BoardImage>> {
+    let mut images = compile_unstamped(problem, plan)?;
+    let id = compilation_id(problem, &images);
+    for im in &mut images {
+        stamp_compilation(&mut im.bytes, id)
+            .map_err(|e| anyhow!("board {:?}: stamping the compilation id: {e}", im.coords))?;
+        im.header.compilation = id;
+    }
+    Ok(images)
+}
+
+/// Every board's image, with the compilation id unset.
+fn compile_unstamped(problem: &Problem, plan: &Plan) -> Result<Vec<BoardImage>> {
     let dt = problem.time_step.dt_s;
     let shared = Shared {
         dt_s: dt,

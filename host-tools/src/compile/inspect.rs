@@ -28,6 +28,7 @@ pub fn inspect(dir: &Path, board: [usize; 3]) -> Result<String> {
         h.integration,
         bytes.len()
     );
+    s += &format!("  compilation {}\n", h.compilation);
     s += &format!(
         "  dt = {:.4e} s, {} steps, damping {} 1/s\n",
         h.params.dt_s, h.params.steps, h.params.damping_per_s

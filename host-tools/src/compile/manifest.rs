@@ -19,6 +19,9 @@ use crate::problem::Problem;
 pub struct Manifest {
     pub format_version: u16,
     pub scene: String,
+    /// The compilation id every image of the set carries in its header (16 hex digits,
+    /// [`pe_firmware::image::CompilationId`]'s display); board-sim refuses images without it.
+    pub compilation: String,
     /// How to load the scene again (its mesh, for outputs): `builtin:LEVEL` or a file path.
     pub scene_source: String,
     pub machine: [usize; 3],
@@ -35,6 +38,8 @@ pub struct ManifestBoard {
     pub board: [usize; 3],
     pub file: String,
     pub bytes: usize,
+    /// CRC-32 of the image (what its last four bytes hold), 8 hex digits; board-sim checks
+    /// the file against it.
     pub crc32: String,
 }
 
@@ -55,6 +60,10 @@ pub fn compile_to_dir(
     let manifest = Manifest {
         format_version: FORMAT_VERSION,
         scene: scene.to_string(),
+        compilation: images
+            .first()
+            .map(|im| im.header.compilation.to_string())
+            .unwrap_or_default(),
         scene_source: scene_source.to_string(),
         machine: machine.dims,
         profile: profile.name.to_string(),

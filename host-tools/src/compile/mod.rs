@@ -36,7 +36,8 @@ mod tables;
 pub use decode::{decode_image, DecodedImage, DecodedRound};
 pub use fit::{check_fit, fit_problems};
 pub use image::{
-    compile_images, contact_tables, graphics_params, image_file_name, write_images, BoardImage,
+    compilation_id, compile_images, contact_tables, graphics_params, image_file_name, write_images,
+    BoardImage,
 };
 pub use inspect::inspect;
 pub use manifest::{compile_to_dir, read_manifest, Manifest, ManifestBoard};

@@ -387,6 +387,34 @@ impl<'a> ImageWriter<'a> {
     }
 }
 
+/// Writes `id` into a finished image's header and renews its CRC: how the compiler stamps
+/// every image of a set once the set's id (a hash over the set with the field unset) is
+/// known. The header is re-encoded through its own type; the id is 8 raw bytes, so its
+/// length cannot change (checked: a different length is [`ImageError::Malformed`]).
+pub fn stamp_compilation(image: &mut [u8], id: CompilationId) -> Result<(), ImageError> {
+    let (mut header, header_end) = {
+        let r = ImageReader::new(image, None)?;
+        (r.header, image.len() - CRC_BYTES - r.rest.len())
+    };
+    header.compilation = id;
+    let slot = image
+        .get_mut(MAGIC.len()..header_end)
+        .ok_or(ImageError::TooShort)?;
+    let written = postcard::to_slice(&header, slot)
+        .map_err(|_| ImageError::Malformed { record: "header" })?
+        .len();
+    if written != header_end - MAGIC.len() {
+        return Err(ImageError::Malformed { record: "header" });
+    }
+    let body_end = image.len() - CRC_BYTES;
+    let crc = link_proto::frame::crc32(&image[..body_end]);
+    image[body_end..].copy_from_slice(&crc.to_le_bytes());
+    Ok(())
+}
+
+/// Bytes of the CRC that ends an image.
+const CRC_BYTES: usize = 4;
+
 /// Reads an image: checks magic, CRC and version up front; the sections go through
 /// [`transcode`].
 pub struct ImageReader<'a> {

@@ -2,7 +2,8 @@
 //! the schedule compiler (`pe compile`) and read by the board runtime. The Rust types here
 //! are the schema: both sides serialise them with postcard, so they cannot disagree.
 //!
-//! Layout: `MAGIC` (4 bytes), one [`ImageHeader`] (postcard), then the sections, each a run
+//! Layout: `MAGIC` (4 bytes), one [`ImageHeader`] (postcard; its version first, then the
+//! [`CompilationId`] as 8 raw bytes), then the sections, each a run
 //! of records whose count the header's [`Counts`] gives, in the order of
 //! [`codec::transcode`], the one place that order is written: the compiler's writer, the
 //! runtime's loader and `pe inspect`'s decoder all go through it. Last, a CRC-32
@@ -19,8 +20,8 @@ pub mod codec;
 pub mod path;
 
 pub use codec::{
-    read_image, transcode, validate, write_image, zero_record, Codec, ElementRecord, ImageParts,
-    ImageReader, ImageReal, ImageWriter,
+    read_image, stamp_compilation, transcode, validate, write_image, zero_record, Codec,
+    ElementRecord, ImageParts, ImageReader, ImageReal, ImageWriter,
 };
 pub use path::{path_value, piecewise_linear};
 
@@ -31,7 +32,35 @@ pub use crate::physics::contact::{ContactFace, ContactNode, ContactPair, Tool};
 /// First four bytes of every schedule image.
 pub const MAGIC: [u8; 4] = *b"PESI";
 /// Format version; bumped whenever a record type changes.
-pub const FORMAT_VERSION: u16 = 4;
+pub const FORMAT_VERSION: u16 = 5;
+
+/// The id of the compilation an image belongs to: a 64-bit hash the compiler computes over
+/// every image of the set (with this field zero) and the scene's mesh (see `pe compile`).
+/// A board only compares it: with its neighbours' before step 0 (the Hello frames) and the
+/// host with the manifest's. Stored as 8 raw bytes (little-endian), so the header's length
+/// does not depend on its value and [`codec::stamp_compilation`] can write it in place.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct CompilationId(pub [u8; 8]);
+
+impl CompilationId {
+    /// The id before the compiler stamps it (what the hash is computed over).
+    pub const UNSET: CompilationId = CompilationId([0; 8]);
+
+    pub const fn from_u64(v: u64) -> Self {
+        CompilationId(v.to_le_bytes())
+    }
+
+    pub const fn as_u64(self) -> u64 {
+        u64::from_le_bytes(self.0)
+    }
+}
+
+/// 16 hex digits, as the manifest and the reports write it.
+impl core::fmt::Display for CompilationId {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{:016x}", self.as_u64())
+    }
+}
 
 /// Scalar type of the image's element and node records.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -178,6 +207,8 @@ pub struct SceneParams {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ImageHeader {
     pub version: u16,
+    /// The compilation this image belongs to (the same in every image of a set).
+    pub compilation: CompilationId,
     /// This board's logical coordinates.
     pub board: [u8; 3],
     /// Machine size (boards per axis).

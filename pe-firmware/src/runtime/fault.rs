@@ -3,7 +3,7 @@
 
 use link_proto::Face;
 
-use crate::image::ImageError;
+use crate::image::{CompilationId, ImageError};
 use crate::physics::PhysicsError;
 
 /// What went wrong, where.
@@ -62,6 +62,13 @@ pub enum FaultKind {
     GlobalTimeout {
         src: u8,
     },
+    /// The neighbour across `face` runs an image of another compilation (its Hello before
+    /// step 0 carried `theirs`): the image set is mixed.
+    CompilationMismatch {
+        face: Face,
+        ours: CompilationId,
+        theirs: CompilationId,
+    },
     /// The contact search needs more room than this firmware has.
     ContactCapacity {
         what: &'static str,
@@ -105,10 +112,32 @@ impl core::fmt::Display for Fault {
             FaultKind::GlobalTimeout { src } => {
                 write!(f, "global network: nothing from board {src} within the timeout")
             }
+            FaultKind::CompilationMismatch { face, ours, theirs } => {
+                write!(f, "link {face:?}")?;
+                if let Some([nx, ny, nz]) = neighbour(self.board, face) {
+                    write!(f, " (to board ({nx},{ny},{nz}))")?;
+                }
+                write!(
+                    f,
+                    ": the neighbour's image is from compilation {theirs}, this board's from {ours}: the image set is mixed; recompile or load the whole set"
+                )
+            }
             FaultKind::ContactCapacity { what, needed, max } => write!(
                 f,
                 "contact: {needed} {what} needed, this firmware holds {max}"
             ),
         }
     }
+}
+
+/// The board across `face` of `board` (`None` below 0 or past 255).
+pub fn neighbour(board: [u8; 3], face: Face) -> Option<[u8; 3]> {
+    let mut n = board;
+    let a = face.index() / 2;
+    n[a] = if face.sign() > 0 {
+        n[a].checked_add(1)?
+    } else {
+        n[a].checked_sub(1)?
+    };
+    Some(n)
 }

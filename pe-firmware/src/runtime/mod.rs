@@ -4,7 +4,7 @@
 //! Rooms: [`fault`] (what went wrong, where), [`storage`] (the arrays and their
 //! capacities), `load` (an image into storage), [`program`] (the step's operations, also
 //! walked by board-sim's timing model), `exchange` (force frames over the point-to-point
-//! links), `global` (packets on the global network), `contact` (bounding boxes, node
+//! links), `hello` (the compilation ids checked with the neighbours before step 0), `global` (packets on the global network), `contact` (bounding boxes, node
 //! exchange, contact and tool forces), `graphics` (surface nodes to the graphics engine);
 //! this file holds the runtime itself and the step loop.
 //!
@@ -18,6 +18,7 @@ mod exchange;
 pub mod fault;
 mod global;
 mod graphics;
+mod hello;
 mod load;
 pub mod program;
 pub mod storage;
@@ -100,6 +101,8 @@ pub struct Runtime<'a, T, E> {
     port: global::GlobalPort,
     contact: ContactState,
     graphics_cursor: usize,
+    /// Faces whose Hello (compilation id) is still to send or to check before step 0.
+    hello: hello::Hello,
     /// Range of each stage's records in the external-force list.
     external_stages: [(u32, u32); STAGES],
     pub stats: LinkStats,
@@ -249,6 +252,21 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         links: &mut impl Links,
         env: &mut impl Environment,
     ) -> Result<bool, Fault> {
+        if !self.hello.is_done() {
+            if !self.hello_poll(links)? {
+                let now = env.now_ns();
+                let since = *self.waiting_since.get_or_insert(now);
+                if now.saturating_sub(since) > self.config.link_timeout_ns {
+                    return Err(self.fault(FaultKind::LinkTimeout {
+                        face: self.hello.missing(),
+                    }));
+                }
+                return Ok(false);
+            }
+            if let Some(since) = self.waiting_since.take() {
+                self.stats.wait_ns += env.now_ns().saturating_sub(since);
+            }
+        }
         let t = self.step as f64 * self.header.params.dt_s;
         while let Some(op) = self.program.get(self.pc) {
             let done = match op {
