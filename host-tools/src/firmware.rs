@@ -151,21 +151,37 @@ pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<Imag
     let elf = std::fs::read(&elf_path)
         .with_context(|| format!("reading the firmware {}", elf_path.display()))?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let mut boards = Vec::new();
+    // Every image decoded and the set checked against the manifest (one compilation, the
+    // CRCs it recorded) before anything is written.
+    let mut files = Vec::new();
     for b in &m.boards {
         let c = b.board;
         let p = dir.join(&b.file);
-        let image = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
+        let bytes = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
+        let header = crate::compile::decode_image(&bytes, Some(c.map(|v| v as u8)))
+            .map_err(|e| {
+                anyhow::anyhow!("board ({},{},{}): {}: {e}", c[0], c[1], c[2], p.display())
+            })?
+            .header;
+        files.push(crate::compile::ImageFile {
+            board: c,
+            path: p,
+            bytes,
+            header,
+        });
+    }
+    crate::compile::check_image_set(&m, &files)?;
+    let mut boards = Vec::new();
+    for f in &files {
+        let (c, image) = (f.board, &f.bytes);
         let pos = c.map(|v| v as u8);
-        crate::compile::decode_image(&image, Some(pos))
-            .map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?;
         let stem = image_file_name(c);
         let stem = stem.trim_end_matches(".bin");
         let elf_name = format!("{stem}.elf");
         let sched_name = format!("{stem}.sched");
         std::fs::write(out.join(&elf_name), patch_identity(&elf, pos)?)
             .with_context(|| format!("writing {}", out.join(&elf_name).display()))?;
-        let blob = schedule_blob(&image);
+        let blob = schedule_blob(image);
         std::fs::write(out.join(&sched_name), &blob)
             .with_context(|| format!("writing {}", out.join(&sched_name).display()))?;
         let addr = format!("{:#010x}", profile.image_origin);

@@ -3,8 +3,8 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
-use pe_firmware::image::FORMAT_VERSION;
+use anyhow::{anyhow, bail, Context, Result};
+use pe_firmware::image::{CompilationId, ImageHeader, FORMAT_VERSION};
 use pe_firmware::profile::BoardProfile;
 use serde::Serialize;
 
@@ -99,4 +99,118 @@ pub fn read_manifest(dir: &Path) -> Result<Manifest> {
     let p = dir.join("manifest.json");
     let text = std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
     serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))
+}
+
+/// One image file of a set, as read (its header checked for its position).
+pub struct ImageFile {
+    pub board: [usize; 3],
+    pub path: std::path::PathBuf,
+    pub bytes: Vec<u8>,
+    pub header: ImageHeader,
+}
+
+/// The set against the manifest (board-sim before any board runs, `pe image` before it
+/// writes anything): every image's compilation id is the manifest's, every
+/// file's CRC the one the manifest recorded, and the step the manifest repeats. A mixed set
+/// is refused naming each odd board, its file and both ids.
+pub fn check_image_set(manifest: &Manifest, files: &[ImageFile]) -> Result<()> {
+    let named = |f: &ImageFile| {
+        let [x, y, z] = f.board;
+        format!("board ({x},{y},{z}): {}", f.path.display())
+    };
+    let expected = u64::from_str_radix(&manifest.compilation, 16)
+        .ok()
+        .filter(|_| manifest.compilation.len() == 16)
+        .map(CompilationId::from_u64)
+        .ok_or_else(|| {
+            anyhow!(
+                "manifest.json: compilation {:?} is not 16 hex digits: recompile",
+                manifest.compilation
+            )
+        })?;
+    let odd: Vec<&ImageFile> = files
+        .iter()
+        .filter(|f| f.header.compilation != expected)
+        .collect();
+    if !odd.is_empty() {
+        let agree = files.len() - odd.len();
+        let mut msg = if agree == 0
+            && odd
+                .iter()
+                .all(|f| f.header.compilation == odd[0].header.compilation)
+        {
+            format!(
+                "manifest.json is from compilation {expected} but all {} images are from {}",
+                files.len(),
+                odd[0].header.compilation
+            )
+        } else if agree * 2 < files.len()
+            && odd
+                .iter()
+                .all(|f| f.header.compilation == odd[0].header.compilation)
+        {
+            // Most images agree among themselves: the manifest came with the few others.
+            let mut m = format!(
+                "mixed image set: manifest.json is from compilation {expected}, as are only {agree} of {} images; the other {} are from {}:",
+                files.len(),
+                odd.len(),
+                odd[0].header.compilation
+            );
+            for f in files
+                .iter()
+                .filter(|f| f.header.compilation == expected)
+                .take(8)
+            {
+                m += &format!("\n  {} is from compilation {expected}", named(f));
+            }
+            m
+        } else {
+            let mut m = format!(
+                "mixed image set: {} of {} images are not from the manifest's compilation {expected}:",
+                odd.len(),
+                files.len()
+            );
+            for f in odd.iter().take(8) {
+                m += &format!(
+                    "\n  {} is from compilation {} but the manifest (and {agree} other boards) are from {expected}",
+                    named(f),
+                    f.header.compilation
+                );
+            }
+            if odd.len() > 8 {
+                m += &format!("\n  ... and {} more", odd.len() - 8);
+            }
+            m
+        };
+        msg += "\nrecompile, or copy the whole set (images and manifest.json) from one compilation";
+        bail!(msg);
+    }
+    for (f, b) in files.iter().zip(&manifest.boards) {
+        let crc = f
+            .bytes
+            .len()
+            .checked_sub(4)
+            .map(|n| link_proto::frame::crc32(&f.bytes[..n]))
+            .unwrap_or(0);
+        if format!("{crc:08x}") != b.crc32.to_ascii_lowercase() {
+            bail!(
+                "{}: CRC {crc:08x}, but manifest.json records {} for it: the file changed after compilation {expected}; recompile or copy the whole set",
+                named(f),
+                b.crc32
+            );
+        }
+        // The manifest repeats the step for its readers; the images are what runs.
+        let params = f.header.params;
+        if params.dt_s != manifest.dt_s || params.steps != manifest.steps {
+            bail!(
+                "{}: dt {} s and {} steps, but manifest.json says dt {} s and {} steps: the image is from another compilation",
+                named(f),
+                params.dt_s,
+                params.steps,
+                manifest.dt_s,
+                manifest.steps
+            );
+        }
+    }
+    Ok(())
 }

@@ -40,7 +40,9 @@ pub use image::{
     BoardImage,
 };
 pub use inspect::inspect;
-pub use manifest::{compile_to_dir, read_manifest, Manifest, ManifestBoard};
+pub use manifest::{
+    check_image_set, compile_to_dir, read_manifest, ImageFile, Manifest, ManifestBoard,
+};
 pub use plan::{line_rounds, plan, BoardPlan, Plan, RoundPlan, FACE_NAMES};
 pub use report::{
     link_time_s, report, summary, verdict, BoardSummary, Capacity, CompileReport,

@@ -1,5 +1,5 @@
 //! The first exchange: before step 0 every board sends its image's [`CompilationId`] to each
-//! neighbour in the machine (one [`FrameKind::Hello`] frame per linked face: step 0, one f64
+//! neighbour it exchanges with (one [`FrameKind::Hello`] frame per linked face: step 0, one f64
 //! value whose 8 bytes are the id) and reads one from each. A neighbour whose id differs is
 //! [`FaultKind::CompilationMismatch`]: the boards run images of different compilations (a
 //! board flashed from another compile, a set mixed by hand), whose schedules would agree
@@ -18,16 +18,19 @@ pub(super) struct Hello {
 }
 
 impl Hello {
-    /// The faces of board `board` that have a neighbour in a `machine` (boards per axis).
-    pub fn new(board: [u8; 3], machine: [u8; 3]) -> Self {
+    /// The faces of board `board` that have a neighbour in a `machine` (boards per axis)
+    /// on an axis the schedule exchanges over (`rounds` per axis, the same on every board):
+    /// the links the step needs, so both ends agree on which faces say Hello.
+    pub fn new(board: [u8; 3], machine: [u8; 3], rounds: [u8; 3]) -> Self {
         let mut faces = 0u8;
         for face in Face::ALL {
             let a = face.index() / 2;
-            let linked = if face.sign() > 0 {
-                board[a].saturating_add(1) < machine[a]
-            } else {
-                board[a] > 0
-            };
+            let linked = rounds[a] > 0
+                && if face.sign() > 0 {
+                    board[a].saturating_add(1) < machine[a]
+                } else {
+                    board[a] > 0
+                };
             if linked {
                 faces |= 1 << face.index();
             }

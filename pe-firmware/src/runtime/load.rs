@@ -103,7 +103,7 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
             },
             contact,
             graphics_cursor: 0,
-            hello: super::hello::Hello::new(header.board, header.machine),
+            hello: super::hello::Hello::new(header.board, header.machine, c.rounds),
             stats: LinkStats::default(),
             external_stages: stage_ranges(&c.external),
             reaction_prescribed: [0.0; 3],
