@@ -291,7 +291,15 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    let out = out?;
+    let out = match out {
+        Ok(o) => o,
+        Err(e) => {
+            if let (Some(p), Some(f)) = (&a.report, e.downcast_ref::<board_sim::SimFault>()) {
+                write_fault_report(p, &manifest, f)?;
+            }
+            return Err(e);
+        }
+    };
     let sim_s = out.steps as f64 * manifest.dt_s;
     let max = out
         .displacements
@@ -518,6 +526,35 @@ fn write_report(
         "faults_injected": out.injected,
         "paraview_frames": paraview_frames,
         "global_network": global.map(|g| &g.json),
+    });
+    std::fs::write(p, serde_json::to_string_pretty(&rep)?)
+        .with_context(|| format!("writing {}", p.display()))
+}
+
+/// The report of a run that stopped on a fault: the first cause, the observation that
+/// detected it, the consequences (every other board's fault or wait) and what was injected.
+fn write_fault_report(
+    p: &std::path::Path,
+    manifest: &host_tools::compile::Manifest,
+    f: &board_sim::SimFault,
+) -> Result<()> {
+    let obs = |o: &board_sim::Observed| {
+        serde_json::json!({
+            "board": o.fault.board,
+            "step": o.fault.step,
+            "link": o.face().map(|f| format!("{f:?}")),
+            "waiting": o.waiting,
+            "text": o.to_string(),
+        })
+    };
+    let rep = serde_json::json!({
+        "scene": manifest.scene,
+        "machine": manifest.machine,
+        "stopped": true,
+        "cause": f.cause,
+        "detected": f.observed.get(f.cause.detected).map(obs),
+        "consequences": f.consequences().map(obs).collect::<Vec<_>>(),
+        "faults_injected": f.injected,
     });
     std::fs::write(p, serde_json::to_string_pretty(&rep)?)
         .with_context(|| format!("writing {}", p.display()))
