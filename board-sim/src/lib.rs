@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
 use host_tools::compile::{image_file_name, read_manifest, Manifest};
+use link_proto::reliable::{FaceRecovery, ReliableConfig};
 use link_proto::Links;
 use pe_firmware::image::{
     ElementRecord, ImageError, ImageHeader, ImageReader, Integration, Precision,
@@ -21,7 +22,7 @@ use pe_firmware::image::{
 use pe_firmware::physics::{HexFull, HexReduced};
 use pe_firmware::runtime::{Fault, GlobalStats, LinkStats, Runtime, RuntimeConfig, WireReal};
 
-use links::{build_links, FaultSpec, FaultyLinks, Injected, ThreadEnv};
+use links::{build_links, BoardLinks, FaultSpec, FaultyLinks, Injected, Lower, ThreadEnv};
 use storage::HostStorage;
 pub use storage::{load_check, StorageSizing, VecShelf};
 
@@ -42,6 +43,9 @@ pub struct SimOptions {
     pub workers: Option<usize>,
     /// How each board's storage is sized.
     pub storage: StorageSizing,
+    /// Link-level recovery (retransmission) above the emulated links and the fault
+    /// injector; `None` runs without, so that every fault stops the run.
+    pub recovery: Option<ReliableConfig>,
 }
 
 impl Default for SimOptions {
@@ -53,6 +57,7 @@ impl Default for SimOptions {
             frame_every: 0,
             workers: None,
             storage: StorageSizing::Exact,
+            recovery: Some(ReliableConfig::default()),
         }
     }
 }
@@ -67,6 +72,58 @@ pub struct BoardResult {
     pub wait_s: f64,
     /// Global-network traffic (contact exchange, graphics, tool forces).
     pub global: GlobalStats,
+    /// What link recovery cost (with recovery on).
+    pub recovery: Option<LinkRecovery>,
+}
+
+/// What link recovery cost on one board, per face (`Face::index` order: +x, −x, +y, −y,
+/// +z, −z).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct LinkRecovery {
+    /// Bytes of the envelopes of first transmissions (frames included).
+    pub data_bytes: [u64; 6],
+    pub retransmitted_frames: [u64; 6],
+    pub retransmitted_bytes: [u64; 6],
+    pub nacks_sent: [u64; 6],
+    pub nacks_received: [u64; 6],
+    pub acks_sent: [u64; 6],
+    pub statuses_sent: [u64; 6],
+    /// Bytes of acks, nacks and statuses.
+    pub control_bytes: [u64; 6],
+    /// Envelopes received damaged, beyond a gap, or twice.
+    pub damaged: [u64; 6],
+    pub gaps: [u64; 6],
+    pub duplicates: [u64; 6],
+    /// Data envelopes sent the first time (each adds `reliable::OVERHEAD` bytes).
+    pub data_frames: [u64; 6],
+}
+
+impl LinkRecovery {
+    fn from_faces(f: &[FaceRecovery; 6]) -> Self {
+        let a = |g: fn(&FaceRecovery) -> u64| std::array::from_fn(|i| g(&f[i]));
+        LinkRecovery {
+            data_bytes: a(|x| x.data_bytes),
+            retransmitted_frames: a(|x| x.retransmitted_frames),
+            retransmitted_bytes: a(|x| x.retransmitted_bytes),
+            nacks_sent: a(|x| x.nacks_sent),
+            nacks_received: a(|x| x.nacks_received),
+            acks_sent: a(|x| x.acks_sent),
+            statuses_sent: a(|x| x.statuses_sent),
+            control_bytes: a(|x| x.control_bytes),
+            damaged: a(|x| x.damaged),
+            gaps: a(|x| x.gaps),
+            duplicates: a(|x| x.duplicates),
+            data_frames: a(|x| x.data_frames),
+        }
+    }
+
+    /// Bytes recovery added on this board's links: envelopes, retransmissions, control.
+    pub fn overhead_bytes(&self) -> u64 {
+        let s = |v: &[u64; 6]| v.iter().sum::<u64>();
+        s(&self.data_frames) * link_proto::reliable::OVERHEAD as u64
+            + s(&self.retransmitted_bytes)
+            + s(&self.control_bytes)
+    }
 }
 
 /// What a run produced.
@@ -413,7 +470,7 @@ fn attribute(dims: [usize; 3], mut observed: Vec<Observed>, injected: Vec<Inject
 }
 
 /// A board's links as the worker threads hold them.
-type BoxedLinks = Box<dyn Links + Send>;
+type BoxedLinks = Box<BoardLinks>;
 
 /// Messages from board threads to the collector.
 #[allow(clippy::large_enum_variant)]
@@ -431,6 +488,11 @@ enum Report {
         kinetic_energy: f64,
     },
     Failed(Observed),
+    /// What link recovery cost on a board's faces, at the end.
+    Recovery {
+        board: usize,
+        faces: [FaceRecovery; 6],
+    },
 }
 
 struct BoardCtx {
@@ -452,7 +514,7 @@ struct BoardCtx {
 fn run_worker<T: WireReal, E: ElementRecord<T>>(
     boards: Vec<BoardCtx>,
     sizing: StorageSizing,
-    links: &mut [Box<dyn Links + Send>],
+    links: &mut [BoxedLinks],
     env: &mut ThreadEnv,
     out: &mpsc::Sender<Report>,
 ) -> Result<(), Fault> {
@@ -539,6 +601,7 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
                             bytes_sent: st.bytes_sent,
                             wait_s: st.wait_ns as f64 * 1e-9,
                             global: rt.global_stats(),
+                            recovery: None,
                         },
                         reaction_prescribed: rt.reaction_prescribed,
                         reaction_fixed: rt.reaction_fixed,
@@ -564,6 +627,9 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
                     progressed = true;
                 }
                 if !complete {
+                    // Waiting (perhaps on the global network): the links still answer
+                    // (link recovery's acks and retransmissions), as `Runtime::step` does.
+                    links[i].poll();
                     break;
                 }
                 let s = rt.step_index();
@@ -572,6 +638,17 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
                 }
                 if ctx.frame_every > 0 && s.is_multiple_of(ctx.frame_every) && s < ctx.steps {
                     send_frame(rt, s);
+                }
+            }
+        }
+        let exiting = stop.load(Ordering::Relaxed) || finished.load(Ordering::Relaxed) >= total;
+        if exiting {
+            for (ctx, l) in boards.iter().zip(links.iter()) {
+                if let Some(r) = l.recovery() {
+                    let _ = out.send(Report::Recovery {
+                        board: ctx.index,
+                        faces: r,
+                    });
                 }
             }
         }
@@ -668,6 +745,7 @@ struct Collected {
     /// at the end (so a report does not depend on which thread finished first).
     energies: Vec<([f64; 3], [f64; 3], f64)>,
     faults: Vec<Observed>,
+    recovery: Vec<Option<LinkRecovery>>,
 }
 
 impl Collected {
@@ -681,6 +759,7 @@ impl Collected {
             results: vec![None; boards],
             energies: vec![([0.0; 3], [0.0; 3], 0.0); boards],
             faults: Vec::new(),
+            recovery: vec![None; boards],
         }
     }
 
@@ -719,6 +798,11 @@ impl Collected {
                 self.results[board] = Some(result);
             }
             Report::Failed(f) => self.faults.push(f),
+            Report::Recovery { board, faces } => {
+                if let Some(r) = self.recovery.get_mut(board) {
+                    *r = Some(LinkRecovery::from_faces(&faces));
+                }
+            }
         }
     }
 }
@@ -822,16 +906,20 @@ pub fn run(
             finished: finished.clone(),
             total: count,
         };
-        let l: Box<dyn Links + Send> = match &opts.faults {
-            Some(spec) => Box::new(FaultyLinks::new(
+        let lower = match &opts.faults {
+            Some(spec) => Lower::Faulty(Box::new(FaultyLinks::new(
                 link,
                 coords,
                 b,
                 spec.clone(),
                 injected.clone(),
-            )),
-            None => Box::new(link),
+            ))),
+            None => Lower::Clean(link),
         };
+        let l = Box::new(
+            BoardLinks::new(lower, opts.recovery)
+                .map_err(|e| anyhow!("link recovery {:?}: {e}", opts.recovery))?,
+        );
         per_worker[b % workers].0.push(ctx);
         per_worker[b % workers].1.push(l);
     }
@@ -864,11 +952,14 @@ pub fn run(
     if !c.faults.is_empty() {
         return Err(attribute(dims, c.faults, injected).into());
     }
-    let boards = c
+    let mut boards = c
         .results
         .into_iter()
         .collect::<Option<Vec<_>>>()
         .ok_or_else(|| anyhow!("a board ended without a report"))?;
+    for (b, r) in boards.iter_mut().zip(c.recovery) {
+        b.recovery = r;
+    }
     c.frames.sort_by_key(|f| f.0);
     let tools = header.counts.tools as usize;
     let (graphics, tool_force) = collect_sinks(&net, steps, tools)?;
@@ -893,7 +984,7 @@ pub fn run(
 fn dispatch(
     ctx: Vec<BoardCtx>,
     sizing: StorageSizing,
-    links: &mut [Box<dyn Links + Send>],
+    links: &mut [BoxedLinks],
     env: &mut ThreadEnv,
     out: &mpsc::Sender<Report>,
     precision: Precision,

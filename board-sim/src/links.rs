@@ -526,3 +526,122 @@ fn pop_into(queue: &Mutex<VecDeque<Vec<u8>>>, buf: &mut [u8]) -> Result<Option<u
         }
     }
 }
+
+/// A board's links below recovery: clean, or with faults injected.
+pub enum Lower {
+    Clean(EmuLinks),
+    Faulty(Box<FaultyLinks<EmuLinks>>),
+}
+
+impl Links for Lower {
+    fn try_send(&mut self, face: Face, frame: &[u8]) -> Result<(), SendError> {
+        match self {
+            Lower::Clean(l) => l.try_send(face, frame),
+            Lower::Faulty(l) => l.try_send(face, frame),
+        }
+    }
+    fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        match self {
+            Lower::Clean(l) => l.try_recv(face, buf),
+            Lower::Faulty(l) => l.try_recv(face, buf),
+        }
+    }
+    fn try_send_global(&mut self, p: &[u8]) -> Result<(), SendError> {
+        match self {
+            Lower::Clean(l) => l.try_send_global(p),
+            Lower::Faulty(l) => l.try_send_global(p),
+        }
+    }
+    fn try_recv_global(&mut self, b: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        match self {
+            Lower::Clean(l) => l.try_recv_global(b),
+            Lower::Faulty(l) => l.try_recv_global(b),
+        }
+    }
+    fn poll(&mut self) {
+        match self {
+            Lower::Clean(l) => l.poll(),
+            Lower::Faulty(l) => l.poll(),
+        }
+    }
+}
+
+/// A board thread's clock for link recovery (its own start, passed in).
+pub struct SimClock(Instant);
+
+impl link_proto::reliable::Clock for SimClock {
+    fn now_ns(&mut self) -> u64 {
+        self.0.elapsed().as_nanos() as u64
+    }
+}
+
+/// A board's links as its runtime sees them: with link recovery above the (possibly
+/// faulty) emulated links, or without.
+pub enum BoardLinks {
+    Plain(Lower),
+    Recovering(Box<link_proto::reliable::Reliable<Lower, SimClock, Vec<u8>>>),
+}
+
+impl BoardLinks {
+    /// `lower` with recovery by `config`, or without (`None`). Fails on a configuration
+    /// the wrapper refuses (window beyond `WINDOW_MAX`, frames too long).
+    pub fn new(
+        lower: Lower,
+        config: Option<link_proto::reliable::ReliableConfig>,
+    ) -> Result<Self, link_proto::Error> {
+        use link_proto::reliable::Reliable;
+        Ok(match config {
+            None => BoardLinks::Plain(lower),
+            Some(c) => {
+                let buf = vec![0u8; Reliable::<Lower, SimClock, Vec<u8>>::buffer_len(&c)];
+                BoardLinks::Recovering(Box::new(Reliable::new(
+                    lower,
+                    SimClock(Instant::now()),
+                    c,
+                    buf,
+                )?))
+            }
+        })
+    }
+
+    /// What recovery cost, per face, if it is on.
+    pub fn recovery(&self) -> Option<[link_proto::reliable::FaceRecovery; 6]> {
+        match self {
+            BoardLinks::Plain(_) => None,
+            BoardLinks::Recovering(r) => Some(*r.stats()),
+        }
+    }
+}
+
+impl Links for BoardLinks {
+    fn try_send(&mut self, face: Face, frame: &[u8]) -> Result<(), SendError> {
+        match self {
+            BoardLinks::Plain(l) => l.try_send(face, frame),
+            BoardLinks::Recovering(l) => l.try_send(face, frame),
+        }
+    }
+    fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        match self {
+            BoardLinks::Plain(l) => l.try_recv(face, buf),
+            BoardLinks::Recovering(l) => l.try_recv(face, buf),
+        }
+    }
+    fn try_send_global(&mut self, p: &[u8]) -> Result<(), SendError> {
+        match self {
+            BoardLinks::Plain(l) => l.try_send_global(p),
+            BoardLinks::Recovering(l) => l.try_send_global(p),
+        }
+    }
+    fn try_recv_global(&mut self, b: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        match self {
+            BoardLinks::Plain(l) => l.try_recv_global(b),
+            BoardLinks::Recovering(l) => l.try_recv_global(b),
+        }
+    }
+    fn poll(&mut self) {
+        match self {
+            BoardLinks::Plain(l) => l.poll(),
+            BoardLinks::Recovering(l) => l.poll(),
+        }
+    }
+}

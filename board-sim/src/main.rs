@@ -100,6 +100,10 @@ struct RunArgs {
     /// Inject faults: seed=S,drop=P,corrupt=P,delay=MS,stall=X.Y.Z@STEP
     #[arg(long)]
     faults: Option<String>,
+    /// Run without link-level recovery: every lost or damaged frame stops the run (for
+    /// fault detection). Default: frames are numbered, acknowledged and retransmitted.
+    #[arg(long)]
+    no_recovery: bool,
     /// A link silent this long is a fault (s).
     #[arg(long, default_value_t = 10.0)]
     link_timeout_s: f64,
@@ -323,6 +327,16 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
             f[0], f[1], f[2]
         );
     }
+    if let Some(r) = recovery_summary(&out) {
+        println!(
+            "link recovery: {} frames ({} bytes) retransmitted after {} nacks; {} bytes added in all ({:.2}% of the frames' bytes: envelopes, retransmissions, acks)",
+            r["retransmitted_frames"],
+            r["retransmitted_bytes"],
+            r["nacks_sent"],
+            r["overhead_bytes"],
+            100.0 * r["overhead_fraction_of_frame_bytes"].as_f64().unwrap_or(0.0)
+        );
+    }
     let modelled = link_model(dir, &manifest, &a)?;
     // The frames the graphics engine could assemble (every surface node received): the
     // ones written to the ParaView series and counted in the summary and the report.
@@ -368,6 +382,9 @@ fn sim_options(
         storage,
         ..Default::default()
     };
+    if a.no_recovery {
+        opts.recovery = None;
+    }
     if let Some(f) = &a.faults {
         let spec = FaultSpec::parse(f)?;
         eprintln!(
@@ -415,7 +432,27 @@ fn link_model(
     if let Some(l) = a.link_latency_s {
         timing.link_latency_s = l;
     }
+    if !a.no_recovery {
+        timing.frame_overhead_bytes = link_proto::reliable::OVERHEAD;
+    }
     let modelled = model(dir, manifest.machine, timing)?;
+    if !a.no_recovery {
+        let bare = model(
+            dir,
+            manifest.machine,
+            SimTiming {
+                frame_overhead_bytes: 0,
+                ..timing
+            },
+        )?;
+        println!(
+            "link model: recovery's envelope ({} bytes a frame) makes the slowest board's step {:.2} us longer ({:.1} us against {:.1} us)",
+            link_proto::reliable::OVERHEAD,
+            (modelled.step_s - bare.step_s) * 1e6,
+            modelled.step_s * 1e6,
+            bare.step_s * 1e6
+        );
+    }
     println!(
         "link model ({}): a step takes {:.1} us on the slowest board ({:.1} us computing), dt = {:.1} us: {}",
         profile.name, modelled.step_s * 1e6, modelled.compute_s * 1e6, modelled.dt_s * 1e6,
@@ -500,7 +537,7 @@ fn write_report(
     let links: Vec<serde_json::Value> = out
         .boards
         .iter()
-        .map(|b| serde_json::json!({ "board": b.board, "frames_sent": b.frames_sent, "bytes_sent": b.bytes_sent, "wait_s": b.wait_s }))
+        .map(|b| serde_json::json!({ "board": b.board, "frames_sent": b.frames_sent, "bytes_sent": b.bytes_sent, "wait_s": b.wait_s, "recovery": b.recovery }))
         .collect();
     let rep = serde_json::json!({
         "scene": manifest.scene,
@@ -524,6 +561,7 @@ fn write_report(
         "boards": links,
         "link_model": modelled,
         "faults_injected": out.injected,
+        "recovery": recovery_summary(out),
         "paraview_frames": paraview_frames,
         "global_network": global.map(|g| &g.json),
     });
@@ -558,6 +596,41 @@ fn write_fault_report(
     });
     std::fs::write(p, serde_json::to_string_pretty(&rep)?)
         .with_context(|| format!("writing {}", p.display()))
+}
+
+/// Link recovery's totals over the boards (None without recovery): retransmitted frames
+/// and bytes, nacks, and the bytes recovery added against the frames' own.
+fn recovery_summary(out: &board_sim::SimOutput) -> Option<serde_json::Value> {
+    let rs: Vec<&board_sim::LinkRecovery> = out
+        .boards
+        .iter()
+        .filter_map(|b| b.recovery.as_ref())
+        .collect();
+    if rs.is_empty() {
+        return None;
+    }
+    let sum = |g: fn(&board_sim::LinkRecovery) -> &[u64; 6]| {
+        rs.iter().map(|r| g(r).iter().sum::<u64>()).sum::<u64>()
+    };
+    let frame_bytes: u64 = out
+        .boards
+        .iter()
+        .map(|b| b.bytes_sent.iter().sum::<u64>())
+        .sum();
+    let overhead: u64 = rs.iter().map(|r| r.overhead_bytes()).sum();
+    Some(serde_json::json!({
+        "retransmitted_frames": sum(|r| &r.retransmitted_frames),
+        "retransmitted_bytes": sum(|r| &r.retransmitted_bytes),
+        "nacks_sent": sum(|r| &r.nacks_sent),
+        "acks_sent": sum(|r| &r.acks_sent),
+        "statuses_sent": sum(|r| &r.statuses_sent),
+        "control_bytes": sum(|r| &r.control_bytes),
+        "damaged_received": sum(|r| &r.damaged),
+        "gaps": sum(|r| &r.gaps),
+        "duplicates": sum(|r| &r.duplicates),
+        "overhead_bytes": overhead,
+        "overhead_fraction_of_frame_bytes": overhead as f64 / frame_bytes.max(1) as f64,
+    }))
 }
 
 struct GlobalSummary {

@@ -42,7 +42,7 @@ use crate::link::{Face, Links, RecvError, SendError};
 pub const HEADER_LEN: usize = 6;
 /// Bytes an envelope adds to a frame.
 pub const OVERHEAD: usize = HEADER_LEN + CRC_LEN;
-/// Largest window (frames kept per face for retransmission).
+/// Largest window (frames kept per face for retransmission, and received ahead of delivery).
 pub const WINDOW_MAX: usize = 16;
 
 /// Envelope type codes.
@@ -143,8 +143,10 @@ struct TxState {
 #[derive(Clone, Copy, Default)]
 struct RxState {
     expected: u16,
-    /// Length of the envelope held in the receive slot (0: empty).
-    held: usize,
+    /// Envelopes taken in order and not yet delivered: `count` from slot `head` on.
+    head: usize,
+    count: usize,
+    lens: [u16; WINDOW_MAX],
     /// Requests sent for `expected` since it was last heard of.
     nacks: u8,
     waiting_since: Option<u64>,
@@ -170,10 +172,12 @@ pub struct Reliable<L, C, B> {
 }
 
 impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
-    /// Bytes of storage a configuration needs: per face, `window` send slots and one
-    /// receive slot of `frame_len_max + OVERHEAD` bytes.
+    /// Bytes of storage a configuration needs: per face, `window` send slots and `window`
+    /// receive slots of `frame_len_max + OVERHEAD` bytes (a sender has at most a window
+    /// unacknowledged, so the receiver can always read its link to the end, and no ack or
+    /// nack waits behind data).
     pub const fn buffer_len(config: &ReliableConfig) -> usize {
-        Face::COUNT * (config.window + 1) * (config.frame_len_max + OVERHEAD)
+        Face::COUNT * 2 * config.window * (config.frame_len_max + OVERHEAD)
     }
 
     /// Wraps `inner`. Fails with [`Error::BufferTooSmall`] if `buf` is shorter than
@@ -221,7 +225,7 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
 
     fn slot_range(&self, face: Face, i: usize) -> core::ops::Range<usize> {
         let s = self.slot_len();
-        let start = (face.index() * (self.config.window + 1) + i) * s;
+        let start = (face.index() * 2 * self.config.window + i) * s;
         start..start + s
     }
 
@@ -229,8 +233,10 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
         self.slot_range(face, seq as usize % self.config.window)
     }
 
-    fn rx_slot(&self, face: Face) -> core::ops::Range<usize> {
-        self.slot_range(face, self.config.window)
+    /// The receive slot `k` places after the oldest held.
+    fn rx_slot(&self, face: Face, k: usize) -> core::ops::Range<usize> {
+        let w = self.config.window;
+        self.slot_range(face, w + (self.rx[face.index()].head + k) % w)
     }
 
     /// Sends a control envelope; `false` if the link's queue is full (nothing sent).
@@ -292,10 +298,10 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
         self.control(face, code::NACK, seq);
     }
 
-    /// Handles the envelope of `n` bytes just read into the receive slot.
+    /// Handles the envelope of `n` bytes just read into the first free receive slot.
     fn take(&mut self, face: Face, n: usize) {
         let f = face.index();
-        let range = self.rx_slot(face);
+        let range = self.rx_slot(face, self.rx[f].count);
         let slot = &self.buf.as_ref()[range];
         let ok = n >= OVERHEAD
             && n <= slot.len()
@@ -340,7 +346,9 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
                 let r = &mut self.rx[f];
                 match diff(seq, r.expected) {
                     0 => {
-                        r.held = n;
+                        let k = (r.head + r.count) % self.config.window;
+                        r.lens[k] = n as u16;
+                        r.count += 1;
                         r.expected = r.expected.wrapping_add(1);
                         r.nacks = 0;
                         r.waiting_since = None;
@@ -366,12 +374,12 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
         }
     }
 
-    /// Reads what has arrived on `face` while its receive slot is free, then sends what is
+    /// Reads what has arrived on `face` while a receive slot is free, then sends what is
     /// owed (retransmissions, status, ack).
     fn service(&mut self, face: Face) -> Result<(), RecvError> {
         let f = face.index();
-        while self.rx[f].held == 0 {
-            let range = self.rx_slot(face);
+        while self.rx[f].count < self.config.window {
+            let range = self.rx_slot(face, self.rx[f].count);
             match self.inner.try_recv(face, &mut self.buf.as_mut()[range]) {
                 Ok(None) => break,
                 Ok(Some(n)) => self.take(face, n),
@@ -470,23 +478,22 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Links for Reliable<L, C, 
     fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
         let f = face.index();
         self.service(face)?;
-        let held = self.rx[f].held;
-        if held > 0 {
-            let n = held - OVERHEAD;
-            let range = self.rx_slot(face);
+        if self.rx[f].count == 0 {
+            // Waiting: answer the other links, and ask again for this one's frame in time.
+            self.service_all()?;
+        }
+        if self.rx[f].count > 0 {
+            let r = self.rx[f];
+            let n = usize::from(r.lens[r.head]) - OVERHEAD;
+            let range = self.rx_slot(face, 0);
             let out = buf
                 .get_mut(..n)
                 .ok_or(RecvError::BufferTooSmall { needed: n })?;
             out.copy_from_slice(&self.buf.as_ref()[range][HEADER_LEN..HEADER_LEN + n]);
-            self.rx[f].held = 0;
-            // Anything behind it (acks, nacks) is read now.
-            self.service(face)?;
+            let r = &mut self.rx[f];
+            r.head = (r.head + 1) % self.config.window;
+            r.count -= 1;
             return Ok(Some(n));
-        }
-        // Waiting: answer the other links, and ask again for this one's frame in time.
-        self.service_all()?;
-        if self.rx[f].held > 0 {
-            return self.try_recv(face, buf);
         }
         let now = self.clock.now_ns();
         let r = &mut self.rx[f];

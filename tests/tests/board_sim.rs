@@ -248,10 +248,12 @@ fn faulty_with(
     workers: Option<usize>,
     link_timeout: Duration,
 ) -> SimFault {
+    // Without link recovery: every fault stops the run, and is named.
     let opts = SimOptions {
         faults: Some(FaultSpec::parse(spec).unwrap()),
         link_timeout,
         workers,
+        recovery: None,
         ..Default::default()
     };
     match run(dir, &opts, &mut |_, _| {}) {
@@ -400,4 +402,112 @@ fn fault_injection_replays_from_its_seed() {
     assert!(!a.injected.is_empty());
     assert_eq!(a.injected[0], b.injected[0]);
     assert_eq!(a.cause, b.cause);
+}
+
+/// With link recovery (the default), frames lost or corrupted at 1e-3 per frame (each alone
+/// and both) are sent again: the run finishes with the clean run's bits, and the report
+/// shows the retransmissions.
+#[test]
+fn recovery_gives_the_clean_bits_under_loss_and_corruption() {
+    // 1000 steps: the probe has pressed the tube, the fields compared are far from zero.
+    let p = builtin_problem("coarse", 1000);
+    let dir = compile(&p, "builtin:coarse", "2x2x2", "recover");
+    let opts = |faults: Option<&str>| SimOptions {
+        faults: faults.map(|f| FaultSpec::parse(f).unwrap()),
+        workers: Some(2),
+        ..Default::default()
+    };
+    let clean = sim(&dir, &opts(None));
+    let u_max = clean
+        .displacements
+        .iter()
+        .flatten()
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(
+        u_max > 1e-4,
+        "the probe has moved the tube: max |u| {u_max} m"
+    );
+    assert_eq!(clean.displacements.len(), p.mesh.nodes.len());
+    let retransmitted = |o: &board_sim::SimOutput| -> u64 {
+        o.boards
+            .iter()
+            .filter_map(|b| b.recovery.as_ref())
+            .map(|r| r.retransmitted_frames.iter().sum::<u64>())
+            .sum()
+    };
+    // (The clean run may send a frame again too: a request for a frame that crossed it on
+    // the way, on a loaded machine. The receiver drops the copy.)
+    for spec in [
+        "seed=5,drop=1e-3",
+        "seed=6,corrupt=1e-3",
+        "seed=7,drop=1e-3,corrupt=1e-3",
+    ] {
+        let out = sim(&dir, &opts(Some(spec)));
+        assert!(!out.injected.is_empty(), "{spec}: faults were injected");
+        assert!(
+            retransmitted(&out) > 0,
+            "{spec}: and recovered by retransmission"
+        );
+        assert_eq!(out.steps, clean.steps, "{spec}");
+        assert_eq!(out.displacements.len(), clean.displacements.len(), "{spec}");
+        assert!(
+            out.displacements
+                .iter()
+                .zip(&clean.displacements)
+                .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits)),
+            "{spec}: the clean run's bits"
+        );
+        assert_eq!(out.kinetic_energy.to_bits(), clean.kinetic_energy.to_bits());
+        assert_eq!(out.tool_force.len(), clean.tool_force.len());
+        assert!(out
+            .tool_force
+            .iter()
+            .zip(&clean.tool_force)
+            .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits)));
+    }
+}
+
+/// Half the frames lost: recovery gives up on a frame after its bounded requests, and the
+/// run stops naming the receiving board, the link and the step, and the injected loss on
+/// that link as the cause.
+#[test]
+fn losses_beyond_the_retry_bound_stop_the_run_naming_the_link() {
+    let p = builtin_problem("coarse", 200);
+    let dir = compile(&p, "builtin:coarse", "2x2x2", "retries");
+    for w in [1, 8] {
+        let opts = SimOptions {
+            faults: Some(FaultSpec::parse("seed=3,drop=0.5").unwrap()),
+            // Longer than recovery's requests take, so that they are what gives up.
+            link_timeout: Duration::from_secs(5),
+            workers: Some(w),
+            ..Default::default()
+        };
+        let f = match run(&dir, &opts, &mut |_, _| {}) {
+            Ok(_) => panic!("half the frames lost: the run cannot finish"),
+            Err(e) => e.downcast::<SimFault>().expect("a fault report"),
+        };
+        println!("{f}");
+        let d = &f.observed[f.cause.detected];
+        let pe_firmware::runtime::FaultKind::LinkError { face, error } = d.fault.kind else {
+            panic!("workers {w}: detected by recovery giving up: {f}");
+        };
+        assert!(
+            matches!(error, link_proto::RecvError::RetriesExhausted { .. }),
+            "{f}"
+        );
+        assert!(f.cause.injected && f.cause.what == "injected drop", "{f}");
+        assert_eq!(
+            f.cause.face.as_deref(),
+            Some(format!("{:?}", face.opposite()).as_str())
+        );
+        assert_eq!(
+            Some(d.fault.board.map(|v| v as usize)),
+            across(f.cause.board, f.cause.face.as_deref().unwrap()),
+            "{f}"
+        );
+        assert!(
+            f.cause.step <= d.fault.step && d.fault.step <= f.cause.step + 1,
+            "{f}"
+        );
+    }
 }
