@@ -13,6 +13,7 @@ use host_tools::problem::Problem;
 use host_tools::scene::builtin::builtin_scene;
 use host_tools::scene::Scene;
 
+mod campaign;
 mod graphics;
 
 #[derive(Parser)]
@@ -50,6 +51,24 @@ enum Command {
         boards: String,
         #[arg(long, default_value_t = 1000)]
         steps: u64,
+    },
+    /// A seeded fault campaign on the machine in DIR: RUNS short runs, each with faults
+    /// drawn from SEED (drop, corrupt, delay, stall, alone and mixed), each classified as
+    /// bit-identical to the clean run or stopped naming the true first cause; a summary.
+    #[command(
+        after_help = "Example:\n  pe compile scenes/seed-box.toml --boards 2x2x2 -o out/campaign\n  board-sim campaign out/campaign --runs 1000 --seed 1 --steps 100"
+    )]
+    Campaign {
+        dir: PathBuf,
+        #[arg(long, default_value_t = 1000)]
+        runs: u64,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(long, default_value_t = 100)]
+        steps: u64,
+        /// Without link recovery (every fault must stop the run, naming its cause).
+        #[arg(long)]
+        no_recovery: bool,
     },
     /// The main job: compile the built-in scene (uterus, tubes, probe) for a board mesh and
     /// run it, writing OUT/images, OUT/frames (ParaView), OUT/report.json and a summary.
@@ -149,6 +168,13 @@ fn main() -> Result<()> {
             boards,
             steps,
         } => bench(&level, &boards, steps),
+        Command::Campaign {
+            dir,
+            runs,
+            seed,
+            steps,
+            no_recovery,
+        } => campaign::campaign(&dir, runs, seed, steps, !no_recovery),
     }
 }
 
