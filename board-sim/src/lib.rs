@@ -7,13 +7,14 @@ mod storage;
 pub mod timing;
 
 use std::path::Path;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
 use host_tools::compile::{check_image_set, image_file_name, read_manifest, ImageFile, Manifest};
+use link_proto::reliable::{FaceRecovery, ReliableConfig};
 use link_proto::Links;
 use pe_firmware::image::{
     ElementRecord, ImageError, ImageHeader, ImageReader, Integration, Precision,
@@ -21,9 +22,12 @@ use pe_firmware::image::{
 use pe_firmware::physics::{HexFull, HexReduced};
 use pe_firmware::runtime::{Fault, GlobalStats, LinkStats, Runtime, RuntimeConfig, WireReal};
 
-use links::{build_links, FaultSpec, FaultyLinks, Injected, ThreadEnv};
+use links::{build_links, BoardLinks, FaultSpec, FaultyLinks, Injected, Lower, ThreadEnv};
 use storage::HostStorage;
 pub use storage::{load_check, StorageSizing, VecShelf};
+
+/// How long the other boards run on after the first fault (at most the link timeout).
+pub const FAULT_GRACE: Duration = Duration::from_millis(250);
 
 /// How to run.
 #[derive(Clone, Debug)]
@@ -43,6 +47,9 @@ pub struct SimOptions {
     /// and every image's compilation id (true by default). False leaves a mixed set to the
     /// boards' own check with their neighbours (the Hello frames), which tests exercise.
     pub check_manifest: bool,
+    /// Link-level recovery (retransmission) above the emulated links and the fault
+    /// injector; `None` runs without, so that every fault stops the run.
+    pub recovery: Option<ReliableConfig>,
 }
 
 impl Default for SimOptions {
@@ -55,6 +62,7 @@ impl Default for SimOptions {
             workers: None,
             storage: StorageSizing::Exact,
             check_manifest: true,
+            recovery: Some(ReliableConfig::default()),
         }
     }
 }
@@ -69,6 +77,58 @@ pub struct BoardResult {
     pub wait_s: f64,
     /// Global-network traffic (contact exchange, graphics, tool forces).
     pub global: GlobalStats,
+    /// What link recovery cost (with recovery on).
+    pub recovery: Option<LinkRecovery>,
+}
+
+/// What link recovery cost on one board, per face (`Face::index` order: +x, −x, +y, −y,
+/// +z, −z).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct LinkRecovery {
+    /// Bytes of the envelopes of first transmissions (frames included).
+    pub data_bytes: [u64; 6],
+    pub retransmitted_frames: [u64; 6],
+    pub retransmitted_bytes: [u64; 6],
+    pub nacks_sent: [u64; 6],
+    pub nacks_received: [u64; 6],
+    pub acks_sent: [u64; 6],
+    pub statuses_sent: [u64; 6],
+    /// Bytes of acks, nacks and statuses.
+    pub control_bytes: [u64; 6],
+    /// Envelopes received damaged, beyond a gap, or twice.
+    pub damaged: [u64; 6],
+    pub gaps: [u64; 6],
+    pub duplicates: [u64; 6],
+    /// Data envelopes sent the first time (each adds `reliable::OVERHEAD` bytes).
+    pub data_frames: [u64; 6],
+}
+
+impl LinkRecovery {
+    fn from_faces(f: &[FaceRecovery; 6]) -> Self {
+        let a = |g: fn(&FaceRecovery) -> u64| std::array::from_fn(|i| g(&f[i]));
+        LinkRecovery {
+            data_bytes: a(|x| x.data_bytes),
+            retransmitted_frames: a(|x| x.retransmitted_frames),
+            retransmitted_bytes: a(|x| x.retransmitted_bytes),
+            nacks_sent: a(|x| x.nacks_sent),
+            nacks_received: a(|x| x.nacks_received),
+            acks_sent: a(|x| x.acks_sent),
+            statuses_sent: a(|x| x.statuses_sent),
+            control_bytes: a(|x| x.control_bytes),
+            damaged: a(|x| x.damaged),
+            gaps: a(|x| x.gaps),
+            duplicates: a(|x| x.duplicates),
+            data_frames: a(|x| x.data_frames),
+        }
+    }
+
+    /// Bytes recovery added on this board's links: envelopes, retransmissions, control.
+    pub fn overhead_bytes(&self) -> u64 {
+        let s = |v: &[u64; 6]| v.iter().sum::<u64>();
+        s(&self.data_frames) * link_proto::reliable::OVERHEAD as u64
+            + s(&self.retransmitted_bytes)
+            + s(&self.control_bytes)
+    }
 }
 
 /// What a run produced.
@@ -159,22 +219,168 @@ fn collect_sinks(
     Ok((out, tool_force))
 }
 
-/// A run that stopped on a fault: the faults reported (root cause first) and what was
-/// injected.
+/// What a board reported when the run stopped: a fault, or (`waiting`) the link it was
+/// still waiting on.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Observed {
+    /// For a waiting board: the timeout its wait would have become.
+    pub fault: Fault,
+    /// Where in the step ([`phase`]), comparable across boards.
+    pub phase: u32,
+    /// The board was still waiting, not yet timed out, when the run was stopped.
+    pub waiting: bool,
+}
+
+impl Observed {
+    /// A wait (a timeout, or a board stopped while waiting): a consequence of a fault
+    /// elsewhere when there is one.
+    pub fn is_wait(&self) -> bool {
+        use pe_firmware::runtime::FaultKind as K;
+        self.waiting
+            || matches!(
+                self.fault.kind,
+                K::LinkTimeout { .. } | K::GlobalTimeout { .. }
+            )
+    }
+
+    /// The link the observation names, if any.
+    pub fn face(&self) -> Option<link_proto::Face> {
+        use pe_firmware::runtime::FaultKind as K;
+        match self.fault.kind {
+            K::LinkTimeout { face }
+            | K::LinkError { face, .. }
+            | K::SendFailed { face, .. }
+            | K::UnexpectedFrame { face, .. }
+            | K::BadFrame { face, .. } => Some(face),
+            _ => None,
+        }
+    }
+
+    /// Ordering across boards and workers: by step; in a step faults before waits (a
+    /// timeout is a consequence of a fault elsewhere when there is one), then by phase and
+    /// board.
+    fn key(&self) -> (u64, bool, u32, [u8; 3]) {
+        (
+            self.fault.step,
+            self.is_wait(),
+            self.phase,
+            self.fault.board,
+        )
+    }
+}
+
+impl std::fmt::Display for Observed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.waiting {
+            let [x, y, z] = self.fault.board;
+            match self.face() {
+                Some(face) => write!(
+                    f,
+                    "board ({x},{y},{z}) step {}: link {face:?}: still waiting when the run stopped",
+                    self.fault.step
+                ),
+                None => write!(f, "{} (still waiting when the run stopped)", self.fault),
+            }
+        } else {
+            write!(f, "{}", self.fault)
+        }
+    }
+}
+
+/// Where in a step an operation lies, in the order every board's step program runs them
+/// (graphics, contact, batch 0, then per axis: external, send round 0, batch, and per round
+/// its sends and receives; last the update): comparable across boards whose programs
+/// differ in length.
+pub fn phase(op: Option<pe_firmware::runtime::Op>) -> u32 {
+    use pe_firmware::runtime::Op;
+    let axis = |a: u8, k: u32| 3 + 100 * a as u32 + k;
+    match op {
+        Some(Op::Graphics) => 0,
+        Some(Op::Contact) => 1,
+        Some(Op::Batch(0)) => 2,
+        Some(Op::External(a)) => axis(a, 0),
+        Some(Op::Batch(b)) => axis(b - 1, 2),
+        Some(Op::Send(a, 0, _)) => axis(a, 1),
+        Some(Op::Send(a, r, _)) => axis(a, 3 + 3 * r as u32),
+        Some(Op::Recv(a, r, f)) => axis(a, 4 + 3 * r as u32 + (1 - f.min(1)) as u32),
+        Some(Op::Update) => axis(3, 1),
+        None => u32::MAX,
+    }
+}
+
+/// The first cause of a stopped run.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Cause {
+    /// The board at fault: for an injected fault the board that sent the damaged frame; for
+    /// an observed one the board that observed it.
+    pub board: [usize; 3],
+    /// Its link (`PosX` ...), if the cause is on one.
+    pub face: Option<String>,
+    pub step: u64,
+    pub what: String,
+    /// The cause is an injected fault (known ground truth) that explains `detected`.
+    pub injected: bool,
+    /// The observation that detected it (index into [`SimFault::observed`]).
+    pub detected: usize,
+}
+
+impl std::fmt::Display for Cause {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let [x, y, z] = self.board;
+        write!(f, "board ({x},{y},{z})")?;
+        if let Some(face) = &self.face {
+            write!(f, " link {face}")?;
+        }
+        write!(f, " step {}: {}", self.step, self.what)
+    }
+}
+
+/// A run that stopped on a fault: the first cause, every board's observation (ordered by
+/// step, faults before waits, then by phase and board) and what was injected.
 #[derive(Debug)]
 pub struct SimFault {
-    pub faults: Vec<Fault>,
+    pub cause: Cause,
+    pub observed: Vec<Observed>,
     pub injected: Vec<Injected>,
+}
+
+impl SimFault {
+    /// The observations other than the one that detected the cause.
+    pub fn consequences(&self) -> impl Iterator<Item = &Observed> {
+        let d = self.cause.detected;
+        self.observed
+            .iter()
+            .enumerate()
+            .filter(move |(k, _)| *k != d)
+            .map(|(_, o)| o)
+    }
 }
 
 impl std::fmt::Display for SimFault {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         writeln!(f, "the run stopped on a fault:")?;
-        for x in self.faults.iter().take(8) {
-            writeln!(f, "  {x}")?;
+        writeln!(
+            f,
+            "  cause: {}{}",
+            self.cause,
+            if self.cause.injected {
+                " (injected)"
+            } else {
+                ""
+            }
+        )?;
+        if let Some(d) = self.observed.get(self.cause.detected) {
+            writeln!(f, "  detected: {d}")?;
         }
-        if self.faults.len() > 8 {
-            writeln!(f, "  ... and {} more", self.faults.len() - 8)?;
+        let rest: Vec<&Observed> = self.consequences().collect();
+        if !rest.is_empty() {
+            writeln!(f, "  consequences ({}):", rest.len())?;
+        }
+        for x in rest.iter().take(8) {
+            writeln!(f, "    {x}")?;
+        }
+        if rest.len() > 8 {
+            writeln!(f, "    ... and {} more", rest.len() - 8)?;
         }
         if !self.injected.is_empty() {
             writeln!(f, "injected faults ({}):", self.injected.len())?;
@@ -191,8 +397,85 @@ impl std::fmt::Display for SimFault {
 }
 impl std::error::Error for SimFault {}
 
+/// The board across `face` of `board` on a `dims` machine.
+fn neighbour(dims: [usize; 3], board: [u8; 3], face: link_proto::Face) -> Option<[usize; 3]> {
+    let mut c = board.map(|v| v as usize);
+    let a = face.index() / 2;
+    if face.sign() > 0 {
+        c[a] += 1;
+    } else {
+        c[a] = c[a].checked_sub(1)?;
+    }
+    (c[a] < dims[a]).then_some(c)
+}
+
+/// The injected fault that explains an observation: one on the frames the observing board
+/// receives on that link (sent by the neighbour across it), at the observed step or the
+/// one before (a lost or damaged frame is noticed in its step, a lost last frame of a step
+/// perhaps only once the next one arrives), or at any earlier step for a stall or delay
+/// (which go on); the latest such.
+fn explains<'a>(dims: [usize; 3], o: &Observed, injected: &'a [Injected]) -> Option<&'a Injected> {
+    let face = o.face()?;
+    let from = neighbour(dims, o.fault.board, face)?;
+    let link = format!("{:?}", face.opposite());
+    injected
+        .iter()
+        .filter(|i| i.board == from && i.face == link && i.step as u64 <= o.fault.step)
+        .filter(|i| {
+            i.what == "stall" || i.what.starts_with("delay") || i.step as u64 + 1 >= o.fault.step
+        })
+        .max_by_key(|i| i.step)
+}
+
+/// Orders the observations and names the first cause: the first observation when an
+/// injected fault explains it or it is not a wait; otherwise (the first is a wait, a
+/// consequence) the first observation an injected fault explains; otherwise the first.
+fn attribute(dims: [usize; 3], mut observed: Vec<Observed>, injected: Vec<Injected>) -> SimFault {
+    observed.sort_by_key(Observed::key);
+    let pick = match observed.first() {
+        Some(first) if explains(dims, first, &injected).is_some() || !first.is_wait() => 0,
+        _ => observed
+            .iter()
+            .position(|o| explains(dims, o, &injected).is_some())
+            .unwrap_or(0),
+    };
+    let cause = match observed.get(pick) {
+        Some(o) => match explains(dims, o, &injected) {
+            Some(i) => Cause {
+                board: i.board,
+                face: Some(i.face.clone()),
+                step: i.step as u64,
+                what: format!("injected {}", i.what),
+                injected: true,
+                detected: pick,
+            },
+            None => Cause {
+                board: o.fault.board.map(|v| v as usize),
+                face: o.face().map(|f| format!("{f:?}")),
+                step: o.fault.step,
+                what: o.to_string(),
+                injected: false,
+                detected: pick,
+            },
+        },
+        None => Cause {
+            board: [0; 3],
+            face: None,
+            step: 0,
+            what: "no board reported a fault".into(),
+            injected: false,
+            detected: 0,
+        },
+    };
+    SimFault {
+        cause,
+        observed,
+        injected,
+    }
+}
+
 /// A board's links as the worker threads hold them.
-type BoxedLinks = Box<dyn Links + Send>;
+type BoxedLinks = Box<BoardLinks>;
 
 /// Messages from board threads to the collector.
 #[allow(clippy::large_enum_variant)]
@@ -209,7 +492,12 @@ enum Report {
         reaction_fixed: [f64; 3],
         kinetic_energy: f64,
     },
-    Failed(Fault),
+    Failed(Observed),
+    /// What link recovery cost on a board's faces, at the end.
+    Recovery {
+        board: usize,
+        faces: [FaceRecovery; 6],
+    },
 }
 
 struct BoardCtx {
@@ -221,6 +509,9 @@ struct BoardCtx {
     config: RuntimeConfig,
     progress: Arc<AtomicU64>,
     stop: Arc<std::sync::atomic::AtomicBool>,
+    /// Boards that finished or stopped on a fault, of `total`.
+    finished: Arc<AtomicUsize>,
+    total: usize,
 }
 
 /// Runs a worker's boards: each is polled in turn as far as its links allow; when no board
@@ -228,7 +519,7 @@ struct BoardCtx {
 fn run_worker<T: WireReal, E: ElementRecord<T>>(
     boards: Vec<BoardCtx>,
     sizing: StorageSizing,
-    links: &mut [Box<dyn Links + Send>],
+    links: &mut [BoxedLinks],
     env: &mut ThreadEnv,
     out: &mpsc::Sender<Report>,
 ) -> Result<(), Fault> {
@@ -266,16 +557,41 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
             .collect();
         let _ = out.send(Report::Frame { step, nodes });
     };
-    let mut done = vec![false; boards.len()];
+    // Per board: running, finished its steps, or stopped on a fault. A board that finished
+    // keeps its links polled (a neighbour may still need a frame again) until every board
+    // has finished or the run is stopped.
+    #[derive(Clone, Copy, PartialEq)]
+    enum State {
+        Running,
+        Done,
+        Failed,
+    }
+    let mut state = vec![State::Running; boards.len()];
     let mut idle_sweeps = 0u32;
+    let Some(shared) = boards
+        .first()
+        .map(|c| (c.stop.clone(), c.finished.clone(), c.total))
+    else {
+        return Ok(());
+    };
+    let (stop, finished, total) = shared;
+    let failed = |rt: &Runtime<'_, T, E>, f: Fault| {
+        let _ = out.send(Report::Failed(Observed {
+            fault: f,
+            phase: phase(rt.current_op()),
+            waiting: false,
+        }));
+        finished.fetch_add(1, Ordering::Relaxed);
+    };
     loop {
         let mut progressed = false;
-        let mut all_done = true;
         for (i, ctx) in boards.iter().enumerate() {
-            if done[i] {
+            if state[i] == State::Done {
+                links[i].poll();
+            }
+            if state[i] != State::Running {
                 continue;
             }
-            all_done = false;
             let rt = &mut rts[i];
             loop {
                 if rt.step_index() >= ctx.steps {
@@ -290,22 +606,35 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
                             bytes_sent: st.bytes_sent,
                             wait_s: st.wait_ns as f64 * 1e-9,
                             global: rt.global_stats(),
+                            recovery: None,
                         },
                         reaction_prescribed: rt.reaction_prescribed,
                         reaction_fixed: rt.reaction_fixed,
                         kinetic_energy: rt.kinetic_energy,
                     });
-                    done[i] = true;
+                    state[i] = State::Done;
+                    finished.fetch_add(1, Ordering::Relaxed);
                     progressed = true;
                     break;
                 }
                 let before = rt.progress();
                 let mut link: &mut (dyn Links + Send) = &mut *links[i];
-                let complete = rt.poll_step(&mut link, env)?;
+                let complete = match rt.poll_step(&mut link, env) {
+                    Ok(c) => c,
+                    Err(f) => {
+                        failed(rt, f);
+                        state[i] = State::Failed;
+                        progressed = true;
+                        break;
+                    }
+                };
                 if rt.progress() != before {
                     progressed = true;
                 }
                 if !complete {
+                    // Waiting (perhaps on the global network): the links still answer
+                    // (link recovery's acks and retransmissions), as `Runtime::step` does.
+                    links[i].poll();
                     break;
                 }
                 let s = rt.step_index();
@@ -317,11 +646,36 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
                 }
             }
         }
-        if all_done
-            || boards
-                .first()
-                .is_some_and(|c| c.stop.load(Ordering::Relaxed))
-        {
+        let exiting = stop.load(Ordering::Relaxed) || finished.load(Ordering::Relaxed) >= total;
+        if exiting {
+            for (ctx, l) in boards.iter().zip(links.iter()) {
+                if let Some(r) = l.recovery() {
+                    let _ = out.send(Report::Recovery {
+                        board: ctx.index,
+                        faces: r,
+                    });
+                }
+            }
+        }
+        if stop.load(Ordering::Relaxed) {
+            // Where every board still running stood: the consequences of the fault, and
+            // evidence of where it came from.
+            let now = pe_firmware::runtime::Environment::now_ns(env);
+            for (i, rt) in rts.iter().enumerate() {
+                if state[i] != State::Running {
+                    continue;
+                }
+                if let Some((fault, _)) = rt.waiting(now) {
+                    let _ = out.send(Report::Failed(Observed {
+                        fault,
+                        phase: phase(rt.current_op()),
+                        waiting: true,
+                    }));
+                }
+            }
+            return Ok(());
+        }
+        if finished.load(Ordering::Relaxed) >= total {
             return Ok(());
         }
         if progressed {
@@ -425,7 +779,8 @@ struct Collected {
     /// Per board: prescribed and fixed reactions and kinetic energy, summed in board order
     /// at the end (so a report does not depend on which thread finished first).
     energies: Vec<([f64; 3], [f64; 3], f64)>,
-    faults: Vec<Fault>,
+    faults: Vec<Observed>,
+    recovery: Vec<Option<LinkRecovery>>,
 }
 
 impl Collected {
@@ -439,6 +794,7 @@ impl Collected {
             results: vec![None; boards],
             energies: vec![([0.0; 3], [0.0; 3], 0.0); boards],
             faults: Vec::new(),
+            recovery: vec![None; boards],
         }
     }
 
@@ -477,24 +833,17 @@ impl Collected {
                 self.results[board] = Some(result);
             }
             Report::Failed(f) => self.faults.push(f),
+            Report::Recovery { board, faces } => {
+                if let Some(r) = self.recovery.get_mut(board) {
+                    *r = Some(LinkRecovery::from_faces(&faces));
+                }
+            }
         }
     }
 }
 
-/// Faults ordered root cause first: the earliest step; a timeout is a consequence of a
-/// neighbour's fault.
-fn root_cause_first(mut faults: Vec<Fault>) -> Vec<Fault> {
-    faults.sort_by_key(|f: &Fault| {
-        (
-            f.step,
-            matches!(f.kind, pe_firmware::runtime::FaultKind::LinkTimeout { .. }) as u8,
-            f.board,
-        )
-    });
-    faults
-}
-
-/// One thread per worker, each running its boards; a worker's first fault stops the run.
+/// One thread per worker, each running its boards; a fault stops its board, and the run
+/// stops (see [`run`]) a grace period after the first.
 fn spawn_workers(
     per_worker: Vec<(Vec<BoardCtx>, Vec<BoxedLinks>)>,
     bells: &[Arc<links::Doorbell>],
@@ -515,8 +864,13 @@ fn spawn_workers(
             .spawn(move || {
                 let mut env = ThreadEnv::new(bell);
                 if let Err(f) = dispatch(ctxs, sizing, &mut ls, &mut env, &out, p, i) {
+                    // A board's image was refused: nothing of this worker runs.
                     stop.store(true, Ordering::Relaxed);
-                    let _ = out.send(Report::Failed(f));
+                    let _ = out.send(Report::Failed(Observed {
+                        fault: f,
+                        phase: 0,
+                        waiting: false,
+                    }));
                 }
             })
             .context("spawning a worker thread")?;
@@ -535,21 +889,8 @@ pub fn run(
     let manifest = read_manifest(dir)?;
     let (images, header) = read_images(dir, &manifest, opts.check_manifest)?;
     let dims = manifest.machine;
-    if let Some((b, step)) = opts.faults.as_ref().and_then(|f| f.stall) {
-        if (0..3).any(|a| b[a] >= dims[a]) {
-            bail!(
-                "--faults stall={}.{}.{}@{step}: no board ({},{},{}) on this {}x{}x{} machine",
-                b[0],
-                b[1],
-                b[2],
-                b[0],
-                b[1],
-                b[2],
-                dims[0],
-                dims[1],
-                dims[2]
-            );
-        }
+    if let Some(spec) = &opts.faults {
+        spec.check(dims)?;
     }
     let count = images.len();
     let steps = opts
@@ -574,6 +915,7 @@ pub fn run(
     let (tx, rx) = mpsc::channel::<Report>();
     let progress = Arc::new(AtomicU64::new(0));
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let finished = Arc::new(AtomicUsize::new(0));
     let injected = Arc::new(Mutex::new(Vec::new()));
     let config = RuntimeConfig {
         link_timeout_ns: opts.link_timeout.as_nanos() as u64,
@@ -596,28 +938,44 @@ pub fn run(
             config,
             progress: progress.clone(),
             stop: stop.clone(),
+            finished: finished.clone(),
+            total: count,
         };
-        let l: Box<dyn Links + Send> = match &opts.faults {
-            Some(spec) => Box::new(FaultyLinks::new(
+        let lower = match &opts.faults {
+            Some(spec) => Lower::Faulty(Box::new(FaultyLinks::new(
                 link,
                 coords,
                 b,
                 spec.clone(),
                 injected.clone(),
-            )),
-            None => Box::new(link),
+            ))),
+            None => Lower::Clean(link),
         };
+        let l = Box::new(
+            BoardLinks::new(lower, opts.recovery)
+                .map_err(|e| anyhow!("link recovery {:?}: {e}", opts.recovery))?,
+        );
         per_worker[b % workers].0.push(ctx);
         per_worker[b % workers].1.push(l);
     }
     let handles = spawn_workers(per_worker, &bells, &tx, &stop, opts.storage, &header)?;
     drop(tx);
     let mut c = Collected::new(steps, n_nodes, count);
+    // After the first fault the other boards run on for a grace period, so that every board
+    // reports its own fault or where it waits: the evidence the cause is found from.
+    let grace = opts.link_timeout.min(FAULT_GRACE);
+    let mut first_fault: Option<Instant> = None;
     loop {
-        match rx.recv_timeout(Duration::from_millis(100)) {
+        match rx.recv_timeout(Duration::from_millis(20)) {
             Ok(report) => c.file(report),
             Err(mpsc::RecvTimeoutError::Timeout) => {}
             Err(mpsc::RecvTimeoutError::Disconnected) => break,
+        }
+        if !c.faults.is_empty() {
+            let t = *first_fault.get_or_insert_with(Instant::now);
+            if t.elapsed() >= grace {
+                stop.store(true, Ordering::Relaxed);
+            }
         }
         on_progress(progress.load(Ordering::Relaxed), steps);
     }
@@ -627,14 +985,16 @@ pub fn run(
     let wall_s = start.elapsed().as_secs_f64();
     let injected = injected.lock().map(|v| v.clone()).unwrap_or_default();
     if !c.faults.is_empty() {
-        let faults = root_cause_first(c.faults);
-        return Err(SimFault { faults, injected }.into());
+        return Err(attribute(dims, c.faults, injected).into());
     }
-    let boards = c
+    let mut boards = c
         .results
         .into_iter()
         .collect::<Option<Vec<_>>>()
         .ok_or_else(|| anyhow!("a board ended without a report"))?;
+    for (b, r) in boards.iter_mut().zip(c.recovery) {
+        b.recovery = r;
+    }
     c.frames.sort_by_key(|f| f.0);
     let tools = header.counts.tools as usize;
     let (graphics, tool_force) = collect_sinks(&net, steps, tools)?;
@@ -659,7 +1019,7 @@ pub fn run(
 fn dispatch(
     ctx: Vec<BoardCtx>,
     sizing: StorageSizing,
-    links: &mut [Box<dyn Links + Send>],
+    links: &mut [BoxedLinks],
     env: &mut ThreadEnv,
     out: &mpsc::Sender<Report>,
     precision: Precision,

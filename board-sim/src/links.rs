@@ -260,7 +260,8 @@ pub struct FaultSpec {
     pub drop: f64,
     /// Probability that one bit of a frame is flipped.
     pub corrupt: f64,
-    /// Every frame is held this long before delivery (ms).
+    /// Every frame is held this long before delivery (ms; the link holds it, the sender
+    /// goes on).
     pub delay_ms: u64,
     /// This board stops sending at this step.
     pub stall: Option<([usize; 3], u64)>,
@@ -319,6 +320,22 @@ impl FaultSpec {
     }
 }
 
+impl FaultSpec {
+    /// Refuses a spec that names a board a `dims` machine does not have (before the run).
+    pub fn check(&self, dims: [usize; 3]) -> anyhow::Result<()> {
+        if let Some((b, step)) = self.stall {
+            if (0..3).any(|a| b[a] >= dims[a]) {
+                anyhow::bail!(
+                    "--faults stall={}.{}.{}@{step}: no board ({},{},{}) on this {}x{}x{} machine (boards 0..{} x 0..{} x 0..{})",
+                    b[0], b[1], b[2], b[0], b[1], b[2], dims[0], dims[1], dims[2],
+                    dims[0], dims[1], dims[2]
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
 /// SplitMix64: small, fast and good enough for fault injection.
 pub struct Rng(u64);
 
@@ -354,6 +371,14 @@ pub struct FaultyLinks<L> {
     spec: FaultSpec,
     rng: Rng,
     pub injected: Arc<Mutex<Vec<Injected>>>,
+    /// Faces whose delay is recorded (at their first delayed frame).
+    delayed: [bool; 6],
+    /// Faces whose stall is recorded.
+    stalled: [bool; 6],
+    /// Frames held by the delay: (due, face, bytes), in sending order.
+    held: VecDeque<(Instant, Face, Vec<u8>)>,
+    /// Step of the last data frame sent per face.
+    last_step: [u32; 6],
 }
 
 impl<L> FaultyLinks<L> {
@@ -371,6 +396,10 @@ impl<L> FaultyLinks<L> {
             spec,
             rng,
             injected,
+            delayed: [false; 6],
+            stalled: [false; 6],
+            held: VecDeque::new(),
+            last_step: [0; 6],
         }
     }
     fn record(&self, face: Face, step: u32, what: &str) {
@@ -385,44 +414,95 @@ impl<L> FaultyLinks<L> {
     }
 }
 
-fn frame_step(frame: &[u8]) -> u32 {
-    frame
-        .get(4..8)
+/// The step of a frame, or of the frame in a recovery envelope; None for a recovery
+/// control envelope (ack, nack, status).
+fn frame_step(frame: &[u8]) -> Option<u32> {
+    let f = match frame.first() {
+        Some(&link_proto::reliable::code::DATA) => link_proto::reliable::data_frame(frame)?,
+        Some(c) if *c >= link_proto::reliable::code::ACK => return None,
+        _ => frame,
+    };
+    f.get(4..8)
         .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .unwrap_or(0)
+}
+
+impl<L: Links> FaultyLinks<L> {
+    /// Delivers the held frames that are due, in order (a frame the link refuses now waits
+    /// with those behind it).
+    fn release(&mut self) {
+        let now = Instant::now();
+        while let Some((due, face, bytes)) = self.held.front() {
+            if *due > now || self.inner.try_send(*face, bytes).is_err() {
+                break;
+            }
+            self.held.pop_front();
+        }
+    }
+
+    /// Sends after the held frames (none are held without a delay).
+    fn flush_then(&mut self, face: Face, bytes: &[u8]) -> Result<(), SendError> {
+        self.release();
+        if !self.held.is_empty() {
+            return Err(SendError::WouldBlock);
+        }
+        self.inner.try_send(face, bytes)
+    }
 }
 
 impl<L: Links> Links for FaultyLinks<L> {
     fn try_send(&mut self, face: Face, frame: &[u8]) -> Result<(), SendError> {
-        let step = frame_step(frame);
+        // A control envelope belongs to the step of the last data frame on its link.
+        let step = match frame_step(frame) {
+            Some(s) => {
+                self.last_step[face.index()] = s;
+                s
+            }
+            None => self.last_step[face.index()],
+        };
         if let Some((b, s)) = self.spec.stall {
             if b == self.board && step as u64 >= s {
-                // A stalled board sends nothing more (and says it did).
-                if step as u64 == s {
+                // A stalled board sends nothing more (and says it did); each link's stall is
+                // recorded at its first frame not sent.
+                if !self.stalled[face.index()] {
+                    self.stalled[face.index()] = true;
                     self.record(face, step, "stall");
                 }
                 return Ok(());
             }
-        }
-        if self.spec.delay_ms > 0 {
-            std::thread::sleep(Duration::from_millis(self.spec.delay_ms));
         }
         let (u_drop, u_corrupt, bit) = (self.rng.unit(), self.rng.unit(), self.rng.next_u64());
         if u_drop < self.spec.drop {
             self.record(face, step, "drop");
             return Ok(());
         }
-        if u_corrupt < self.spec.corrupt {
-            let mut bad = frame.to_vec();
-            let k = (bit % (bad.len() as u64 * 8)) as usize;
-            bad[k / 8] ^= 1 << (k % 8);
-            self.record(face, step, &format!("corrupt bit {k}"));
-            return self.inner.try_send(face, &bad);
+        if u_corrupt >= self.spec.corrupt && self.spec.delay_ms == 0 {
+            return self.inner.try_send(face, frame);
         }
-        self.inner.try_send(face, frame)
+        let mut bytes = frame.to_vec();
+        if u_corrupt < self.spec.corrupt {
+            let k = (bit % (bytes.len() as u64 * 8)) as usize;
+            bytes[k / 8] ^= 1 << (k % 8);
+            self.record(face, step, &format!("corrupt bit {k}"));
+        }
+        if self.spec.delay_ms > 0 {
+            if !self.delayed[face.index()] {
+                self.delayed[face.index()] = true;
+                self.record(face, step, &format!("delay {} ms", self.spec.delay_ms));
+            }
+            let due = Instant::now() + Duration::from_millis(self.spec.delay_ms);
+            self.held.push_back((due, face, bytes));
+            self.release();
+            return Ok(());
+        }
+        self.flush_then(face, &bytes)
     }
     fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        self.release();
         self.inner.try_recv(face, buf)
+    }
+    fn poll(&mut self) {
+        self.release();
+        self.inner.poll();
     }
     fn try_send_global(&mut self, p: &[u8]) -> Result<(), SendError> {
         self.inner.try_send_global(p)
@@ -443,6 +523,125 @@ fn pop_into(queue: &Mutex<VecDeque<Vec<u8>>>, buf: &mut [u8]) -> Result<Option<u
                 .ok_or(RecvError::BufferTooSmall { needed: f.len() })?;
             dst.copy_from_slice(&f);
             Ok(Some(f.len()))
+        }
+    }
+}
+
+/// A board's links below recovery: clean, or with faults injected.
+pub enum Lower {
+    Clean(EmuLinks),
+    Faulty(Box<FaultyLinks<EmuLinks>>),
+}
+
+impl Links for Lower {
+    fn try_send(&mut self, face: Face, frame: &[u8]) -> Result<(), SendError> {
+        match self {
+            Lower::Clean(l) => l.try_send(face, frame),
+            Lower::Faulty(l) => l.try_send(face, frame),
+        }
+    }
+    fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        match self {
+            Lower::Clean(l) => l.try_recv(face, buf),
+            Lower::Faulty(l) => l.try_recv(face, buf),
+        }
+    }
+    fn try_send_global(&mut self, p: &[u8]) -> Result<(), SendError> {
+        match self {
+            Lower::Clean(l) => l.try_send_global(p),
+            Lower::Faulty(l) => l.try_send_global(p),
+        }
+    }
+    fn try_recv_global(&mut self, b: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        match self {
+            Lower::Clean(l) => l.try_recv_global(b),
+            Lower::Faulty(l) => l.try_recv_global(b),
+        }
+    }
+    fn poll(&mut self) {
+        match self {
+            Lower::Clean(l) => l.poll(),
+            Lower::Faulty(l) => l.poll(),
+        }
+    }
+}
+
+/// A board thread's clock for link recovery (its own start, passed in).
+pub struct SimClock(Instant);
+
+impl link_proto::reliable::Clock for SimClock {
+    fn now_ns(&mut self) -> u64 {
+        self.0.elapsed().as_nanos() as u64
+    }
+}
+
+/// A board's links as its runtime sees them: with link recovery above the (possibly
+/// faulty) emulated links, or without.
+pub enum BoardLinks {
+    Plain(Lower),
+    Recovering(Box<link_proto::reliable::Reliable<Lower, SimClock, Vec<u8>>>),
+}
+
+impl BoardLinks {
+    /// `lower` with recovery by `config`, or without (`None`). Fails on a configuration
+    /// the wrapper refuses (window beyond `WINDOW_MAX`, frames too long).
+    pub fn new(
+        lower: Lower,
+        config: Option<link_proto::reliable::ReliableConfig>,
+    ) -> Result<Self, link_proto::Error> {
+        use link_proto::reliable::Reliable;
+        Ok(match config {
+            None => BoardLinks::Plain(lower),
+            Some(c) => {
+                let buf = vec![0u8; Reliable::<Lower, SimClock, Vec<u8>>::buffer_len(&c)];
+                BoardLinks::Recovering(Box::new(Reliable::new(
+                    lower,
+                    SimClock(Instant::now()),
+                    c,
+                    buf,
+                )?))
+            }
+        })
+    }
+
+    /// What recovery cost, per face, if it is on.
+    pub fn recovery(&self) -> Option<[link_proto::reliable::FaceRecovery; 6]> {
+        match self {
+            BoardLinks::Plain(_) => None,
+            BoardLinks::Recovering(r) => Some(*r.stats()),
+        }
+    }
+}
+
+impl Links for BoardLinks {
+    fn try_send(&mut self, face: Face, frame: &[u8]) -> Result<(), SendError> {
+        match self {
+            BoardLinks::Plain(l) => l.try_send(face, frame),
+            BoardLinks::Recovering(l) => l.try_send(face, frame),
+        }
+    }
+    fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        match self {
+            BoardLinks::Plain(l) => l.try_recv(face, buf),
+            BoardLinks::Recovering(l) => l.try_recv(face, buf),
+        }
+    }
+    fn try_send_global(&mut self, p: &[u8]) -> Result<(), SendError> {
+        match self {
+            BoardLinks::Plain(l) => l.try_send_global(p),
+            BoardLinks::Recovering(l) => l.try_send_global(p),
+        }
+    }
+    fn try_recv_global(&mut self, b: &mut [u8]) -> Result<Option<usize>, RecvError> {
+        match self {
+            BoardLinks::Plain(l) => l.try_recv_global(b),
+            BoardLinks::Recovering(l) => l.try_recv_global(b),
+        }
+    }
+    fn poll(&mut self) {
+        match self {
+            BoardLinks::Plain(l) => l.poll(),
+            BoardLinks::Recovering(l) => l.poll(),
         }
     }
 }

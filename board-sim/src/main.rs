@@ -13,6 +13,7 @@ use host_tools::problem::Problem;
 use host_tools::scene::builtin::builtin_scene;
 use host_tools::scene::Scene;
 
+mod campaign;
 mod graphics;
 
 #[derive(Parser)]
@@ -50,6 +51,24 @@ enum Command {
         boards: String,
         #[arg(long, default_value_t = 1000)]
         steps: u64,
+    },
+    /// A seeded fault campaign on the machine in DIR: RUNS short runs, each with faults
+    /// drawn from SEED (drop, corrupt, delay, stall, alone and mixed), each classified as
+    /// bit-identical to the clean run or stopped naming the true first cause; a summary.
+    #[command(
+        after_help = "Example:\n  pe compile scenes/seed-box.toml --boards 2x2x2 -o out/campaign\n  board-sim campaign out/campaign --runs 1000 --seed 1 --steps 100"
+    )]
+    Campaign {
+        dir: PathBuf,
+        #[arg(long, default_value_t = 1000)]
+        runs: u64,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(long, default_value_t = 100)]
+        steps: u64,
+        /// Without link recovery (every fault must stop the run, naming its cause).
+        #[arg(long)]
+        no_recovery: bool,
     },
     /// The main job: compile the built-in scene (uterus, tubes, probe) for a board mesh and
     /// run it, writing OUT/images, OUT/frames (ParaView), OUT/report.json and a summary.
@@ -100,6 +119,10 @@ struct RunArgs {
     /// Inject faults: seed=S,drop=P,corrupt=P,delay=MS,stall=X.Y.Z@STEP
     #[arg(long)]
     faults: Option<String>,
+    /// Run without link-level recovery: every lost or damaged frame stops the run (for
+    /// fault detection). Default: frames are numbered, acknowledged and retransmitted.
+    #[arg(long)]
+    no_recovery: bool,
     /// A link silent this long is a fault (s).
     #[arg(long, default_value_t = 10.0)]
     link_timeout_s: f64,
@@ -145,6 +168,13 @@ fn main() -> Result<()> {
             boards,
             steps,
         } => bench(&level, &boards, steps),
+        Command::Campaign {
+            dir,
+            runs,
+            seed,
+            steps,
+            no_recovery,
+        } => campaign::campaign(&dir, runs, seed, steps, !no_recovery),
     }
 }
 
@@ -291,7 +321,15 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    let out = out?;
+    let out = match out {
+        Ok(o) => o,
+        Err(e) => {
+            if let (Some(p), Some(f)) = (&a.report, e.downcast_ref::<board_sim::SimFault>()) {
+                write_fault_report(p, &manifest, f)?;
+            }
+            return Err(e);
+        }
+    };
     let sim_s = out.steps as f64 * manifest.dt_s;
     let max = out
         .displacements
@@ -313,6 +351,16 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
         println!(
             "  prescribed reaction ({prescribed} prescribed nodes on the tissue, at the end) = [{:.4e}, {:.4e}, {:.4e}] N",
             f[0], f[1], f[2]
+        );
+    }
+    if let Some(r) = recovery_summary(&out) {
+        println!(
+            "link recovery: {} frames ({} bytes) retransmitted after {} nacks; {} bytes added in all ({:.2}% of the frames' bytes: envelopes, retransmissions, acks)",
+            r["retransmitted_frames"],
+            r["retransmitted_bytes"],
+            r["nacks_sent"],
+            r["overhead_bytes"],
+            100.0 * r["overhead_fraction_of_frame_bytes"].as_f64().unwrap_or(0.0)
         );
     }
     let modelled = link_model(dir, &manifest, &a)?;
@@ -360,6 +408,9 @@ fn sim_options(
         storage,
         ..Default::default()
     };
+    if a.no_recovery {
+        opts.recovery = None;
+    }
     if let Some(f) = &a.faults {
         let spec = FaultSpec::parse(f)?;
         eprintln!(
@@ -407,7 +458,27 @@ fn link_model(
     if let Some(l) = a.link_latency_s {
         timing.link_latency_s = l;
     }
+    if !a.no_recovery {
+        timing.frame_overhead_bytes = link_proto::reliable::OVERHEAD;
+    }
     let modelled = model(dir, manifest.machine, timing)?;
+    if !a.no_recovery {
+        let bare = model(
+            dir,
+            manifest.machine,
+            SimTiming {
+                frame_overhead_bytes: 0,
+                ..timing
+            },
+        )?;
+        println!(
+            "link model: recovery's envelope ({} bytes a frame) makes the slowest board's step {:.2} us longer ({:.1} us against {:.1} us)",
+            link_proto::reliable::OVERHEAD,
+            (modelled.step_s - bare.step_s) * 1e6,
+            modelled.step_s * 1e6,
+            bare.step_s * 1e6
+        );
+    }
     println!(
         "link model ({}): a step takes {:.1} us on the slowest board ({:.1} us computing), dt = {:.1} us: {}",
         profile.name, modelled.step_s * 1e6, modelled.compute_s * 1e6, modelled.dt_s * 1e6,
@@ -492,7 +563,7 @@ fn write_report(
     let links: Vec<serde_json::Value> = out
         .boards
         .iter()
-        .map(|b| serde_json::json!({ "board": b.board, "frames_sent": b.frames_sent, "bytes_sent": b.bytes_sent, "wait_s": b.wait_s }))
+        .map(|b| serde_json::json!({ "board": b.board, "frames_sent": b.frames_sent, "bytes_sent": b.bytes_sent, "wait_s": b.wait_s, "recovery": b.recovery }))
         .collect();
     let rep = serde_json::json!({
         "scene": manifest.scene,
@@ -516,11 +587,76 @@ fn write_report(
         "boards": links,
         "link_model": modelled,
         "faults_injected": out.injected,
+        "recovery": recovery_summary(out),
         "paraview_frames": paraview_frames,
         "global_network": global.map(|g| &g.json),
     });
     std::fs::write(p, serde_json::to_string_pretty(&rep)?)
         .with_context(|| format!("writing {}", p.display()))
+}
+
+/// The report of a run that stopped on a fault: the first cause, the observation that
+/// detected it, the consequences (every other board's fault or wait) and what was injected.
+fn write_fault_report(
+    p: &std::path::Path,
+    manifest: &host_tools::compile::Manifest,
+    f: &board_sim::SimFault,
+) -> Result<()> {
+    let obs = |o: &board_sim::Observed| {
+        serde_json::json!({
+            "board": o.fault.board,
+            "step": o.fault.step,
+            "link": o.face().map(|f| format!("{f:?}")),
+            "waiting": o.waiting,
+            "text": o.to_string(),
+        })
+    };
+    let rep = serde_json::json!({
+        "scene": manifest.scene,
+        "machine": manifest.machine,
+        "stopped": true,
+        "cause": f.cause,
+        "detected": f.observed.get(f.cause.detected).map(obs),
+        "consequences": f.consequences().map(obs).collect::<Vec<_>>(),
+        "faults_injected": f.injected,
+    });
+    std::fs::write(p, serde_json::to_string_pretty(&rep)?)
+        .with_context(|| format!("writing {}", p.display()))
+}
+
+/// Link recovery's totals over the boards (None without recovery): retransmitted frames
+/// and bytes, nacks, and the bytes recovery added against the frames' own.
+fn recovery_summary(out: &board_sim::SimOutput) -> Option<serde_json::Value> {
+    let rs: Vec<&board_sim::LinkRecovery> = out
+        .boards
+        .iter()
+        .filter_map(|b| b.recovery.as_ref())
+        .collect();
+    if rs.is_empty() {
+        return None;
+    }
+    let sum = |g: fn(&board_sim::LinkRecovery) -> &[u64; 6]| {
+        rs.iter().map(|r| g(r).iter().sum::<u64>()).sum::<u64>()
+    };
+    let frame_bytes: u64 = out
+        .boards
+        .iter()
+        .map(|b| b.bytes_sent.iter().sum::<u64>())
+        .sum();
+    let overhead: u64 = rs.iter().map(|r| r.overhead_bytes()).sum();
+    Some(serde_json::json!({
+        "retransmitted_frames": sum(|r| &r.retransmitted_frames),
+        "retransmitted_bytes": sum(|r| &r.retransmitted_bytes),
+        "nacks_sent": sum(|r| &r.nacks_sent),
+        "acks_sent": sum(|r| &r.acks_sent),
+        "statuses_sent": sum(|r| &r.statuses_sent),
+        "control_bytes": sum(|r| &r.control_bytes),
+        "damaged_received": sum(|r| &r.damaged),
+        "gaps": sum(|r| &r.gaps),
+        "duplicates": sum(|r| &r.duplicates),
+        "overhead_bytes": overhead,
+        "overhead_fraction_of_frame_bytes": overhead as f64 / frame_bytes.max(1) as f64,
+    }))
 }
 
 struct GlobalSummary {

@@ -27,6 +27,10 @@ pub struct SimTiming {
     pub cycles_per_contact_node: f64,
     pub link_bytes_per_s: f64,
     pub link_latency_s: f64,
+    /// Bytes link recovery adds to every frame (its envelope, `link_proto::reliable::OVERHEAD`;
+    /// 0 without recovery). Retransmissions are not modelled: at the loss rates recovery is
+    /// for (1e-3 per frame) they add that fraction of a frame per frame.
+    pub frame_overhead_bytes: usize,
 }
 
 impl SimTiming {
@@ -50,6 +54,7 @@ impl SimTiming {
             cycles_per_contact_node: reduced.per_contact_node.max(full.per_contact_node) as f64,
             link_bytes_per_s: p.link_bytes_per_s as f64,
             link_latency_s: p.link_latency_ns as f64 * 1e-9,
+            frame_overhead_bytes: 0,
         }
     }
 }
@@ -72,7 +77,10 @@ fn frame_s(t: &SimTiming, values: usize, width: usize) -> f64 {
     if values == 0 {
         return 0.0;
     }
-    let bytes = link_proto::FRAME_HEADER_LEN + link_proto::CRC_LEN + values * width;
+    let bytes = link_proto::FRAME_HEADER_LEN
+        + link_proto::CRC_LEN
+        + values * width
+        + t.frame_overhead_bytes;
     t.link_latency_s + bytes as f64 / t.link_bytes_per_s
 }
 

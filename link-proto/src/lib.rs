@@ -38,6 +38,12 @@
 //! | 8       | `n`  | payload                                                      |
 //! | 8 + `n` | 4    | CRC-32                                                       |
 //!
+//! ## Recovery envelope ([`reliable`])
+//!
+//! With link recovery, every frame on a face travels in a 10-byte envelope: type, sequence
+//! number, piggybacked acknowledgement, the frame, CRC-32; acks, nacks and statuses are
+//! envelopes without a frame. See [`reliable`].
+//!
 //! ## Byte stream ([`framing`])
 //!
 //! `0x00`, COBS(frame or packet), `0x00`. Every `0x00` is a
@@ -66,6 +72,7 @@ pub mod limits;
 pub mod link;
 pub mod packet;
 pub mod payload;
+pub mod reliable;
 pub mod stream;
 
 pub use error::{Error, Result};

@@ -165,6 +165,14 @@ pub enum RecvError {
     NoLink,
     /// The underlying stream failed.
     Io(embedded_io::ErrorKind),
+    /// Link recovery ([`crate::reliable`]) asked the neighbour for frame `seq` `requests`
+    /// times without getting it: the link is given up.
+    RetriesExhausted {
+        /// The frame's sequence number on this link.
+        seq: u16,
+        /// Requests (negative acknowledgements) sent for it.
+        requests: u8,
+    },
 }
 
 impl fmt::Display for SendError {
@@ -190,6 +198,10 @@ impl fmt::Display for RecvError {
             }
             RecvError::NoLink => f.write_str("no link on this face"),
             RecvError::Io(k) => write!(f, "stream error: {k:?}"),
+            RecvError::RetriesExhausted { seq, requests } => write!(
+                f,
+                "frame {seq} lost: not received after {requests} retransmission requests"
+            ),
         }
     }
 }

@@ -239,9 +239,21 @@ fn a_stall_outside_the_machine_is_refused() {
 }
 
 fn faulty(dir: &std::path::Path, spec: &str) -> SimFault {
+    faulty_with(dir, spec, None, Duration::from_millis(500))
+}
+
+fn faulty_with(
+    dir: &std::path::Path,
+    spec: &str,
+    workers: Option<usize>,
+    link_timeout: Duration,
+) -> SimFault {
+    // Without link recovery: every fault stops the run, and is named.
     let opts = SimOptions {
         faults: Some(FaultSpec::parse(spec).unwrap()),
-        link_timeout: Duration::from_millis(500),
+        link_timeout,
+        workers,
+        recovery: None,
         ..Default::default()
     };
     match run(dir, &opts, &mut |_, _| {}) {
@@ -253,68 +265,249 @@ fn faulty(dir: &std::path::Path, spec: &str) -> SimFault {
     }
 }
 
-/// A corrupted frame is detected by its CRC at the receiver: the run stops with a report
-/// naming the board, the link and the step of the injected corruption.
+/// The board across `face` (named as in the reports) of `board` on a 2x2x2 machine.
+fn across(board: [usize; 3], face: &str) -> Option<[usize; 3]> {
+    let f = link_proto::Face::ALL
+        .into_iter()
+        .find(|f| format!("{f:?}") == face)?;
+    let a = f.index() / 2;
+    let mut c = board;
+    c[a] = if f.sign() > 0 {
+        c[a] + 1
+    } else {
+        c[a].checked_sub(1)?
+    };
+    (c[a] < 2).then_some(c)
+}
+
+/// The named cause is ground truth: an injected fault of the expected kind at the earliest
+/// step anything was injected (nothing before it can have caused the stop), on a link of
+/// the machine, detected by the board at the other end of that link at that step or later.
+fn assert_true_cause(f: &SimFault, kind: &str, workers: usize) {
+    let c = &f.cause;
+    assert!(c.injected, "workers {workers}: cause not injected:\n{f}");
+    assert!(
+        c.what.starts_with(&format!("injected {kind}")),
+        "workers {workers}: {f}"
+    );
+    let face = c.face.as_deref().expect("a link fault names its link");
+    assert!(
+        f.injected
+            .iter()
+            .any(|i| i.board == c.board && i.face == face && i.step as u64 == c.step),
+        "workers {workers}: the cause is one of the injected faults:\n{f}"
+    );
+    let first = f.injected.iter().map(|i| i.step as u64).min().unwrap();
+    assert_eq!(
+        c.step, first,
+        "workers {workers}: the earliest injected step:\n{f}"
+    );
+    let d = &f.observed[c.detected];
+    assert_eq!(
+        Some(d.fault.board.map(|v| v as usize)),
+        across(c.board, face),
+        "workers {workers}: detected across the link:\n{f}"
+    );
+    assert!(d.fault.step >= c.step, "workers {workers}: {f}");
+    assert!(!f.observed.is_empty());
+}
+
+/// Worker counts: one thread for all boards, four, one per board.
+const WORKERS: [usize; 3] = [1, 4, 8];
+
+/// A corrupted frame is detected by its CRC at the receiver: the run stops naming the
+/// board that sent it, the link and the step, whatever the worker threads.
 #[test]
 fn corrupted_frames_are_detected_and_named() {
     let p = builtin_problem("coarse", 200);
     let dir = compile(&p, "builtin:coarse", "2x2x2", "corrupt");
-    let f = faulty(&dir, "seed=7,corrupt=0.01");
-    let first = &f.injected[0];
-    let root = &f.faults[0];
-    println!("{f}");
-    assert!(
-        matches!(root.kind, pe_firmware::runtime::FaultKind::BadFrame { .. }),
-        "{root}"
-    );
-    assert_eq!(
-        root.step, first.step as u64,
-        "detected at the step it was injected"
-    );
-    assert!(root.to_string().contains("link"), "{root}");
+    for w in WORKERS {
+        let f = faulty_with(
+            &dir,
+            "seed=7,corrupt=0.01",
+            Some(w),
+            Duration::from_millis(500),
+        );
+        println!("{f}");
+        assert_true_cause(&f, "corrupt", w);
+        // A CRC failure is the receiver's own observation, not a wait.
+        let d = &f.observed[f.cause.detected];
+        assert!(
+            matches!(
+                d.fault.kind,
+                pe_firmware::runtime::FaultKind::BadFrame { .. }
+            ),
+            "{d}"
+        );
+    }
 }
 
-/// A lost frame is detected at the step it was lost, naming board, link and step: either
-/// the next step's frame arrives in its place (its step number gives it away) or, at the
-/// last exchange, the link times out.
+/// A lost frame is detected at the step it was lost (the next frame's step number gives it
+/// away, or the link waits), naming the sender, the link and the step.
 #[test]
 fn dropped_frames_are_detected_and_named() {
     let p = builtin_problem("coarse", 200);
     let dir = compile(&p, "builtin:coarse", "2x2x2", "drop");
-    let f = faulty(&dir, "seed=3,drop=0.01");
-    let first = &f.injected[0];
-    let root = &f.faults[0];
-    assert!(
-        matches!(
-            root.kind,
-            pe_firmware::runtime::FaultKind::LinkTimeout { .. }
-                | pe_firmware::runtime::FaultKind::UnexpectedFrame { .. }
-        ),
-        "{root}"
-    );
-    assert_eq!(root.step, first.step as u64);
+    for w in WORKERS {
+        let f = faulty_with(
+            &dir,
+            "seed=3,drop=0.01",
+            Some(w),
+            Duration::from_millis(500),
+        );
+        println!("{f}");
+        assert_true_cause(&f, "drop", w);
+    }
 }
 
-/// A board that stalls is detected by its neighbours at that step.
+/// A board that stalls at step 50 is named (not the neighbours that wait for it).
 #[test]
-fn a_stalled_board_is_detected() {
+fn a_stalled_board_is_named() {
     let p = builtin_problem("coarse", 200);
     let dir = compile(&p, "builtin:coarse", "2x2x2", "stall");
-    let f = faulty(&dir, "seed=1,stall=1.0.0@50");
-    assert_eq!(f.faults[0].step, 50, "{f}");
-    assert!(f
-        .injected
-        .iter()
-        .any(|i| i.board == [1, 0, 0] && i.what == "stall"));
+    for w in WORKERS {
+        for board in [[1, 0, 0], [1, 1, 1], [0, 0, 0]] {
+            let spec = format!("seed=1,stall={}.{}.{}@50", board[0], board[1], board[2]);
+            let f = faulty_with(&dir, &spec, Some(w), Duration::from_millis(300));
+            println!("{f}");
+            assert_true_cause(&f, "stall", w);
+            assert_eq!(f.cause.board, board, "workers {w}: {f}");
+            assert_eq!(f.cause.step, 50, "workers {w}: {f}");
+        }
+    }
 }
 
-/// The same seed replays the same faults (all randomness comes from the printed seed).
+/// Frames held longer than the link timeout: the wait names a delayed link, from its first
+/// frame.
+#[test]
+fn a_delay_beyond_the_timeout_is_named() {
+    let p = builtin_problem("coarse", 200);
+    let dir = compile(&p, "builtin:coarse", "2x2x2", "delay");
+    for w in WORKERS {
+        let f = faulty_with(&dir, "seed=1,delay=40", Some(w), Duration::from_millis(20));
+        println!("{f}");
+        assert_true_cause(&f, "delay", w);
+        assert_eq!(f.cause.step, 0);
+    }
+}
+
+/// The same seed replays the same faults and the same cause (all randomness comes from the
+/// printed seed).
 #[test]
 fn fault_injection_replays_from_its_seed() {
     let p = builtin_problem("coarse", 200);
     let dir = compile(&p, "builtin:coarse", "2x2x2", "replay");
     let a = faulty(&dir, "seed=11,corrupt=0.005");
     let b = faulty(&dir, "seed=11,corrupt=0.005");
+    assert!(!a.injected.is_empty());
     assert_eq!(a.injected[0], b.injected[0]);
-    assert_eq!(a.faults[0], b.faults[0]);
+    assert_eq!(a.cause, b.cause);
+}
+
+/// With link recovery (the default), frames lost or corrupted at 1e-3 per frame (each alone
+/// and both) are sent again: the run finishes with the clean run's bits, and the report
+/// shows the retransmissions.
+#[test]
+fn recovery_gives_the_clean_bits_under_loss_and_corruption() {
+    // 1000 steps: the probe has pressed the tube, the fields compared are far from zero.
+    let p = builtin_problem("coarse", 1000);
+    let dir = compile(&p, "builtin:coarse", "2x2x2", "recover");
+    let opts = |faults: Option<&str>| SimOptions {
+        faults: faults.map(|f| FaultSpec::parse(f).unwrap()),
+        workers: Some(2),
+        ..Default::default()
+    };
+    let clean = sim(&dir, &opts(None));
+    let u_max = clean
+        .displacements
+        .iter()
+        .flatten()
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(
+        u_max > 1e-4,
+        "the probe has moved the tube: max |u| {u_max} m"
+    );
+    assert_eq!(clean.displacements.len(), p.mesh.nodes.len());
+    let retransmitted = |o: &board_sim::SimOutput| -> u64 {
+        o.boards
+            .iter()
+            .filter_map(|b| b.recovery.as_ref())
+            .map(|r| r.retransmitted_frames.iter().sum::<u64>())
+            .sum()
+    };
+    // (The clean run may send a frame again too: a request for a frame that crossed it on
+    // the way, on a loaded machine. The receiver drops the copy.)
+    for spec in [
+        "seed=5,drop=1e-3",
+        "seed=6,corrupt=1e-3",
+        "seed=7,drop=1e-3,corrupt=1e-3",
+    ] {
+        let out = sim(&dir, &opts(Some(spec)));
+        assert!(!out.injected.is_empty(), "{spec}: faults were injected");
+        assert!(
+            retransmitted(&out) > 0,
+            "{spec}: and recovered by retransmission"
+        );
+        assert_eq!(out.steps, clean.steps, "{spec}");
+        assert_eq!(out.displacements.len(), clean.displacements.len(), "{spec}");
+        assert!(
+            out.displacements
+                .iter()
+                .zip(&clean.displacements)
+                .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits)),
+            "{spec}: the clean run's bits"
+        );
+        assert_eq!(out.kinetic_energy.to_bits(), clean.kinetic_energy.to_bits());
+        assert_eq!(out.tool_force.len(), clean.tool_force.len());
+        assert!(out
+            .tool_force
+            .iter()
+            .zip(&clean.tool_force)
+            .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits)));
+    }
+}
+
+/// Half the frames lost: recovery gives up on a frame after its bounded requests, and the
+/// run stops naming the receiving board, the link and the step, and the injected loss on
+/// that link as the cause.
+#[test]
+fn losses_beyond_the_retry_bound_stop_the_run_naming_the_link() {
+    let p = builtin_problem("coarse", 200);
+    let dir = compile(&p, "builtin:coarse", "2x2x2", "retries");
+    for w in [1, 8] {
+        let opts = SimOptions {
+            faults: Some(FaultSpec::parse("seed=3,drop=0.5").unwrap()),
+            // Longer than recovery's requests take, so that they are what gives up.
+            link_timeout: Duration::from_secs(5),
+            workers: Some(w),
+            ..Default::default()
+        };
+        let f = match run(&dir, &opts, &mut |_, _| {}) {
+            Ok(_) => panic!("half the frames lost: the run cannot finish"),
+            Err(e) => e.downcast::<SimFault>().expect("a fault report"),
+        };
+        println!("{f}");
+        let d = &f.observed[f.cause.detected];
+        let pe_firmware::runtime::FaultKind::LinkError { face, error } = d.fault.kind else {
+            panic!("workers {w}: detected by recovery giving up: {f}");
+        };
+        assert!(
+            matches!(error, link_proto::RecvError::RetriesExhausted { .. }),
+            "{f}"
+        );
+        assert!(f.cause.injected && f.cause.what == "injected drop", "{f}");
+        assert_eq!(
+            f.cause.face.as_deref(),
+            Some(format!("{:?}", face.opposite()).as_str())
+        );
+        assert_eq!(
+            Some(d.fault.board.map(|v| v as usize)),
+            across(f.cause.board, f.cause.face.as_deref().unwrap()),
+            "{f}"
+        );
+        assert!(
+            f.cause.step <= d.fault.step && d.fault.step <= f.cause.step + 1,
+            "{f}"
+        );
+    }
 }

@@ -92,7 +92,7 @@ fn a_surface_faster_than_the_speed_bound_is_reported() {
     let f = err.downcast_ref::<SimFault>().expect("a fault report");
     println!("{f}");
     assert!(matches!(
-        f.faults[0].kind,
+        f.observed[0].fault.kind,
         FaultKind::Physics(PhysicsError::ContactSpeedBound { .. })
     ));
 }

@@ -91,7 +91,7 @@ impl core::fmt::Display for Fault {
         write!(f, "board ({x},{y},{z}) step {}: ", self.step)?;
         match self.kind {
             FaultKind::LinkTimeout { face } => write!(f, "link {face:?}: no frame within the timeout"),
-            FaultKind::LinkError { face, error } => write!(f, "link {face:?}: {error:?}"),
+            FaultKind::LinkError { face, error } => write!(f, "link {face:?}: {error}"),
             FaultKind::SendFailed { face, error } => write!(f, "link {face:?}: send failed: {error:?}"),
             FaultKind::UnexpectedFrame { face, expected_step, step, expected_values, values } => write!(
                 f,

@@ -304,6 +304,22 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         Ok(true)
     }
 
+    /// The operation the step is at (the one that faulted, after a fault).
+    pub fn current_op(&self) -> Option<Op> {
+        self.program.get(self.pc)
+    }
+
+    /// If the runtime is waiting for a link: the fault its wait would become on timing out
+    /// (board, step, link), and how long it has waited (ns, at `now_ns`). For a host that
+    /// stops a run and asks every board where it stood.
+    pub fn waiting(&self, now_ns: u64) -> Option<(Fault, u64)> {
+        let since = self.waiting_since?;
+        Some((
+            self.timeout(self.current_op()?),
+            now_ns.saturating_sub(since),
+        ))
+    }
+
     /// The fault of an operation that waited longer than the link timeout.
     fn timeout(&self, op: Op) -> Fault {
         match op {
