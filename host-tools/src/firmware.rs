@@ -61,6 +61,43 @@ pub fn max_rel_diff(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
     }
 }
 
+/// Largest `|component|` of a field: how far it is from rest (a comparison of two fields
+/// at rest proves nothing).
+pub fn max_abs(a: &[[f64; 3]]) -> f64 {
+    a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()))
+}
+
+/// `Ok` when `a` and `b` hold the same number of nodes and every component has the same
+/// bits; otherwise an error naming both lengths, or the first differing node and component
+/// and how many components differ (a shorter output never passes for an equal one).
+pub fn bit_identical(a: &[[f64; 3]], b: &[[f64; 3]]) -> Result<()> {
+    if a.len() != b.len() {
+        bail!(
+            "{} nodes against {}: the fields differ in length",
+            a.len(),
+            b.len()
+        );
+    }
+    let differ = |(x, y): (&f64, &f64)| x.to_bits() != y.to_bits();
+    let count = a
+        .iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .filter(|&p| differ(p))
+        .count();
+    if let Some(k) = a.iter().flatten().zip(b.iter().flatten()).position(differ) {
+        bail!(
+            "{count} of {} components differ, first node {} component {}: {:e} against {:e}",
+            3 * a.len(),
+            k / 3,
+            k % 3,
+            a[k / 3][k % 3],
+            b[k / 3][k % 3]
+        );
+    }
+    Ok(())
+}
+
 /// The repository root (for building the firmware).
 pub fn repo_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -357,6 +394,28 @@ pub fn compare(reference: &Path, other: &Path) -> Result<Comparison> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A shorter field, one flipped bit, and -0.0 against 0.0 are all differences; the
+    /// same field is not.
+    #[test]
+    fn bit_identical_checks_lengths_and_bits() {
+        let a = vec![[1.0, -2.5e-4, 3.0], [0.0, 7.0, -1.0]];
+        assert!(max_abs(&a) > 1.0, "not a field at rest");
+        assert!(bit_identical(&a, &a.clone()).is_ok());
+        let e = bit_identical(&a, &a[..1]).unwrap_err().to_string();
+        assert!(e.contains("2 nodes against 1"), "{e}");
+        let mut b = a.clone();
+        b[1][2] = f64::from_bits((-1.0f64).to_bits() ^ 1);
+        let e = bit_identical(&a, &b).unwrap_err().to_string();
+        assert!(
+            e.contains("1 of 6") && e.contains("node 1 component 2"),
+            "{e}"
+        );
+        b = a.clone();
+        b[1][0] = -0.0;
+        assert!(bit_identical(&a, &b).is_err());
+        assert_eq!(max_rel_diff(&a, &a[..1]), f64::INFINITY);
+    }
 
     #[test]
     fn identity_is_patched_once() {

@@ -67,6 +67,7 @@ fn f32_static_tip_within_0_1_percent_of_f64() {
         let (t64, t32) = (tip(&p, &a.displacements), tip(&p, &b.displacements));
         let diff = norm(core::array::from_fn(|i| t32[i] - t64[i]));
         let rel = diff / norm(t64);
+        assert_eq!(a.displacements.len(), b.displacements.len(), "node counts");
         let node_max = a
             .displacements
             .iter()

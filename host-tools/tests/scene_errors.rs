@@ -168,3 +168,45 @@ fn real_liver_mesh_resolves_with_consistent_mass() {
         1060.0 * volume
     );
 }
+
+/// A number that is not finite anywhere in a scene (a load, a material parameter, a path
+/// point, a setting) is refused while reading it, naming the file, the table, the key with
+/// its index and the value: none of them would show until a node went non-finite.
+#[test]
+fn non_finite_numbers_are_refused_naming_the_key() {
+    let d = tmp_dir("non-finite");
+    let cases = [
+        (
+            format!(
+                "{BOX}[[load]]\nbox = [[0.099, -1.0, -1.0], [1.0, 1.0, 1.0]]\nforce = [0.0, nan, 0.0]\n"
+            ),
+            "[[load]] 0 force[1] = NaN",
+        ),
+        (
+            BOX.replace("youngs_modulus = 3.0e3", "youngs_modulus = inf"),
+            "[material] youngs_modulus = inf",
+        ),
+        (
+            format!(
+                "{BOX}[[prescribed]]\nbox = [[0.099, -1.0, -1.0], [1.0, 1.0, 1.0]]\n\
+                 path = [[0.0, 0.0, 0.0, 0.0], [0.01, 0.0, 0.0, -inf]]\n"
+            ),
+            "[[prescribed]] 0 path[1][3] = -inf",
+        ),
+        (
+            format!("{BOX}[solver]\ndamping = nan\n"),
+            "[solver] damping = NaN",
+        ),
+        (
+            BOX.replace("size = [0.1,", "size = [nan,"),
+            "[mesh] generate.size[0] = NaN",
+        ),
+    ];
+    for (text, named) in cases {
+        let e = err(&d, &text);
+        assert!(
+            e.contains("scene.toml") && e.contains(named) && e.contains("not a finite number"),
+            "expected {named:?} in: {e}"
+        );
+    }
+}

@@ -229,6 +229,7 @@ fn f32_and_f64_agree_on_a_short_run() {
     let b = solver::run_typed::<f32>(&p, "f32", &mut (), 1)
         .unwrap()
         .displacements;
+    assert_eq!(a.len(), b.len(), "node counts");
     let umax = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
     let dmax = a
         .iter()

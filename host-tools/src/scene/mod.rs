@@ -356,6 +356,30 @@ fn one_or_many<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<MaterialSpe
     }
 }
 
+/// Errors on the first number under `value` that is not finite, naming where it is as
+/// `head key` (`[solver] dt`, `[[load]] 0 force[1]`, `[mesh] generate.size[0]`).
+fn first_non_finite(value: &toml::Value, head: &str, key: &str) -> anyhow::Result<()> {
+    match value {
+        toml::Value::Float(v) if !v.is_finite() => anyhow::bail!(
+            "{} = {v}: not a finite number (every number in a scene must be finite)",
+            format!("{head} {key}").trim()
+        ),
+        toml::Value::Table(t) => t.iter().try_for_each(|(k, v)| {
+            let key = if key.is_empty() {
+                k.clone()
+            } else {
+                format!("{key}.{k}")
+            };
+            first_non_finite(v, head, &key)
+        }),
+        toml::Value::Array(a) => a
+            .iter()
+            .enumerate()
+            .try_for_each(|(i, v)| first_non_finite(v, head, &format!("{key}[{i}]"))),
+        _ => Ok(()),
+    }
+}
+
 impl Scene {
     /// Reads and parses a scene file; errors name the file and (from the TOML parser) the line.
     pub fn from_file(path: &Path) -> anyhow::Result<Scene> {
@@ -366,6 +390,21 @@ impl Scene {
 
     pub fn from_toml(text: &str) -> anyhow::Result<Scene> {
         let scene: Scene = toml::from_str(text).map_err(|e| anyhow::anyhow!("{e}"))?;
+        // Every number of a scene is a length, time, modulus, force...: a NaN or an infinity
+        // would only show up later as a node gone non-finite (or not at all). Refused here,
+        // naming the table and key as written.
+        let table: toml::Table = text.parse().map_err(|e| anyhow::anyhow!("{e}"))?;
+        for (key, value) in &table {
+            match value {
+                toml::Value::Table(_) => first_non_finite(value, &format!("[{key}]"), "")?,
+                toml::Value::Array(a) if a.iter().all(toml::Value::is_table) => {
+                    for (i, t) in a.iter().enumerate() {
+                        first_non_finite(t, &format!("[[{key}]] {i}"), "")?;
+                    }
+                }
+                _ => first_non_finite(value, "", key)?,
+            }
+        }
         Ok(scene)
     }
 
