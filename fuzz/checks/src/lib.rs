@@ -22,8 +22,11 @@ use link_proto::{
 };
 use pe_firmware::image::{ImageReader, MAGIC};
 
+/// A target's check: panics when the input breaks the target's property.
+pub type Check = fn(&[u8]);
+
 /// Every target: its name (the directory of its seeds and regressions) and its check.
-pub const TARGETS: &[(&str, fn(&[u8]))] = &[
+pub const TARGETS: &[(&str, Check)] = &[
     ("frame_parse", frame_parse),
     ("packet_parse", packet_parse),
     ("stream_decoder", stream_decoder),

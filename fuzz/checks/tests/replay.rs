@@ -33,7 +33,7 @@ fn inputs(kind: &str, target: &str) -> Vec<(PathBuf, Vec<u8>)> {
         .collect()
 }
 
-fn check_named(target: &str) -> fn(&[u8]) {
+fn check_named(target: &str) -> pe_fuzz_checks::Check {
     TARGETS
         .iter()
         .find(|(n, _)| *n == target)
@@ -114,8 +114,6 @@ fn env_u64(name: &str) -> Option<u64> {
     })
 }
 
-/// Runs `check` on every input, then on `mutations` mutations of them; a panic names the
-/// input (or the seed and mutation number that rebuild it).
 thread_local! {
     static LAST_PANIC: std::cell::RefCell<String> = const { std::cell::RefCell::new(String::new()) };
 }
@@ -135,6 +133,9 @@ fn last_panic() -> String {
     LAST_PANIC.with(|m| m.borrow().clone())
 }
 
+/// Runs the target's check on every input, then on mutations of them for the budget;
+/// returns the mutations run. A failure names the input, or the seed and mutation number
+/// that rebuild it (and saves it).
 fn run(target: &str, corpus: &[(PathBuf, Vec<u8>)], budget: Budget, seed: u64) -> u64 {
     quiet_panics();
     let check = check_named(target);
