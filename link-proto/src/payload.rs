@@ -21,6 +21,13 @@
 use crate::error::{Error, Result};
 use crate::limits::PACKET_PAYLOAD_LEN_MAX;
 
+/// Offset of entry `k`, `None` if the entry would end past `usize::MAX` (found by
+/// fuzzing: `k * len` overflowed for a huge `k`).
+fn entry_offset(header: usize, k: usize, len: usize) -> Option<usize> {
+    let at = k.checked_mul(len)?.checked_add(header)?;
+    at.checked_add(len).map(|_| at)
+}
+
 fn u32_at(b: &[u8], at: usize) -> Result<u32> {
     match b.get(at..at + 4) {
         Some(&[a, c, d, e]) => Ok(u32::from_le_bytes([a, c, d, e])),
@@ -142,7 +149,7 @@ impl NodesHeader {
 
 /// Writes node entry `k` (contact-node index, displacement).
 pub fn emit_node_entry(buf: &mut [u8], k: usize, index: u32, u: [f64; 3]) -> Result<()> {
-    let at = NODES_HEADER_LEN + k * NODE_ENTRY_LEN;
+    let at = entry_offset(NODES_HEADER_LEN, k, NODE_ENTRY_LEN).ok_or(Error::BufferTooSmall)?;
     put(buf, at, &index.to_le_bytes())?;
     for i in 0..3 {
         put(buf, at + 4 + 8 * i, &u[i].to_le_bytes())?;
@@ -152,7 +159,7 @@ pub fn emit_node_entry(buf: &mut [u8], k: usize, index: u32, u: [f64; 3]) -> Res
 
 /// Reads node entry `k` of a payload whose header parsed.
 pub fn node_entry(b: &[u8], k: usize) -> Result<(u32, [f64; 3])> {
-    let at = NODES_HEADER_LEN + k * NODE_ENTRY_LEN;
+    let at = entry_offset(NODES_HEADER_LEN, k, NODE_ENTRY_LEN).ok_or(Error::Truncated)?;
     Ok((
         u32_at(b, at)?,
         [f64_at(b, at + 4)?, f64_at(b, at + 12)?, f64_at(b, at + 20)?],
@@ -257,7 +264,7 @@ impl SurfaceHeader {
 
 /// Writes surface entry `k` (mesh node, displacement as f32).
 pub fn emit_surface_entry(buf: &mut [u8], k: usize, node: u32, u: [f32; 3]) -> Result<()> {
-    let at = SURFACE_HEADER_LEN + k * SURFACE_ENTRY_LEN;
+    let at = entry_offset(SURFACE_HEADER_LEN, k, SURFACE_ENTRY_LEN).ok_or(Error::BufferTooSmall)?;
     put(buf, at, &node.to_le_bytes())?;
     for i in 0..3 {
         put(buf, at + 4 + 4 * i, &u[i].to_bits().to_le_bytes())?;
@@ -267,7 +274,7 @@ pub fn emit_surface_entry(buf: &mut [u8], k: usize, node: u32, u: [f32; 3]) -> R
 
 /// Reads surface entry `k` of a payload whose header parsed.
 pub fn surface_entry(b: &[u8], k: usize) -> Result<(u32, [f32; 3])> {
-    let at = SURFACE_HEADER_LEN + k * SURFACE_ENTRY_LEN;
+    let at = entry_offset(SURFACE_HEADER_LEN, k, SURFACE_ENTRY_LEN).ok_or(Error::Truncated)?;
     Ok((
         u32_at(b, at)?,
         [f32_at(b, at + 4)?, f32_at(b, at + 8)?, f32_at(b, at + 12)?],

@@ -38,7 +38,10 @@ pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
         walk_vtk(&mut Reader::new(path, bytes))?;
     }
     let bytes = legacy_type_names(bytes);
-    let vtk = vtkio::Vtk::parse_legacy_be(&bytes[..]).map_err(|e| {
+    let vtk = vtkio_guarded(path, "legacy VTK", || {
+        vtkio::Vtk::parse_legacy_be(&bytes[..])
+    })?
+    .map_err(|e| {
         perr(
             path,
             None,
@@ -55,7 +58,7 @@ pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
 /// appended, raw or base64, uncompressed, zlib or LZ4. Regions, node sets and node tags as
 /// for [`parse_vtk`].
 pub fn parse_vtu(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
-    let vtk = vtkio::Vtk::parse_xml(bytes).map_err(|e| {
+    let vtk = vtkio_guarded(path, "VTK XML", || vtkio::Vtk::parse_xml(bytes))?.map_err(|e| {
         perr(
             path,
             None,
@@ -66,6 +69,21 @@ pub fn parse_vtu(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
         )
     })?;
     grid_mesh(path, vtk.data, "VTU")
+}
+
+/// Runs a vtkio parse, turning a panic inside vtkio (it indexes by lengths read from the
+/// file: a damaged VTU header length panics in its decompressor) into an error naming the
+/// file, instead of a crash of the host tool.
+fn vtkio_guarded<R>(path: &Path, format: &str, parse: impl FnOnce() -> R) -> Result<R, MeshError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(parse)).map_err(|_| {
+        perr(
+            path,
+            None,
+            format!(
+                "not a readable {format} file: its data lengths do not fit the file (vtkio failed)"
+            ),
+        )
+    })
 }
 
 /// VTK 5.1's data type names (`vtktypeint64`, ...) on FIELD array and attribute header

@@ -1,0 +1,5 @@
+//! libFuzzer target: the check is [`pe_fuzz_checks::msh_parse`] (shared with the stable replay
+//! test in `fuzz/checks/tests/replay.rs`).
+#![no_main]
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| pe_fuzz_checks::msh_parse(data));
