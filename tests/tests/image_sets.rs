@@ -163,7 +163,7 @@ fn a_mixed_set_is_refused_by_the_host_and_by_the_boards() {
             Err(e) => e.downcast::<SimFault>().expect("a fault report"),
         };
         println!("{f}");
-        let root = &f.faults[0];
+        let root = &f.observed[f.cause.detected].fault;
         let FaultKind::CompilationMismatch { face, ours, theirs } = root.kind else {
             panic!("the root cause is the mismatch, not a timeout: {f}");
         };
@@ -176,7 +176,7 @@ fn a_mixed_set_is_refused_by_the_host_and_by_the_boards() {
         want.sort();
         assert_eq!(ids, want, "{root}");
         assert!(root.to_string().contains(&format!("{face:?}")), "{root}");
-        for x in &f.faults {
+        for x in f.observed.iter().map(|o| &o.fault) {
             if let FaultKind::CompilationMismatch { face, .. } = x.kind {
                 let n = neighbour(x.board, face).expect("a neighbour");
                 assert!(x.board == odd8 || n == odd8, "{x}");
@@ -239,7 +239,7 @@ fn foreign_misplaced_and_corrupted_images_are_refused() {
     };
     assert!(
         matches!(
-            f.faults[0].kind,
+            f.observed[f.cause.detected].fault.kind,
             FaultKind::CompilationMismatch { .. } | FaultKind::Image(_)
         ),
         "named at start, not a timeout: {f}"
