@@ -53,10 +53,11 @@ enum Command {
         steps: u64,
     },
     /// A seeded fault campaign on the machine in DIR: RUNS short runs, each with faults
-    /// drawn from SEED (drop, corrupt, delay, stall, alone and mixed), each classified as
-    /// bit-identical to the clean run or stopped naming the true first cause; a summary.
+    /// drawn from SEED (drop, corrupt, delay, stall, alone and mixed; with --swap-from, also
+    /// one board's image taken from another compilation), each classified as bit-identical
+    /// to the clean run or stopped naming the true first cause; a summary.
     #[command(
-        after_help = "Example:\n  pe compile scenes/seed-box.toml --boards 2x2x2 -o out/campaign\n  board-sim campaign out/campaign --runs 1000 --seed 1 --steps 100"
+        after_help = "Example (scripts/fault-campaign.sh does this):\n  pe compile scenes/seed-box.toml --boards 2x2x2 -o out/campaign\n  sed 's/^youngs_modulus = .*/youngs_modulus = 4.5e3/' scenes/seed-box.toml > /tmp/stiffer.toml\n  pe compile /tmp/stiffer.toml --boards 2x2x2 -o out/campaign-other\n  board-sim campaign out/campaign --swap-from out/campaign-other --runs 1000 --seed 1 --steps 100"
     )]
     Campaign {
         dir: PathBuf,
@@ -69,6 +70,11 @@ enum Command {
         /// Without link recovery (every fault must stop the run, naming its cause).
         #[arg(long)]
         no_recovery: bool,
+        /// Another compilation of the same machine (e.g. another Young's modulus): some
+        /// runs take one board's image from it (alone, with its manifest, or with the
+        /// host's manifest check off), and must be refused naming that board.
+        #[arg(long, value_name = "DIR2")]
+        swap_from: Option<PathBuf>,
     },
     /// The main job: compile the built-in scene (uterus, tubes, probe) for a board mesh and
     /// run it, writing OUT/images, OUT/frames (ParaView), OUT/report.json and a summary.
@@ -174,7 +180,8 @@ fn main() -> Result<()> {
             seed,
             steps,
             no_recovery,
-        } => campaign::campaign(&dir, runs, seed, steps, !no_recovery),
+            swap_from,
+        } => campaign::campaign(&dir, swap_from.as_deref(), runs, seed, steps, !no_recovery),
     }
 }
 
