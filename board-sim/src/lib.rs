@@ -44,8 +44,9 @@ pub struct SimOptions {
     /// How each board's storage is sized.
     pub storage: StorageSizing,
     /// Check the image set against `manifest.json` before any board runs: every file's CRC
-    /// and every image's compilation id (true by default). False leaves a mixed set to the
-    /// boards' own check with their neighbours (the Hello frames), which tests exercise.
+    /// and every image's compilation id; and, as the boards start, the id each board
+    /// reports to the host (true by default). False leaves a mixed set to the boards' own
+    /// check with their neighbours (the Hello frames), which tests exercise.
     pub check_manifest: bool,
     /// Link-level recovery (retransmission) above the emulated links and the fault
     /// injector; `None` runs without, so that every fault stops the run.
@@ -203,6 +204,15 @@ fn collect_sinks(
     for p in &host {
         let r =
             link_proto::PacketRepr::parse_bytes(p).map_err(|e| anyhow!("host: bad packet: {e}"))?;
+        match r.kind {
+            link_proto::PacketKind::ToolForce => {}
+            // Checked as they arrive (`HostCheck`).
+            link_proto::PacketKind::Hello => continue,
+            k => bail!(
+                "host: unexpected packet {k:?} from address {} (tool forces and hellos only)",
+                r.src
+            ),
+        }
         let t = ToolForcePayload::parse(r.payload)
             .map_err(|e| anyhow!("host: bad tool-force payload from {}: {e}", r.src))?;
         shares.push((t.step, t.tool, r.src, t.force));
@@ -217,6 +227,107 @@ fn collect_sinks(
         }
     }
     Ok((out, tool_force))
+}
+
+/// The host's check of what the boards say they run: each board's [`PacketKind::Hello`]
+/// packet (before its step 0) must carry the manifest's compilation id; every board must
+/// have said it by the end. Catches a board that runs another image than the host loaded
+/// (flashed from another compile), a board with no neighbour to compare with included.
+///
+/// [`PacketKind::Hello`]: link_proto::PacketKind::Hello
+struct HostCheck {
+    expected: String,
+    dims: [usize; 3],
+    /// Host packets already looked at.
+    seen: usize,
+    /// Boards (x fastest) that have said hello.
+    said: Vec<bool>,
+}
+
+impl HostCheck {
+    fn new(expected: &str, dims: [usize; 3]) -> Self {
+        HostCheck {
+            expected: expected.to_ascii_lowercase(),
+            dims,
+            seen: 0,
+            said: vec![false; dims.iter().product()],
+        }
+    }
+
+    /// The board (coordinates) at a global address, if it is one of this machine's.
+    fn coords(&self, address: u8) -> Option<[usize; 3]> {
+        let d = self.dims;
+        (0..self.said.len())
+            .map(|b| [b % d[0], (b / d[0]) % d[1], b / (d[0] * d[1])])
+            .find(|c| link_proto::link::board_at(c[0], c[1], c[2]) == Some(address))
+    }
+
+    /// Looks at the host packets that arrived since the last call.
+    fn poll(&mut self, net: &links::GlobalNet) -> Result<()> {
+        use link_proto::payload::HelloPayload;
+        let new: Vec<Vec<u8>> = match net.host.lock() {
+            Ok(v) => v.get(self.seen..).map(<[_]>::to_vec).unwrap_or_default(),
+            Err(_) => bail!("host: the packet sink was poisoned"),
+        };
+        self.seen += new.len();
+        for p in new {
+            let Ok(r) = link_proto::PacketRepr::parse_bytes(&p) else {
+                continue; // named by `collect_sinks`
+            };
+            if r.kind != link_proto::PacketKind::Hello {
+                continue;
+            }
+            let Some(c) = self.coords(r.src) else {
+                bail!(
+                    "host: a hello from address {}, which is no board of this {}x{}x{} machine",
+                    r.src,
+                    self.dims[0],
+                    self.dims[1],
+                    self.dims[2]
+                );
+            };
+            let h = HelloPayload::parse(r.payload).map_err(|e| {
+                anyhow!(
+                    "host: bad hello from board ({},{},{}): {e}",
+                    c[0],
+                    c[1],
+                    c[2]
+                )
+            })?;
+            let id = pe_firmware::image::CompilationId(h.compilation).to_string();
+            if id != self.expected {
+                bail!(
+                    "board ({},{},{}) runs an image of compilation {id}, but the host loaded compilation {} (the manifest's): the board was flashed from another compile",
+                    c[0], c[1], c[2], self.expected
+                );
+            }
+            let b = c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2]);
+            if let Some(s) = self.said.get_mut(b) {
+                *s = true;
+            }
+        }
+        Ok(())
+    }
+
+    /// At the end of a run: every board has said hello.
+    fn finish(&mut self, net: &links::GlobalNet) -> Result<()> {
+        self.poll(net)?;
+        let silent: Vec<String> = (0..self.said.len())
+            .filter(|&b| !self.said[b])
+            .map(|b| {
+                let d = self.dims;
+                format!("({},{},{})", b % d[0], (b / d[0]) % d[1], b / (d[0] * d[1]))
+            })
+            .collect();
+        if !silent.is_empty() {
+            bail!(
+                "host: {} board(s) never reported their compilation id: {}",
+                silent.len(),
+                silent.join(" ")
+            );
+        }
+        Ok(())
+    }
 }
 
 /// What a board reported when the run stopped: a fault, or (`waiting`) the link it was
@@ -965,11 +1076,21 @@ pub fn run(
     // reports its own fault or where it waits: the evidence the cause is found from.
     let grace = opts.link_timeout.min(FAULT_GRACE);
     let mut first_fault: Option<Instant> = None;
+    let mut host_check = opts
+        .check_manifest
+        .then(|| HostCheck::new(&manifest.compilation, dims));
     loop {
         match rx.recv_timeout(Duration::from_millis(20)) {
             Ok(report) => c.file(report),
             Err(mpsc::RecvTimeoutError::Timeout) => {}
             Err(mpsc::RecvTimeoutError::Disconnected) => break,
+        }
+        if let Some(Err(e)) = host_check.as_mut().map(|h| h.poll(&net)) {
+            stop.store(true, Ordering::Relaxed);
+            for h in handles {
+                let _ = h.join();
+            }
+            return Err(e);
         }
         if !c.faults.is_empty() {
             let t = *first_fault.get_or_insert_with(Instant::now);
@@ -996,6 +1117,9 @@ pub fn run(
         b.recovery = r;
     }
     c.frames.sort_by_key(|f| f.0);
+    if let Some(h) = host_check.as_mut() {
+        h.finish(&net)?;
+    }
     let tools = header.counts.tools as usize;
     let (graphics, tool_force) = collect_sinks(&net, steps, tools)?;
     Ok(SimOutput {
@@ -1038,5 +1162,74 @@ fn dispatch(
         (Precision::F32, Integration::Full) => {
             run_worker::<f32, HexFull<f32>>(ctx, sizing, links, env, out)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use link_proto::payload::HelloPayload;
+    use link_proto::{PacketKind, PacketRepr};
+
+    fn hello(src: u8, id: [u8; 8]) -> Vec<u8> {
+        let mut payload = [0u8; HelloPayload::LEN];
+        HelloPayload { compilation: id }
+            .emit(&mut payload)
+            .expect("payload");
+        let r = PacketRepr {
+            dst: link_proto::packet::ADDR_HOST,
+            src,
+            msg_id: 0,
+            kind: PacketKind::Hello,
+            payload: &payload,
+        };
+        let mut buf = vec![0u8; r.buffer_len()];
+        r.emit(&mut buf).expect("packet");
+        buf
+    }
+
+    /// The host names a board whose hello carries another compilation's id, and the boards
+    /// that never said hello; a set whose every board said the manifest's id passes.
+    #[test]
+    fn the_host_checks_what_every_board_says_it_runs() {
+        let dims = [2, 2, 1];
+        let bells: Vec<Arc<links::Doorbell>> = (0..4).map(|_| Default::default()).collect();
+        let (_, net) = build_links(dims, &bells);
+        let ours = [0x57, 0xdc, 1, 2, 3, 4, 5, 6];
+        let expected = pe_firmware::image::CompilationId(ours).to_string();
+        assert_eq!(expected.len(), 16, "16 hex digits: {expected}");
+        let mut check = HostCheck::new(&expected, dims);
+        let push = |p: Vec<u8>| net.host.lock().expect("sink").push(p);
+        // Boards (0,0,0), (1,0,0) and (0,1,0) (addresses 0, 1, 4) say the right id.
+        for a in [0u8, 1, 4] {
+            push(hello(a, ours));
+        }
+        check.poll(&net).expect("right ids pass");
+        let e = check
+            .finish(&net)
+            .expect_err("board (1,1,0) never said hello");
+        let m = format!("{e:#}");
+        assert!(m.contains("1 board(s)") && m.contains("(1,1,0)"), "{m}");
+        // Board (1,1,0) (address 5) says another compilation's id.
+        let mut theirs = ours;
+        theirs[7] ^= 0x80;
+        push(hello(5, theirs));
+        let e = check
+            .poll(&net)
+            .expect_err("another compilation's id is refused");
+        let m = format!("{e:#}");
+        let theirs_hex = pe_firmware::image::CompilationId(theirs).to_string();
+        assert!(
+            m.contains("board (1,1,0)") && m.contains(&theirs_hex) && m.contains(&expected),
+            "names the board and both ids: {m}"
+        );
+        // A hello from an address outside the machine.
+        let (_, net) = build_links(dims, &bells);
+        let mut check = HostCheck::new(&expected, dims);
+        net.host.lock().expect("sink").push(hello(16, ours));
+        let e = check
+            .poll(&net)
+            .expect_err("address 16 is board (0,0,1): not on 2x2x1");
+        assert!(format!("{e:#}").contains("address 16"), "{e:#}");
     }
 }

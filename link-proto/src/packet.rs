@@ -15,7 +15,7 @@
 //! | 8 + `n` | 4    | CRC-32/ISO-HDLC over bytes `0 .. 8 + n`                |
 //!
 //! Kind codes: 0x01 collision exchange, 0x02 graphics surface, 0x03 bounding box,
-//! 0x04 tool force, 0x10 control
+//! 0x04 tool force, 0x05 hello (a board's compilation id, to the host), 0x10 control
 //! start, 0x11 control stop, 0x12 control step-done, 0x20 fault report; any
 //! other code parses as [`PacketKind::Unknown`].
 //!
@@ -81,6 +81,9 @@ pub enum PacketKind {
     BoundingBox,
     /// A board's share of a tool's contact force (to the host / haptic device).
     ToolForce,
+    /// A board's compilation id, to the host before step 0 (the host checks the board
+    /// runs the set it loaded).
+    Hello,
     /// Control: start, stop, step done.
     Control(Control),
     /// A board reports a fault.
@@ -97,6 +100,7 @@ impl PacketKind {
             PacketKind::GraphicsSurface => 0x02,
             PacketKind::BoundingBox => 0x03,
             PacketKind::ToolForce => 0x04,
+            PacketKind::Hello => 0x05,
             PacketKind::Control(Control::Start) => 0x10,
             PacketKind::Control(Control::Stop) => 0x11,
             PacketKind::Control(Control::StepDone) => 0x12,
@@ -112,6 +116,7 @@ impl PacketKind {
             0x02 => PacketKind::GraphicsSurface,
             0x03 => PacketKind::BoundingBox,
             0x04 => PacketKind::ToolForce,
+            0x05 => PacketKind::Hello,
             0x10 => PacketKind::Control(Control::Start),
             0x11 => PacketKind::Control(Control::Stop),
             0x12 => PacketKind::Control(Control::StepDone),

@@ -9,6 +9,7 @@
 //! | [`BoxPayload`] ([`PacketKind::BoundingBox`](crate::PacketKind)) | step u32, min 3×f64, max 3×f64 (52 bytes) |
 //! | nodes ([`PacketKind::CollisionExchange`](crate::PacketKind)) | step u32, last u8 (1: the sender's last packet of the step), count u16, then count × (contact-node index u32, displacement 3×f64) |
 //! | [`ToolForcePayload`] ([`PacketKind::ToolForce`](crate::PacketKind)) | step u32, tool u8, force 3×f64 (29 bytes) |
+//! | [`HelloPayload`] ([`PacketKind::Hello`](crate::PacketKind)) | compilation id, 8 bytes as in the image header |
 //! | surface ([`PacketKind::GraphicsSurface`](crate::PacketKind)) | frame u32, step u32, chunk u8, chunks u8, count u16, then count × (mesh node u32, displacement 3×f32) |
 //!
 //! # Panics
@@ -166,6 +167,33 @@ pub fn node_entry(b: &[u8], k: usize) -> Result<(u32, [f64; 3])> {
     ))
 }
 
+/// The compilation id of the image a board runs (to the host, before step 0).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct HelloPayload {
+    /// The id's bytes, as the image header holds them.
+    pub compilation: [u8; 8],
+}
+
+impl HelloPayload {
+    /// Payload length.
+    pub const LEN: usize = 8;
+
+    /// Writes the payload; returns its length.
+    pub fn emit(&self, buf: &mut [u8]) -> Result<usize> {
+        put(buf, 0, &self.compilation)?;
+        Ok(Self::LEN)
+    }
+
+    /// Reads a payload of exactly [`HelloPayload::LEN`] bytes.
+    pub fn parse(b: &[u8]) -> Result<Self> {
+        match <[u8; 8]>::try_from(b) {
+            Ok(compilation) => Ok(HelloPayload { compilation }),
+            Err(_) if b.len() < Self::LEN => Err(Error::Truncated),
+            Err(_) => Err(Error::BadLength),
+        }
+    }
+}
+
 /// A board's share of a tool's contact force at a step.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ToolForcePayload {
@@ -314,6 +342,15 @@ mod tests {
         };
         let n = t.emit(&mut buf).unwrap();
         assert_eq!(ToolForcePayload::parse(&buf[..n]).unwrap(), t);
+        let hello = HelloPayload {
+            compilation: [0x57, 0xdc, 1, 2, 3, 4, 5, 0xff],
+        };
+        let n = hello.emit(&mut buf).unwrap();
+        assert_eq!(n, HelloPayload::LEN);
+        assert_eq!(HelloPayload::parse(&buf[..n]).unwrap(), hello);
+        assert_eq!(HelloPayload::parse(&buf[..n - 1]), Err(Error::Truncated));
+        assert_eq!(HelloPayload::parse(&buf[..n + 1]), Err(Error::BadLength));
+        assert_eq!(hello.emit(&mut buf[..7]), Err(Error::BufferTooSmall));
         let s = SurfaceHeader {
             frame: 2,
             step: 800,

@@ -71,6 +71,7 @@ fn kind_codes() {
         (PacketKind::GraphicsSurface, 0x02),
         (PacketKind::BoundingBox, 0x03),
         (PacketKind::ToolForce, 0x04),
+        (PacketKind::Hello, 0x05),
         (PacketKind::Control(Control::Start), 0x10),
         (PacketKind::Control(Control::Stop), 0x11),
         (PacketKind::Control(Control::StepDone), 0x12),

@@ -2,7 +2,7 @@
 //! values in the order of the image's send list, combined on arrival by the receive list's
 //! rule (the summation tree the compiler fixed).
 
-use link_proto::{emit_values, FrameKind, FrameRepr, Links};
+use link_proto::{emit_values, Face, FrameKind, FrameRepr, Links};
 
 use super::program::{face_of, ROUNDS_PER_AXIS_MAX};
 use super::{Fault, FaultKind, Runtime, WireReal};
@@ -88,7 +88,19 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                 error: link_proto::SendError::TooLong,
             })
         })?;
-        match links.try_send(face, &self.st.tx[..len]) {
+        self.send_frame(links, face, len)
+    }
+
+    /// Sends the frame of `len` bytes already in `tx` on `face` and counts it; `Ok(false)`
+    /// if the link's queue is full (nothing sent: send it again later), a fault for any
+    /// other refusal. The one path every frame a board sends goes out by.
+    pub(super) fn send_frame(
+        &mut self,
+        links: &mut impl Links,
+        face: Face,
+        len: usize,
+    ) -> Result<bool, Fault> {
+        match links.try_send(face, &self.st.tx[..len.min(self.st.tx.len())]) {
             Ok(()) => {
                 self.stats.frames_sent[face.index()] += 1;
                 self.stats.bytes_sent[face.index()] += len as u64;

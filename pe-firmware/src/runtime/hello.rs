@@ -3,9 +3,12 @@
 //! value whose 8 bytes are the id) and reads one from each. A neighbour whose id differs is
 //! [`FaultKind::CompilationMismatch`]: the boards run images of different compilations (a
 //! board flashed from another compile, a set mixed by hand), whose schedules would agree
-//! frame by frame and compute a wrong answer. Once per run, never on a step's path.
+//! frame by frame and compute a wrong answer. Each board also sends its id to the host in
+//! a [`PacketKind::Hello`] packet on the global network, so the host checks what every
+//! board runs (a board with no neighbour too). Once per run, never on a step's path.
 
-use link_proto::{Face, FrameKind, FrameRepr, Links, Payload, Precision};
+use link_proto::payload::HelloPayload;
+use link_proto::{Face, FrameKind, FrameRepr, Links, PacketKind, Payload, Precision};
 
 use super::{Fault, FaultKind, Runtime, WireReal};
 use crate::image::{CompilationId, ElementRecord};
@@ -15,6 +18,8 @@ use crate::image::{CompilationId, ElementRecord};
 pub(super) struct Hello {
     to_send: u8,
     to_recv: u8,
+    /// The host's Hello packet is still to be sent.
+    to_host: bool,
 }
 
 impl Hello {
@@ -38,11 +43,12 @@ impl Hello {
         Hello {
             to_send: faces,
             to_recv: faces,
+            to_host: true,
         }
     }
 
     pub fn is_done(&self) -> bool {
-        self.to_send == 0 && self.to_recv == 0
+        self.to_send == 0 && self.to_recv == 0 && !self.to_host
     }
 
     /// The first face whose Hello has not arrived (for a timeout).
@@ -76,14 +82,22 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                     error: link_proto::SendError::TooLong,
                 })
             })?;
-            match links.try_send(face, &self.st.tx[..len]) {
-                Ok(()) => {
-                    self.hello.to_send &= !bit;
-                    self.stats.frames_sent[face.index()] += 1;
-                    self.stats.bytes_sent[face.index()] += len as u64;
-                }
-                Err(link_proto::SendError::WouldBlock) => {}
-                Err(error) => return Err(self.fault(FaultKind::SendFailed { face, error })),
+            if self.send_frame(links, face, len)? {
+                self.hello.to_send &= !bit;
+            }
+        }
+        if self.hello.to_host {
+            let host = link_proto::packet::ADDR_HOST;
+            let len = HelloPayload { compilation: id.0 }
+                .emit(
+                    self.st
+                        .tx
+                        .get_mut(link_proto::PACKET_HEADER_LEN..)
+                        .unwrap_or_default(),
+                )
+                .map_err(|error| self.fault(FaultKind::BadPacket { error }))?;
+            if self.send_global(links, host, PacketKind::Hello, len)? {
+                self.hello.to_host = false;
             }
         }
         for face in Face::ALL {
