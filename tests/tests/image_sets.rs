@@ -280,3 +280,68 @@ fn foreign_misplaced_and_corrupted_images_are_refused() {
         "{e}"
     );
 }
+
+/// A header whose counts claim more records than the image has bytes (a damaged or forged
+/// header behind a valid CRC) is refused before anyone sizes storage from it: by the
+/// reader, the host decoder and the firmware's loader; the genuine image passes.
+#[test]
+fn counts_beyond_the_image_are_refused_before_allocation() {
+    use pe_firmware::image::{ImageReader, MAGIC};
+    let machine = Machine::parse("2x1x1").unwrap();
+    let p = coarse(10, 1.0);
+    let pl = plan(&p, machine).unwrap();
+    let images = compile_images(&p, &pl).unwrap();
+    let good = &images[0].bytes;
+    let header = ImageReader::new(good, None)
+        .expect("a genuine image")
+        .header;
+    let header_len = postcard::to_allocvec(&header).expect("header").len();
+    let body = &good[MAGIC.len() + header_len..good.len() - 4];
+    // Not trivial: the genuine image holds thousands of records in fewer bytes than that
+    // bound allows (each record at least one byte).
+    assert!(
+        header.counts.records() > 1000 && header.counts.records() <= body.len() as u64,
+        "{} records in {} bytes",
+        header.counts.records(),
+        body.len()
+    );
+    let board = header.board;
+    assert!(board_sim::load_check(good, board, board_sim::StorageSizing::Exact).is_ok());
+    let forge = |edit: &dyn Fn(&mut pe_firmware::image::Counts)| {
+        let mut h = header;
+        edit(&mut h.counts);
+        let mut img = MAGIC.to_vec();
+        img.extend(postcard::to_allocvec(&h).expect("header"));
+        img.extend_from_slice(body);
+        let crc = link_proto::frame::crc32(&img);
+        img.extend(crc.to_le_bytes());
+        img
+    };
+    let bytes = body.len() as u32;
+    let edits: [(&str, &dyn Fn(&mut pe_firmware::image::Counts)); 4] = [
+        ("receives", &|c| c.recvs = u32::MAX),
+        ("elements", &|c| c.elements += bytes),
+        ("contact nodes", &|c| c.contact_nodes = u32::MAX / 2),
+        ("sends", &|c| c.sends = bytes),
+    ];
+    for (what, edit) in edits {
+        let img = forge(edit);
+        match ImageReader::new(&img, None) {
+            Err(ImageError::Malformed { record }) => {
+                assert!(record.contains("header counts"), "{what}: {record}")
+            }
+            other => panic!(
+                "{what}: refused as malformed counts, got {:?}",
+                other.map(|r| r.header.counts)
+            ),
+        }
+        assert!(
+            decode_image(&img, None).is_err(),
+            "{what}: the host decoder refuses it"
+        );
+        assert!(
+            board_sim::load_check(&img, board, board_sim::StorageSizing::Exact).is_err(),
+            "{what}: the loader refuses it"
+        );
+    }
+}

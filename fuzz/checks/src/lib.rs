@@ -242,7 +242,10 @@ pub fn image_load(data: &[u8]) {
         let mut fixed = data.to_vec();
         fixed[..MAGIC.len()].copy_from_slice(&MAGIC);
         if let Some(fixed) = with_crc(&fixed) {
-            image_once(&fixed);
+            // An input that already had the magic and its CRC was checked as it is.
+            if fixed != data {
+                image_once(&fixed);
+            }
         }
     }
 }

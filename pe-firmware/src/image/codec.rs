@@ -453,6 +453,13 @@ impl<'a> ImageReader<'a> {
                 });
             }
         }
+        // Storage is sized from the counts: counts the bytes cannot hold (a damaged or
+        // forged header) are refused here, before anything is allocated or filled.
+        if header.counts.records() > rest.len() as u64 {
+            return Err(ImageError::Malformed {
+                record: "header counts (more records than the image has bytes)",
+            });
+        }
         Ok(ImageReader { header, rest })
     }
 

@@ -152,6 +152,34 @@ impl Counts {
     pub fn external_records(&self) -> usize {
         self.external.iter().map(|&n| n as usize).sum()
     }
+
+    /// Records the image holds after its header, over every section (the contact nodes'
+    /// two sections each count). Every record takes at least one byte (postcard writes at
+    /// least a byte per field), so an image whose counts exceed the bytes after its header
+    /// is malformed: [`ImageReader::new`](codec::ImageReader::new) refuses it before anyone
+    /// sizes storage from the counts.
+    pub fn records(&self) -> u64 {
+        [
+            u64::from(self.materials),
+            u64::from(self.elements),
+            u64::from(self.boxes),
+            u64::from(self.nodes),
+            self.exchange_lists() as u64,
+            u64::from(self.sends),
+            u64::from(self.recvs),
+            u64::from(self.path_points),
+            u64::from(self.loads),
+            self.external_records() as u64,
+            2 * u64::from(self.contact_nodes),
+            u64::from(self.contact_faces),
+            u64::from(self.pairs),
+            u64::from(self.tools),
+            u64::from(self.contact_boards),
+            u64::from(self.graphics_nodes),
+        ]
+        .iter()
+        .sum()
+    }
 }
 
 /// Contact search parameters (all zero without contact).
