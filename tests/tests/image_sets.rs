@@ -318,7 +318,8 @@ fn counts_beyond_the_image_are_refused_before_allocation() {
         img
     };
     let bytes = body.len() as u32;
-    let edits: [(&str, &dyn Fn(&mut pe_firmware::image::Counts)); 4] = [
+    type Edit<'a> = (&'a str, &'a dyn Fn(&mut pe_firmware::image::Counts));
+    let edits: [Edit; 4] = [
         ("receives", &|c| c.recvs = u32::MAX),
         ("elements", &|c| c.elements += bytes),
         ("contact nodes", &|c| c.contact_nodes = u32::MAX / 2),
