@@ -178,6 +178,9 @@ fn diff(a: u16, b: u16) -> i16 {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct FlowRx {
     expected: u16,
+    /// The number last nacked (one nack per gap: a lost nack is recovered by the sender's
+    /// timer).
+    nacked: Option<u16>,
 }
 
 /// What to do with a data packet of a flow.
@@ -187,8 +190,12 @@ pub enum Verdict {
     Deliver,
     /// Already delivered: drop it, acknowledge again.
     Duplicate,
-    /// Beyond the next expected (one was lost): drop it, nack [`FlowRx::expected`].
-    Gap,
+    /// Beyond the next expected (one was lost): drop it, and nack [`FlowRx::expected`] if
+    /// `nack` (the first packet beyond this gap).
+    Gap {
+        /// Whether to nack.
+        nack: bool,
+    },
 }
 
 impl FlowRx {
@@ -200,7 +207,11 @@ impl FlowRx {
                 Verdict::Deliver
             }
             d if d < 0 => Verdict::Duplicate,
-            _ => Verdict::Gap,
+            _ => {
+                let nack = self.nacked != Some(self.expected);
+                self.nacked = Some(self.expected);
+                Verdict::Gap { nack }
+            }
         }
     }
 
@@ -236,9 +247,9 @@ impl Default for GlobalConfig {
             peers_max: 16,
             rx_slots: 16,
             packet_len_max: crate::limits::PACKET_LEN_MAX,
-            retries: 10,
-            retransmit_after_ns: 1_000_000,
-            retransmit_backoff_max_ns: 64_000_000,
+            retries: 8,
+            retransmit_after_ns: 10_000_000,
+            retransmit_backoff_max_ns: 160_000_000,
         }
     }
 }
@@ -296,6 +307,9 @@ struct Peer {
     ack_owed: bool,
     /// No nack before this (one per `retransmit_after_ns`).
     nack_at: u64,
+    /// The number last retransmitted from on a nack: a nack for it again is ignored until
+    /// the window moves or the timer fires (no retransmission storm from a burst of nacks).
+    nacked: Option<u16>,
 }
 
 /// Global-network recovery over `L` (see the module doc); the faces pass through. `B` is
@@ -453,6 +467,7 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
         if diff(ack, p.base) > 0 && diff(ack, p.next) <= 0 {
             p.base = ack;
             p.tries = 0;
+            p.nacked = None;
             p.timer_at = now.saturating_add(after);
             if let Some(r) = p.resend {
                 if diff(r, ack) < 0 {
@@ -488,7 +503,8 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
                 self.stats.nacks_received += 1;
                 self.acked(i, seq, now);
                 let p = &mut self.peers[i];
-                if diff(seq, p.base) >= 0 && diff(seq, p.next) < 0 {
+                if diff(seq, p.base) >= 0 && diff(seq, p.next) < 0 && p.nacked != Some(seq) {
+                    p.nacked = Some(seq);
                     p.resend = Some(match p.resend {
                         Some(r) if diff(r, seq) < 0 => r,
                         _ => seq,
@@ -521,9 +537,9 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
                         self.stats.duplicates += 1;
                         p.ack_owed = true;
                     }
-                    Verdict::Gap => {
+                    Verdict::Gap { nack } => {
                         self.stats.gaps += 1;
-                        if now >= p.nack_at {
+                        if nack || now >= p.nack_at {
                             p.nack_at = now.saturating_add(self.config.retransmit_after_ns);
                             let want = p.rx.expected();
                             self.send_control(src, code::NACK, want);
@@ -566,6 +582,7 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
             }
             p.tries += 1;
             p.resend = Some(p.base);
+            p.nacked = None;
             let wait = after
                 .checked_shl(u32::from(p.tries.min(32)))
                 .unwrap_or(u64::MAX)

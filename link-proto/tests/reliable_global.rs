@@ -147,11 +147,7 @@ type Received = Vec<HashMap<u8, Vec<Vec<u8>>>>;
 
 /// Every board sends `per_flow` packets to every other; returns what each received, per
 /// source, in order, and the time it took (ns).
-fn exchange(
-    boards: &mut [Board],
-    time: &Rc<Cell<u64>>,
-    per_flow: u16,
-) -> (Received, u64) {
+fn exchange(boards: &mut [Board], time: &Rc<Cell<u64>>, per_flow: u16) -> (Received, u64) {
     let addrs: Vec<u8> = (0..boards.len() as u8).collect();
     let mut next: Vec<HashMap<u8, u16>> = vec![HashMap::new(); boards.len()];
     let mut got: Received = vec![HashMap::new(); boards.len()];
@@ -328,5 +324,58 @@ fn broadcast_and_a_full_peer_table_are_refused() {
     assert_eq!(
         a.try_send_global(&packet(0, 1, 9)),
         Err(SendError::WouldBlock)
+    );
+}
+
+/// One packet corrupted on every transmission while later ones get through (each one beyond
+/// the gap answered with a nack): the sender retransmits a bounded number of times (nacks
+/// for the same packet do not each start a retransmission of the window) and gives up.
+#[test]
+fn a_packet_always_corrupted_is_given_up_without_a_retransmission_storm() {
+    use link_proto::reliable_global::code;
+    let time = Rc::new(Cell::new(0));
+    let net = Net::new(Box::new(|_, p| {
+        if p[1] == 0 && p[2] == code::DATA && p[4] == 0 && p[5] == 0 {
+            Fate::Corrupt
+        } else {
+            Fate::Deliver
+        }
+    }));
+    let mut boards: Vec<Board> = (0..2).map(|a| board(a, &net, &time, CONFIG)).collect();
+    let mut buf = [0u8; 128];
+    let mut sent = 0u16;
+    let mut error = None;
+    for _ in 0..10_000 {
+        if sent < 4 && boards[0].try_send_global(&packet(0, 1, sent)).is_ok() {
+            sent += 1;
+        }
+        while let Some(_n) = boards[1].try_recv_global(&mut buf).unwrap() {}
+        if let Err(e) = boards[0].try_recv_global(&mut buf) {
+            error = Some(e);
+            break;
+        }
+        time.set(time.get() + 100_000);
+    }
+    assert!(matches!(
+        error,
+        Some(RecvError::GlobalRetriesExhausted {
+            peer: 1,
+            seq: 0,
+            ..
+        })
+    ));
+    let s = *boards[0].stats();
+    assert!(s.nacks_received > 0);
+    // Per timeout at most the window again, and once more per distinct nack.
+    let bound = (CONFIG.retries as u64 + 1) * 2 * CONFIG.window as u64;
+    assert!(
+        s.retransmitted_packets <= bound,
+        "{} retransmissions",
+        s.retransmitted_packets
+    );
+    assert!(
+        net.borrow().carried < 200,
+        "{} envelopes",
+        net.borrow().carried
     );
 }
