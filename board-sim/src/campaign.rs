@@ -80,6 +80,11 @@ pub fn campaign(dir: &Path, runs: u64, seed: u64, steps: u64, recovery: bool) ->
         } else {
             None
         },
+        global_recovery: if recovery {
+            SimOptions::default().global_recovery
+        } else {
+            None
+        },
         ..Default::default()
     };
     let clean = run(dir, &base, &mut |_, _| {})?;
