@@ -22,12 +22,14 @@
 //!   destination; a send beyond that is [`SendError::WouldBlock`] (flow control).
 //! - The receiver delivers a flow in order only. The next expected packet is delivered
 //!   and acknowledged (one cumulative ack per service of the port); a duplicate is dropped
-//!   and acknowledged again; a packet beyond the next expected (one was lost) is dropped
-//!   and answered with a nack of the next expected (at most one per `retransmit_after_ns`);
-//!   an envelope failing its CRC is dropped (its source is not trusted: the sender's
-//!   timer recovers it).
-//! - The sender retransmits every unacknowledged packet from the one asked for on a nack,
-//!   and from the oldest when the oldest has waited `retransmit_after_ns` for its ack,
+//!   and acknowledged again; a packet beyond the next expected (one was lost) is dropped,
+//!   the first beyond a gap answered with a nack of the next expected (again only after
+//!   `retransmit_after_ns`); an envelope failing its CRC is dropped (its source is not
+//!   trusted: the sender's timer recovers it).
+//! - The sender retransmits every unacknowledged packet from the one asked for on a nack
+//!   (a nack for the same packet again is ignored until the window moves or the timer
+//!   fires: no storm of retransmissions from a burst of nacks), and from the oldest when
+//!   the oldest has waited `retransmit_after_ns` for its ack,
 //!   doubling with every retransmission up to `retransmit_backoff_max_ns`. An ack that
 //!   moves the window on starts the count again. After `retries` retransmissions without
 //!   an ack the flow is given up: [`GlobalReliable::failure`] names the peer, and
@@ -42,6 +44,11 @@
 //!
 //! The receiving half alone (for a sink such as a graphics engine that only receives) is
 //! [`FlowRx`] with [`parse`] and [`control`].
+//!
+//! Cost: [`OVERHEAD`] bytes per packet plus one ack ([`OVERHEAD`] bytes) per service of the
+//! receiving port that took packets, about one per packet when packets come one at a time;
+//! retransmissions are the loss rate's fraction of the packets, plus the window behind a
+//! lost one (go-back-N). Storage: [`GlobalReliable::buffer_len`].
 //!
 //! Time comes in through [`Clock`] (never read globally). Storage is the caller's: one
 //! buffer of [`GlobalReliable::buffer_len`] bytes. No allocation, no panics.
