@@ -19,7 +19,8 @@
 //!
 //! The protocol, per flow (go-back-N with a window of `window` packets):
 //! - The sender keeps every packet until it is acknowledged, at most `window` per
-//!   destination; a send beyond that is [`SendError::WouldBlock`] (flow control).
+//!   destination and `tx_slots` in all (slots shared by the peers); a send beyond that is
+//!   [`SendError::WouldBlock`] (flow control).
 //! - The receiver delivers a flow in order only. The next expected packet is delivered
 //!   and acknowledged (one cumulative ack per service of the port); a duplicate is dropped
 //!   and acknowledged again; a packet beyond the next expected (one was lost) is dropped,
@@ -67,9 +68,11 @@ pub const OVERHEAD: usize = HEADER_LEN + CRC_LEN;
 /// Largest window (packets kept per destination for retransmission).
 pub const WINDOW_MAX: usize = 16;
 /// Most peers (addresses with a flow) a board can keep.
-pub const PEERS_MAX: usize = 32;
+pub const PEERS_MAX: usize = crate::limits::BOARD_COUNT + 2;
+/// Most send slots (shared by the peers).
+pub const TX_SLOTS_MAX: usize = 128;
 /// Most packets received and not yet taken by the caller.
-pub const RX_SLOTS_MAX: usize = 32;
+pub const RX_SLOTS_MAX: usize = 128;
 
 mod field {
     pub const DST: usize = 0;
@@ -235,6 +238,10 @@ pub struct GlobalConfig {
     pub window: usize,
     /// Addresses with a flow (at most [`PEERS_MAX`]).
     pub peers_max: usize,
+    /// Send slots, shared by the peers (at most [`TX_SLOTS_MAX`]): packets sent and not yet
+    /// acknowledged, to any destination. A send with every slot taken is
+    /// [`SendError::WouldBlock`].
+    pub tx_slots: usize,
     /// Packets received and not yet taken (at most [`RX_SLOTS_MAX`]).
     pub rx_slots: usize,
     /// Largest packet carried (bytes, before the envelope).
@@ -251,8 +258,9 @@ impl Default for GlobalConfig {
     fn default() -> Self {
         GlobalConfig {
             window: 4,
-            peers_max: 16,
-            rx_slots: 16,
+            peers_max: PEERS_MAX,
+            tx_slots: 32,
+            rx_slots: 64,
             packet_len_max: crate::limits::PACKET_LEN_MAX,
             retries: 8,
             retransmit_after_ns: 10_000_000,
@@ -304,6 +312,8 @@ struct Peer {
     /// Oldest unacknowledged.
     base: u16,
     lens: [u16; WINDOW_MAX],
+    /// Send slot of each unacknowledged packet (by `seq % window`).
+    slots: [u8; WINDOW_MAX],
     /// Retransmit from here, if asked or timed out.
     resend: Option<u16>,
     /// When the oldest unacknowledged is retransmitted.
@@ -328,6 +338,8 @@ pub struct GlobalReliable<L, C, B> {
     address: u8,
     buf: B,
     peers: [Peer; PEERS_MAX],
+    /// Free send slots (bit set: free).
+    free: [u64; TX_SLOTS_MAX / 64],
     /// Received packets not yet taken: `count` from ring slot `head` on.
     head: usize,
     count: usize,
@@ -337,11 +349,10 @@ pub struct GlobalReliable<L, C, B> {
 }
 
 impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
-    /// Bytes of storage a configuration needs: `peers_max * window` send slots, `rx_slots`
-    /// receive slots and one slot to read into, each `packet_len_max + OVERHEAD` bytes.
+    /// Bytes of storage a configuration needs: `tx_slots` send slots, `rx_slots` receive
+    /// slots and one slot to read into, each `packet_len_max + OVERHEAD` bytes.
     pub const fn buffer_len(config: &GlobalConfig) -> usize {
-        (config.peers_max * config.window + config.rx_slots + 1)
-            * (config.packet_len_max + OVERHEAD)
+        (config.tx_slots + config.rx_slots + 1) * (config.packet_len_max + OVERHEAD)
     }
 
     /// Wraps `inner` for the board at global `address`. Fails with
@@ -359,6 +370,8 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
             || config.window > WINDOW_MAX
             || config.peers_max == 0
             || config.peers_max > PEERS_MAX
+            || config.tx_slots == 0
+            || config.tx_slots > TX_SLOTS_MAX
             || config.rx_slots == 0
             || config.rx_slots > RX_SLOTS_MAX
             || config.packet_len_max + OVERHEAD > u16::MAX as usize
@@ -375,6 +388,7 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
             address,
             buf,
             peers: [Peer::default(); PEERS_MAX],
+            free: [u64::MAX; TX_SLOTS_MAX / 64],
             head: 0,
             count: 0,
             lens: [0; RX_SLOTS_MAX],
@@ -422,16 +436,34 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
     }
 
     fn tx_slot(&self, peer: usize, seq: u16) -> core::ops::Range<usize> {
-        self.slot(peer * self.config.window + seq as usize % self.config.window)
+        self.slot(usize::from(
+            self.peers[peer].slots[seq as usize % self.config.window],
+        ))
+    }
+
+    /// Takes a free send slot.
+    fn take_slot(&mut self) -> Option<u8> {
+        for (w, bits) in self.free.iter_mut().enumerate() {
+            if *bits != 0 {
+                let b = bits.trailing_zeros() as usize;
+                let k = w * 64 + b;
+                if k >= self.config.tx_slots {
+                    return None;
+                }
+                *bits &= !(1u64 << b);
+                return Some(k as u8);
+            }
+        }
+        None
     }
 
     fn rx_slot(&self, k: usize) -> core::ops::Range<usize> {
-        let base = self.config.peers_max * self.config.window;
+        let base = self.config.tx_slots;
         self.slot(base + (self.head + k) % self.config.rx_slots)
     }
 
     fn scratch(&self) -> core::ops::Range<usize> {
-        self.slot(self.config.peers_max * self.config.window + self.config.rx_slots)
+        self.slot(self.config.tx_slots + self.config.rx_slots)
     }
 
     /// The slot of `addr`, taking a free one for a new address.
@@ -472,7 +504,13 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
         let after = self.config.retransmit_after_ns;
         let p = &mut self.peers[i];
         if diff(ack, p.base) > 0 && diff(ack, p.next) <= 0 {
-            p.base = ack;
+            while p.base != ack {
+                let k = usize::from(p.slots[p.base as usize % self.config.window]);
+                if let Some(bits) = self.free.get_mut(k / 64) {
+                    *bits |= 1u64 << (k % 64);
+                }
+                p.base = p.base.wrapping_add(1);
+            }
             p.tries = 0;
             p.nacked = None;
             p.timer_at = now.saturating_add(after);
@@ -661,11 +699,25 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Links for GlobalReliable<
         if diff(p.next, p.base) as usize >= self.config.window {
             return Err(SendError::WouldBlock);
         }
-        let range = self.tx_slot(i, p.next);
-        let len = emit_data(packet, p.next, &mut self.buf.as_mut()[range.clone()])
-            .ok_or(SendError::TooLong)?;
-        self.inner
-            .try_send_global(&self.buf.as_ref()[range][..len])?;
+        let k = self.take_slot().ok_or(SendError::WouldBlock)?;
+        let range = self.slot(usize::from(k));
+        let sent = emit_data(packet, p.next, &mut self.buf.as_mut()[range.clone()])
+            .ok_or(SendError::TooLong)
+            .and_then(|len| {
+                self.inner
+                    .try_send_global(&self.buf.as_ref()[range][..len])
+                    .map(|()| len)
+            });
+        let len = match sent {
+            Ok(len) => len,
+            Err(e) => {
+                if let Some(bits) = self.free.get_mut(usize::from(k) / 64) {
+                    *bits |= 1u64 << (k % 64);
+                }
+                return Err(e);
+            }
+        };
+        self.peers[i].slots[p.next as usize % self.config.window] = k;
         let now = self.clock.now_ns();
         let p = &mut self.peers[i];
         if p.base == p.next {

@@ -111,6 +111,7 @@ impl Clock for TestClock {
 const CONFIG: GlobalConfig = GlobalConfig {
     window: 4,
     peers_max: 4,
+    tx_slots: 12,
     rx_slots: 8,
     packet_len_max: 64,
     retries: 6,
@@ -211,9 +212,17 @@ fn clean_network_delivers_in_order_without_retransmission() {
 }
 
 /// Drops, corruption, duplicates and reordering on every flow between four boards: every
-/// packet still arrives once and in order, and the statistics show each was met.
+/// packet still arrives once and in order, and the statistics show each was met; also with
+/// 5 send slots shared by the 3 peers of a board (fewer than their windows: the shared
+/// pool's flow control).
 #[test]
 fn lossy_network_delivers_every_flow_in_order() {
+    for tx_slots in [12, 5] {
+        lossy_exchange(GlobalConfig { tx_slots, ..CONFIG });
+    }
+}
+
+fn lossy_exchange(config: GlobalConfig) {
     let time = Rc::new(Cell::new(0));
     let net = Net::new(Box::new(|n, _| match n % 23 {
         3 | 17 => Fate::Drop,
@@ -222,7 +231,7 @@ fn lossy_network_delivers_every_flow_in_order() {
         13 => Fate::Late,
         _ => Fate::Deliver,
     }));
-    let mut boards: Vec<Board> = (0..4).map(|a| board(a, &net, &time, CONFIG)).collect();
+    let mut boards: Vec<Board> = (0..4).map(|a| board(a, &net, &time, config)).collect();
     let (got, _) = exchange(&mut boards, &time, 200);
     check_in_order(&got, 200);
     let sum = |f: fn(&link_proto::reliable_global::GlobalRecovery) -> u64| {
