@@ -1194,13 +1194,11 @@ pub fn run(
             total: count,
         };
         let lower = match &opts.faults {
-            Some(spec) => Lower::Faulty(Box::new(FaultyLinks::new(
-                link,
-                coords,
-                b,
-                spec.clone(),
-                injected.clone(),
-            ))),
+            Some(spec) => {
+                let mut f = FaultyLinks::new(link, coords, b, spec.clone(), injected.clone());
+                f.global_envelopes = opts.global_recovery.is_some();
+                Lower::Faulty(Box::new(f))
+            }
             None => Lower::Clean(link),
         };
         let l = Box::new(

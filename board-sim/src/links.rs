@@ -553,6 +553,9 @@ pub struct FaultyLinks<L> {
     /// count), so that they do not depend on the order packets to different destinations
     /// go out in (which depends on thread timing). Steps far behind are forgotten.
     global_counts: std::collections::HashMap<(u8, u8, u32), u32>,
+    /// The global packets sent through here are recovery envelopes
+    /// (`link_proto::reliable_global`), not bare packets.
+    pub global_envelopes: bool,
     /// The global stall is recorded.
     global_stalled: bool,
     /// Step of the last global packet whose step was readable.
@@ -583,6 +586,7 @@ impl<L> FaultyLinks<L> {
             last_step: [0; 6],
             global_seed,
             global_counts: Default::default(),
+            global_envelopes: false,
             global_stalled: false,
             global_step: 0,
         }
@@ -702,11 +706,14 @@ impl<L: Links> Links for FaultyLinks<L> {
     /// the last packet's step).
     fn try_send_global(&mut self, p: &[u8]) -> Result<(), SendError> {
         let dst = p.first().copied().unwrap_or(u8::MAX);
-        let packet = link_proto::reliable_global::data_packet(p).unwrap_or(p);
-        let is_control = p.get(2).is_some_and(|&c| {
-            c == link_proto::reliable_global::code::ACK
-                || c == link_proto::reliable_global::code::NACK
-        }) && p.len() == link_proto::reliable_global::OVERHEAD;
+        let (packet, is_control) = if self.global_envelopes {
+            match link_proto::reliable_global::data_packet(p) {
+                Some(packet) => (packet, false),
+                None => (p, true),
+            }
+        } else {
+            (p, false)
+        };
         if !is_control {
             if let Some(s) = packet_step(packet) {
                 self.global_step = s;
