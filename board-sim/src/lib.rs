@@ -602,10 +602,12 @@ fn explains_global<'a>(o: &Observed, injected: &'a [Injected]) -> Option<&'a Inj
         })
     };
     match o.fault.kind {
-        K::GlobalTimeout { src } => {
-            let from = coords(src)?;
-            latest(&|i| i.board == from && (i.face == me_face || i.what == "stall"))
-        }
+        K::GlobalTimeout { src } => match coords(src) {
+            Some(from) => latest(&|i| i.board == from && (i.face == me_face || i.what == "stall")),
+            // Not waiting for a board's packet (its own sends blocked: with recovery,
+            // unacknowledged packets fill its window): a fault on its own packets.
+            None => latest(&|i| i.board == to_usize(me)),
+        },
         K::BadPacket { .. } => {
             latest(&|i| i.face == me_face && corrupt(i)).or_else(|| latest(&|i| corrupt(i)))
         }

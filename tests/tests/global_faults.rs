@@ -313,3 +313,24 @@ fn a_lost_graphics_or_tool_force_packet_is_not_a_silent_wrong_answer() {
         assert_eq!(f.cause.board, [0, 0, 0]);
     }
 }
+
+/// A board that stalls sends no more global packets either: on one board (whose packets go
+/// to the sinks only), with recovery, its unacknowledged packets fill its window and its
+/// wait times out; the cause named is the injected stall on its global packets, at the
+/// stall's step.
+#[test]
+fn a_stalled_board_stops_its_global_packets_and_is_named() {
+    let p = builtin_problem("coarse", 1000);
+    let dir = compile(&p, "builtin:coarse", "1x1x1", "global-stall");
+    let o = SimOptions {
+        link_timeout: Duration::from_millis(300),
+        ..opts(Some("seed=1,stall=0.0.0@900"), 1, true)
+    };
+    let f = stopped(&dir, &o);
+    println!("{f}");
+    assert_global_cause(&f, "stall");
+    assert_eq!(f.cause.board, [0, 0, 0]);
+    assert_eq!(f.cause.step, 900);
+    let d = &f.observed[f.cause.detected];
+    assert!(d.fault.step >= 900, "{f}");
+}
