@@ -185,6 +185,11 @@ pub fn campaign(
         } else {
             None
         },
+        global_recovery: if recovery {
+            SimOptions::default().global_recovery
+        } else {
+            None
+        },
         ..Default::default()
     };
     let clean = run(dir, &base, &mut |_, _| {})?;

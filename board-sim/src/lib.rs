@@ -15,6 +15,7 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, bail, Context, Result};
 use host_tools::compile::{check_image_set, image_file_name, read_manifest, ImageFile, Manifest};
 use link_proto::reliable::{FaceRecovery, ReliableConfig};
+use link_proto::reliable_global::{GlobalConfig, GlobalRecovery};
 use link_proto::Links;
 use pe_firmware::image::{
     ElementRecord, ImageError, ImageHeader, ImageReader, Integration, Precision,
@@ -51,6 +52,10 @@ pub struct SimOptions {
     /// Link-level recovery (retransmission) above the emulated links and the fault
     /// injector; `None` runs without, so that every fault stops the run.
     pub recovery: Option<ReliableConfig>,
+    /// Global-network recovery (`link_proto::reliable_global`) on every board's global port,
+    /// and its receiving end in the graphics and host sinks; `None` runs without (a lost or
+    /// damaged global packet then stops the run).
+    pub global_recovery: Option<GlobalConfig>,
 }
 
 impl Default for SimOptions {
@@ -64,6 +69,7 @@ impl Default for SimOptions {
             storage: StorageSizing::Exact,
             check_manifest: true,
             recovery: Some(ReliableConfig::default()),
+            global_recovery: Some(GlobalConfig::default()),
         }
     }
 }
@@ -102,10 +108,64 @@ pub struct LinkRecovery {
     pub duplicates: [u64; 6],
     /// Data envelopes sent the first time (each adds `reliable::OVERHEAD` bytes).
     pub data_frames: [u64; 6],
+    /// What global recovery cost on the board's global port (with it on).
+    pub global: Option<GlobalLinkRecovery>,
+}
+
+/// What global-network recovery cost on one board's port (or in the sinks).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct GlobalLinkRecovery {
+    /// Data envelopes sent the first time (each adds `reliable_global::OVERHEAD` bytes).
+    pub data_packets: u64,
+    /// Their bytes (envelope included).
+    pub data_bytes: u64,
+    pub retransmitted_packets: u64,
+    pub retransmitted_bytes: u64,
+    /// Retransmissions started by the ack timer (not a nack).
+    pub timeouts: u64,
+    pub acks_sent: u64,
+    pub nacks_sent: u64,
+    pub nacks_received: u64,
+    /// Bytes of acks and nacks.
+    pub control_bytes: u64,
+    pub damaged: u64,
+    pub gaps: u64,
+    pub duplicates: u64,
+    pub refused: u64,
+    /// Peers (addresses with a flow).
+    pub peers: u32,
+}
+
+impl GlobalLinkRecovery {
+    fn from_stats(g: &GlobalRecovery) -> Self {
+        GlobalLinkRecovery {
+            data_packets: g.data_packets,
+            data_bytes: g.data_bytes,
+            retransmitted_packets: g.retransmitted_packets,
+            retransmitted_bytes: g.retransmitted_bytes,
+            timeouts: g.timeouts,
+            acks_sent: g.acks_sent,
+            nacks_sent: g.nacks_sent,
+            nacks_received: g.nacks_received,
+            control_bytes: g.control_bytes,
+            damaged: g.damaged,
+            gaps: g.gaps,
+            duplicates: g.duplicates,
+            refused: g.refused,
+            peers: g.peers,
+        }
+    }
+
+    /// Bytes global recovery added: envelopes, retransmissions, acks and nacks.
+    pub fn overhead_bytes(&self) -> u64 {
+        self.data_packets * link_proto::reliable_global::OVERHEAD as u64
+            + self.retransmitted_bytes
+            + self.control_bytes
+    }
 }
 
 impl LinkRecovery {
-    fn from_faces(f: &[FaceRecovery; 6]) -> Self {
+    fn from_faces(f: &[FaceRecovery; 6], global: Option<&GlobalRecovery>) -> Self {
         let a = |g: fn(&FaceRecovery) -> u64| std::array::from_fn(|i| g(&f[i]));
         LinkRecovery {
             data_bytes: a(|x| x.data_bytes),
@@ -120,15 +180,21 @@ impl LinkRecovery {
             gaps: a(|x| x.gaps),
             duplicates: a(|x| x.duplicates),
             data_frames: a(|x| x.data_frames),
+            global: global.map(GlobalLinkRecovery::from_stats),
         }
     }
 
-    /// Bytes recovery added on this board's links: envelopes, retransmissions, control.
+    /// Bytes recovery added on this board's links: envelopes, retransmissions, control,
+    /// on the faces and on the global port.
     pub fn overhead_bytes(&self) -> u64 {
         let s = |v: &[u64; 6]| v.iter().sum::<u64>();
         s(&self.data_frames) * link_proto::reliable::OVERHEAD as u64
             + s(&self.retransmitted_bytes)
             + s(&self.control_bytes)
+            + self
+                .global
+                .as_ref()
+                .map_or(0, GlobalLinkRecovery::overhead_bytes)
     }
 }
 
@@ -152,6 +218,9 @@ pub struct SimOutput {
     pub tool_force: Vec<[f64; 3]>,
     pub tools: usize,
     pub dt_s: f64,
+    /// What the receiving end of global recovery cost in the graphics and host sinks (acks
+    /// and nacks they sent), with global recovery on.
+    pub sink_recovery: Option<GlobalLinkRecovery>,
 }
 
 /// A surface frame as the graphics engine assembled it from the boards' chunks.
@@ -340,6 +409,9 @@ pub struct Observed {
     pub phase: u32,
     /// The board was still waiting, not yet timed out, when the run was stopped.
     pub waiting: bool,
+    /// Observed by a sink (the graphics engine or the host, by address), not a board: the
+    /// fault's board is then the board whose packets arrived damaged or are missing.
+    pub sink: Option<u8>,
 }
 
 impl Observed {
@@ -382,6 +454,21 @@ impl Observed {
 
 impl std::fmt::Display for Observed {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if let Some(sink) = self.sink {
+            let [x, y, z] = self.fault.board;
+            let what = match self.fault.kind {
+                pe_firmware::runtime::FaultKind::BadPacket { error } => {
+                    format!("a damaged packet ({error})")
+                }
+                _ => "fewer packets than the board sent: some were lost".to_string(),
+            };
+            return write!(
+                f,
+                "{} received from board ({x},{y},{z}) (step {}) {what}",
+                links::address_name(sink),
+                self.fault.step
+            );
+        }
         if self.waiting {
             let [x, y, z] = self.fault.board;
             match self.face() {
@@ -520,12 +607,139 @@ fn neighbour(dims: [usize; 3], board: [u8; 3], face: link_proto::Face) -> Option
     (c[a] < dims[a]).then_some(c)
 }
 
+/// The damaged packets the sinks received (without global recovery), as observations (taken
+/// from the net: each is reported once).
+fn sink_observations(net: &links::GlobalNet) -> Vec<Observed> {
+    let faults = match net.sink_faults.lock() {
+        Ok(mut f) => std::mem::take(&mut *f),
+        Err(_) => return Vec::new(),
+    };
+    faults
+        .into_iter()
+        .map(|f| Observed {
+            fault: Fault {
+                board: link_proto::link::board_coords(f.src)
+                    .map_or([u8::MAX; 3], |(x, y, z)| [x as u8, y as u8, z as u8]),
+                step: f.step.map_or(0, u64::from),
+                kind: pe_firmware::runtime::FaultKind::BadPacket { error: f.error },
+            },
+            phase: phase(Some(pe_firmware::runtime::Op::Graphics)),
+            waiting: false,
+            sink: Some(f.sink),
+        })
+        .collect()
+}
+
+/// The sinks' check of a finished run: every board's graphics and tool-force packets (as
+/// the board counted them sent) and its hello arrived at the graphics engine and the host. A missing one
+/// is a wrong output, not a smaller one: an observation per board and sink (at the run's
+/// last step: which packet is missing the sink cannot tell).
+fn missing_sink_packets(
+    net: &links::GlobalNet,
+    boards: &[BoardResult],
+    steps: u64,
+) -> Vec<Observed> {
+    use link_proto::packet::{ADDR_GRAPHICS, ADDR_HOST};
+    let count = |m: &std::sync::Mutex<Vec<Vec<u8>>>, src: u8| {
+        m.lock()
+            .map(|v| v.iter().filter(|p| p.get(1) == Some(&src)).count() as u64)
+            .unwrap_or(0)
+    };
+    let mut out = Vec::new();
+    for b in boards {
+        let Some(addr) = link_proto::link::board_at(b.board[0], b.board[1], b.board[2]) else {
+            continue;
+        };
+        for (sink, m, sent) in [
+            (ADDR_GRAPHICS, &net.graphics, b.global.graphics_packets),
+            // Tool forces and the one hello every board sends before step 0.
+            (ADDR_HOST, &net.host, b.global.tool_packets + 1),
+        ] {
+            if count(m, addr) != sent {
+                out.push(Observed {
+                    fault: Fault {
+                        board: b.board.map(|c| c as u8),
+                        step: steps,
+                        kind: pe_firmware::runtime::FaultKind::GlobalTimeout { src: addr },
+                    },
+                    phase: phase(None),
+                    waiting: false,
+                    sink: Some(sink),
+                });
+            }
+        }
+    }
+    out
+}
+
+/// The injected global fault that explains an observation on the global network: for a
+/// sink's observation one on the board's packets to that sink; for a board's wait for
+/// board `src` one on `src`'s packets to it (or a stall of `src`); for a damaged packet one
+/// corrupting a packet to the observing board (else any corrupted global packet: its
+/// destination may have been hit); for recovery giving up a flow one on the packets
+/// between the board and that peer, either way. The latest such at the observed step or
+/// the one after (a partner runs at most a step ahead).
+fn explains_global<'a>(o: &Observed, injected: &'a [Injected]) -> Option<&'a Injected> {
+    use pe_firmware::runtime::FaultKind as K;
+    let to_usize = |b: [u8; 3]| b.map(|v| v as usize);
+    let me = o.fault.board;
+    let me_addr = link_proto::link::board_at(me[0] as usize, me[1] as usize, me[2] as usize);
+    let coords = |a: u8| link_proto::link::board_coords(a).map(|(x, y, z)| [x, y, z]);
+    let in_time = |i: &&Injected| i.step as u64 <= o.fault.step + 1 && i.face.starts_with("global");
+    let latest = |f: &dyn Fn(&Injected) -> bool| {
+        injected
+            .iter()
+            .filter(in_time)
+            .filter(|i| f(i))
+            .max_by_key(|i| i.step)
+    };
+    let corrupt = |i: &Injected| i.what.starts_with("corrupt");
+    if let Some(sink) = o.sink {
+        let face = links::global_face(sink);
+        let from = to_usize(me);
+        return match o.fault.kind {
+            K::BadPacket { .. } => latest(&|i| i.board == from && i.face == face && corrupt(i))
+                .or_else(|| latest(&|i| i.face == face && corrupt(i)))
+                .or_else(|| latest(&|i| corrupt(i))),
+            _ => latest(&|i| i.board == from && i.face == face),
+        };
+    }
+    let me_face = links::global_face(me_addr?);
+    // This board's packets to `peer` first, else `peer`'s to it (its acks).
+    let between = |peer: u8| {
+        let pf = links::global_face(peer);
+        latest(&|i| i.board == to_usize(me) && i.face == pf).or_else(|| {
+            let pc = coords(peer);
+            latest(&|i| Some(i.board) == pc && (i.face == me_face || i.what == "stall"))
+        })
+    };
+    match o.fault.kind {
+        K::GlobalTimeout { src } => match coords(src) {
+            Some(from) => latest(&|i| i.board == from && (i.face == me_face || i.what == "stall")),
+            // Not waiting for a board's packet (its own sends blocked: with recovery,
+            // unacknowledged packets fill its window): a fault on its own packets.
+            None => latest(&|i| i.board == to_usize(me)),
+        },
+        K::BadPacket { .. } => {
+            latest(&|i| i.face == me_face && corrupt(i)).or_else(|| latest(&|i| corrupt(i)))
+        }
+        K::GlobalError {
+            error: link_proto::RecvError::GlobalRetriesExhausted { peer, .. },
+        } => between(peer),
+        K::GlobalSendFailed { dst, .. } => between(dst),
+        _ => None,
+    }
+}
+
 /// The injected fault that explains an observation: one on the frames the observing board
 /// receives on that link (sent by the neighbour across it), at the observed step or the
 /// one before (a lost or damaged frame is noticed in its step, a lost last frame of a step
 /// perhaps only once the next one arrives), or at any earlier step for a stall or delay
 /// (which go on); the latest such.
 fn explains<'a>(dims: [usize; 3], o: &Observed, injected: &'a [Injected]) -> Option<&'a Injected> {
+    if let Some(i) = explains_global(o, injected) {
+        return Some(i);
+    }
     let face = o.face()?;
     let from = neighbour(dims, o.fault.board, face)?;
     let link = format!("{:?}", face.opposite());
@@ -604,10 +818,11 @@ enum Report {
         kinetic_energy: f64,
     },
     Failed(Observed),
-    /// What link recovery cost on a board's faces, at the end.
+    /// What link recovery cost on a board's faces and global port, at the end.
     Recovery {
         board: usize,
         faces: [FaceRecovery; 6],
+        global: Option<GlobalRecovery>,
     },
 }
 
@@ -668,15 +883,18 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
             .collect();
         let _ = out.send(Report::Frame { step, nodes });
     };
-    // Per board: running, finished its steps, or stopped on a fault. A board that finished
-    // keeps its links polled (a neighbour may still need a frame again) until every board
-    // has finished or the run is stopped.
+    // Per board: running, finished its steps (draining: until every global packet it sent
+    // is acknowledged; done), or stopped on a fault. A board that finished keeps its links
+    // polled (a neighbour may still need a frame again) until every board has finished or
+    // the run is stopped.
     #[derive(Clone, Copy, PartialEq)]
     enum State {
         Running,
+        Draining,
         Done,
         Failed,
     }
+    let mut discard = vec![0u8; link_proto::PACKET_LEN_MAX];
     let mut state = vec![State::Running; boards.len()];
     let mut idle_sweeps = 0u32;
     let Some(shared) = boards
@@ -691,14 +909,44 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
             fault: f,
             phase: phase(rt.current_op()),
             waiting: false,
+            sink: None,
         }));
         finished.fetch_add(1, Ordering::Relaxed);
     };
     loop {
         let mut progressed = false;
         for (i, ctx) in boards.iter().enumerate() {
-            if state[i] == State::Done {
+            if matches!(state[i], State::Done | State::Draining) {
                 links[i].poll();
+                // A finished firmware reads no more packets: taken (and acknowledged) here.
+                while let Ok(Some(_)) = links[i].try_recv_global(&mut discard) {}
+            }
+            if matches!(state[i], State::Running | State::Draining) {
+                if let Some((peer, seq, requests)) = links[i].global_failure() {
+                    let rt = &rts[i];
+                    failed(
+                        rt,
+                        Fault {
+                            board: ctx.coords.map(|c| c as u8),
+                            step: rt.step_index(),
+                            kind: pe_firmware::runtime::FaultKind::GlobalError {
+                                error: link_proto::RecvError::GlobalRetriesExhausted {
+                                    peer,
+                                    seq,
+                                    requests,
+                                },
+                            },
+                        },
+                    );
+                    state[i] = State::Failed;
+                    progressed = true;
+                    continue;
+                }
+            }
+            if state[i] == State::Draining && links[i].global_unacknowledged() == 0 {
+                state[i] = State::Done;
+                finished.fetch_add(1, Ordering::Relaxed);
+                progressed = true;
             }
             if state[i] != State::Running {
                 continue;
@@ -723,8 +971,7 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
                         reaction_fixed: rt.reaction_fixed,
                         kinetic_energy: rt.kinetic_energy,
                     });
-                    state[i] = State::Done;
-                    finished.fetch_add(1, Ordering::Relaxed);
+                    state[i] = State::Draining;
                     progressed = true;
                     break;
                 }
@@ -760,10 +1007,12 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
         let exiting = stop.load(Ordering::Relaxed) || finished.load(Ordering::Relaxed) >= total;
         if exiting {
             for (ctx, l) in boards.iter().zip(links.iter()) {
-                if let Some(r) = l.recovery() {
+                let (faces, global) = (l.recovery(), l.global_recovery());
+                if faces.is_some() || global.is_some() {
                     let _ = out.send(Report::Recovery {
                         board: ctx.index,
-                        faces: r,
+                        faces: faces.unwrap_or_default(),
+                        global,
                     });
                 }
             }
@@ -781,6 +1030,7 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
                         fault,
                         phase: phase(rt.current_op()),
                         waiting: true,
+                        sink: None,
                     }));
                 }
             }
@@ -944,9 +1194,13 @@ impl Collected {
                 self.results[board] = Some(result);
             }
             Report::Failed(f) => self.faults.push(f),
-            Report::Recovery { board, faces } => {
+            Report::Recovery {
+                board,
+                faces,
+                global,
+            } => {
                 if let Some(r) = self.recovery.get_mut(board) {
-                    *r = Some(LinkRecovery::from_faces(&faces));
+                    *r = Some(LinkRecovery::from_faces(&faces, global.as_ref()));
                 }
             }
         }
@@ -981,6 +1235,7 @@ fn spawn_workers(
                         fault: f,
                         phase: 0,
                         waiting: false,
+                        sink: None,
                     }));
                 }
             })
@@ -1022,7 +1277,7 @@ pub fn run(
         .collect();
     let board_bells: Vec<Arc<links::Doorbell>> =
         (0..count).map(|b| bells[b % workers].clone()).collect();
-    let (links, net) = build_links(dims, &board_bells);
+    let (links, net) = build_links(dims, &board_bells, opts.global_recovery.is_some());
     let (tx, rx) = mpsc::channel::<Report>();
     let progress = Arc::new(AtomicU64::new(0));
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
@@ -1053,18 +1308,21 @@ pub fn run(
             total: count,
         };
         let lower = match &opts.faults {
-            Some(spec) => Lower::Faulty(Box::new(FaultyLinks::new(
-                link,
-                coords,
-                b,
-                spec.clone(),
-                injected.clone(),
-            ))),
+            Some(spec) => {
+                let mut f = FaultyLinks::new(link, coords, b, spec.clone(), injected.clone());
+                f.global_envelopes = opts.global_recovery.is_some();
+                Lower::Faulty(Box::new(f))
+            }
             None => Lower::Clean(link),
         };
         let l = Box::new(
-            BoardLinks::new(lower, opts.recovery)
-                .map_err(|e| anyhow!("link recovery {:?}: {e}", opts.recovery))?,
+            BoardLinks::new(lower, opts.recovery, opts.global_recovery).map_err(|e| {
+                anyhow!(
+                    "link recovery {:?} / global recovery {:?}: {e}",
+                    opts.recovery,
+                    opts.global_recovery
+                )
+            })?,
         );
         per_worker[b % workers].0.push(ctx);
         per_worker[b % workers].1.push(l);
@@ -1092,6 +1350,7 @@ pub fn run(
             }
             return Err(e);
         }
+        c.faults.extend(sink_observations(&net));
         if !c.faults.is_empty() {
             let t = *first_fault.get_or_insert_with(Instant::now);
             if t.elapsed() >= grace {
@@ -1105,6 +1364,7 @@ pub fn run(
     }
     let wall_s = start.elapsed().as_secs_f64();
     let injected = injected.lock().map(|v| v.clone()).unwrap_or_default();
+    c.faults.extend(sink_observations(&net));
     if !c.faults.is_empty() {
         return Err(attribute(dims, c.faults, injected).into());
     }
@@ -1113,6 +1373,10 @@ pub fn run(
         .into_iter()
         .collect::<Option<Vec<_>>>()
         .ok_or_else(|| anyhow!("a board ended without a report"))?;
+    let missing = missing_sink_packets(&net, &boards, steps);
+    if !missing.is_empty() {
+        return Err(attribute(dims, missing, injected).into());
+    }
     for (b, r) in boards.iter_mut().zip(c.recovery) {
         b.recovery = r;
     }
@@ -1122,7 +1386,14 @@ pub fn run(
     }
     let tools = header.counts.tools as usize;
     let (graphics, tool_force) = collect_sinks(&net, steps, tools)?;
+    let sink_recovery = opts.global_recovery.and_then(|_| {
+        net.sink_stats
+            .lock()
+            .ok()
+            .map(|g| GlobalLinkRecovery::from_stats(&g))
+    });
     Ok(SimOutput {
+        sink_recovery,
         graphics,
         tool_force,
         tools,

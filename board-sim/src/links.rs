@@ -56,8 +56,30 @@ pub struct Channel {
 pub struct GlobalNet {
     /// Inbox per global address (`x + 4y + 16z`), with the board's doorbell.
     inboxes: Vec<Option<Arc<Channel>>>,
+    /// The packets the graphics engine took (unwrapped, in order per board, once each).
     pub graphics: Mutex<Vec<Vec<u8>>>,
+    /// The packets the host took.
     pub host: Mutex<Vec<Vec<u8>>>,
+    /// The sinks run the receiving end of global recovery (`link_proto::reliable_global`):
+    /// they take envelopes, acknowledge them into the sender's inbox, drop duplicates and
+    /// deliver each board's flow in order.
+    sink_recovery: bool,
+    /// Per (sink, source) flow: the receiver's state.
+    sink_flows: Mutex<std::collections::HashMap<(u8, u8), link_proto::reliable_global::FlowRx>>,
+    /// What the sinks' recovery cost (acks and nacks sent, damaged, duplicates, gaps).
+    pub sink_stats: Mutex<link_proto::reliable_global::GlobalRecovery>,
+    /// Packets the sinks received damaged, without recovery (each stops the run).
+    pub sink_faults: Mutex<Vec<SinkFault>>,
+}
+
+/// A damaged packet a sink received (without recovery): the sink, the source address the
+/// packet names (perhaps damaged itself) and the step in its payload if readable.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SinkFault {
+    pub sink: u8,
+    pub src: u8,
+    pub step: Option<u32>,
+    pub error: link_proto::Error,
 }
 
 /// Packets a board's inbox holds before senders see `WouldBlock`.
@@ -66,14 +88,9 @@ pub const GLOBAL_QUEUE_PACKETS: usize = 4096;
 impl GlobalNet {
     fn deliver(&self, dst: u8, src: u8, packet: &[u8]) -> Result<(), SendError> {
         use link_proto::packet::{ADDR_BROADCAST, ADDR_GRAPHICS, ADDR_HOST};
-        let sink = |m: &Mutex<Vec<Vec<u8>>>| {
-            m.lock()
-                .map(|mut v| v.push(packet.to_vec()))
-                .map_err(|_| SendError::NoLink)
-        };
         match dst {
-            ADDR_GRAPHICS => sink(&self.graphics),
-            ADDR_HOST => sink(&self.host),
+            ADDR_GRAPHICS => self.sink(ADDR_GRAPHICS, &self.graphics, packet),
+            ADDR_HOST => self.sink(ADDR_HOST, &self.host, packet),
             ADDR_BROADCAST => {
                 for (a, ch) in self.inboxes.iter().enumerate() {
                     if a != src as usize {
@@ -90,6 +107,115 @@ impl GlobalNet {
             },
         }
     }
+}
+
+impl GlobalNet {
+    /// A packet (or envelope, with recovery) arrives at sink `addr`, which keeps `m`.
+    fn sink(&self, addr: u8, m: &Mutex<Vec<Vec<u8>>>, bytes: &[u8]) -> Result<(), SendError> {
+        use link_proto::reliable_global::{code, control, parse, Envelope, Verdict, OVERHEAD};
+        let keep = |p: &[u8]| {
+            m.lock()
+                .map(|mut v| v.push(p.to_vec()))
+                .map_err(|_| SendError::NoLink)
+        };
+        if !self.sink_recovery {
+            return match link_proto::PacketRepr::parse_bytes(bytes) {
+                Ok(_) => keep(bytes),
+                Err(error) => {
+                    // Damaged: dropped, and reported (the run stops on it).
+                    let src = bytes.get(1).copied().unwrap_or(u8::MAX);
+                    if let Ok(mut f) = self.sink_faults.lock() {
+                        f.push(SinkFault {
+                            sink: addr,
+                            src,
+                            step: packet_step(bytes),
+                            error,
+                        });
+                    }
+                    Ok(())
+                }
+            };
+        }
+        let mut st = self.sink_stats.lock().map_err(|_| SendError::NoLink)?;
+        let (src, seq, packet) = match parse(bytes) {
+            Envelope::Data { src, seq, packet } => (src, seq, packet),
+            // A sink sends no data: nothing to acknowledge.
+            Envelope::Ack { .. } | Envelope::Nack { .. } => return Ok(()),
+            Envelope::Damaged => {
+                st.damaged += 1;
+                return Ok(());
+            }
+        };
+        let mut flows = self.sink_flows.lock().map_err(|_| SendError::NoLink)?;
+        let flow = flows.entry((addr, src)).or_insert_with(|| {
+            st.peers += 1;
+            Default::default()
+        });
+        let kind = match flow.take(seq) {
+            Verdict::Deliver => {
+                keep(packet)?;
+                code::ACK
+            }
+            Verdict::Duplicate => {
+                st.duplicates += 1;
+                code::ACK
+            }
+            Verdict::Gap { nack } => {
+                st.gaps += 1;
+                if !nack {
+                    return Ok(());
+                }
+                code::NACK
+            }
+        };
+        let reply = control(src, addr, kind, flow.expected());
+        drop(flows);
+        if let Some(Some(ch)) = self.inboxes.get(src as usize) {
+            if push(ch, &reply, GLOBAL_QUEUE_PACKETS).is_ok() {
+                st.control_bytes += OVERHEAD as u64;
+                if kind == code::ACK {
+                    st.acks_sent += 1;
+                } else {
+                    st.nacks_sent += 1;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The step a global packet belongs to, read from its payload (boxes, contact nodes and
+/// tool forces carry it first, surface chunks after their frame number); None for other
+/// kinds or too short a packet. Unchecked: for observers.
+pub fn packet_step(packet: &[u8]) -> Option<u32> {
+    use link_proto::PacketKind as K;
+    let at = match K::from_code(*packet.get(4)?) {
+        K::BoundingBox | K::CollisionExchange | K::ToolForce => 0,
+        K::GraphicsSurface => 4,
+        _ => return None,
+    };
+    let b =
+        packet.get(link_proto::PACKET_HEADER_LEN + at..link_proto::PACKET_HEADER_LEN + at + 4)?;
+    Some(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+}
+
+/// How a global address is named in reports: `(x,y,z)`, `host`, `graphics`, `broadcast`.
+pub fn address_name(addr: u8) -> String {
+    use link_proto::packet::{ADDR_BROADCAST, ADDR_GRAPHICS, ADDR_HOST};
+    match addr {
+        ADDR_GRAPHICS => "graphics".into(),
+        ADDR_HOST => "host".into(),
+        ADDR_BROADCAST => "broadcast".into(),
+        a => match link_proto::link::board_coords(a) {
+            Some((x, y, z)) => format!("({x},{y},{z})"),
+            None => format!("address {a}"),
+        },
+    }
+}
+
+/// The "face" an injected global fault is recorded on: `global to (x,y,z)`, `global to host`...
+pub fn global_face(dst: u8) -> String {
+    format!("global to {}", address_name(dst))
 }
 
 fn push(ch: &Channel, packet: &[u8], max: usize) -> Result<(), SendError> {
@@ -151,7 +277,12 @@ impl Links for EmuLinks {
 
 /// Builds the links of a machine: `links[b]` for board `b` (x fastest); a frame for board
 /// `b` rings `bells[b]` (boards sharing a worker thread share its doorbell).
-pub fn build_links(dims: [usize; 3], bells: &[Arc<Doorbell>]) -> (Vec<EmuLinks>, Arc<GlobalNet>) {
+/// With `sink_recovery` the graphics and host sinks run the receiving end of global recovery.
+pub fn build_links(
+    dims: [usize; 3],
+    bells: &[Arc<Doorbell>],
+    sink_recovery: bool,
+) -> (Vec<EmuLinks>, Arc<GlobalNet>) {
     let count = dims.iter().product::<usize>();
     let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
     let coords = |b: usize| {
@@ -177,6 +308,10 @@ pub fn build_links(dims: [usize; 3], bells: &[Arc<Doorbell>]) -> (Vec<EmuLinks>,
         inboxes,
         graphics: Mutex::new(Vec::new()),
         host: Mutex::new(Vec::new()),
+        sink_recovery,
+        sink_flows: Mutex::new(Default::default()),
+        sink_stats: Mutex::new(Default::default()),
+        sink_faults: Mutex::new(Vec::new()),
     });
     let mut links: Vec<EmuLinks> = (0..count)
         .map(|b| EmuLinks {
@@ -252,7 +387,24 @@ impl Environment for ThreadEnv {
     }
 }
 
-/// What to inject (`--faults seed=S,drop=P,corrupt=P,delay=MS,stall=X.Y.Z@STEP`).
+/// Which traffic drop and corrupt apply to (`on=all|links|global`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FaultScope {
+    /// Point-to-point frames and global packets (the default).
+    #[default]
+    All,
+    /// Point-to-point frames only.
+    Links,
+    /// Global packets only.
+    Global,
+}
+
+/// What to inject (`--faults seed=S,drop=P,corrupt=P,delay=MS,stall=X.Y.Z@STEP,on=all`).
+///
+/// `drop` and `corrupt` apply to every point-to-point frame and every global packet a board
+/// sends (`on=links` or `on=global` for one kind only; global packets draw from their own
+/// random stream, so adding them leaves the frames' faults of a seed as they were); `delay`
+/// to the point-to-point frames; a stalled board sends nothing more, frames or packets.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FaultSpec {
     pub seed: u64,
@@ -265,6 +417,8 @@ pub struct FaultSpec {
     pub delay_ms: u64,
     /// This board stops sending at this step.
     pub stall: Option<([usize; 3], u64)>,
+    /// Which traffic `drop` and `corrupt` apply to.
+    pub on: FaultScope,
 }
 
 impl FaultSpec {
@@ -294,6 +448,14 @@ impl FaultSpec {
                         .parse()
                         .map_err(|_| anyhow::anyhow!("--faults delay: {v:?} (ms)"))?
                 }
+                "on" => {
+                    f.on = match v {
+                        "all" => FaultScope::All,
+                        "links" => FaultScope::Links,
+                        "global" => FaultScope::Global,
+                        _ => anyhow::bail!("--faults on: {v:?} (all, links, global)"),
+                    }
+                }
                 "stall" => {
                     let (b, st) = v
                         .split_once('@')
@@ -309,7 +471,9 @@ impl FaultSpec {
                     f.stall = Some(([c[0], c[1], c[2]], step));
                 }
                 _ => {
-                    anyhow::bail!("--faults: unknown key {k:?} (seed, drop, corrupt, delay, stall)")
+                    anyhow::bail!(
+                        "--faults: unknown key {k:?} (seed, drop, corrupt, delay, stall, on)"
+                    )
                 }
             }
         }
@@ -335,6 +499,9 @@ impl FaultSpec {
         Ok(())
     }
 }
+
+/// Steps behind the latest that the fault injector keeps its per-step packet counts for.
+const GLOBAL_COUNT_STEPS: u32 = 256;
 
 /// SplitMix64: small, fast and good enough for fault injection.
 pub struct Rng(u64);
@@ -379,6 +546,20 @@ pub struct FaultyLinks<L> {
     held: VecDeque<(Instant, Face, Vec<u8>)>,
     /// Step of the last data frame sent per face.
     last_step: [u32; 6],
+    /// The seed of the global packets' draws (the frames' stream stays as without them).
+    global_seed: u64,
+    /// Per (destination, kind, step): how many packets were sent (retransmissions
+    /// included); a packet's draws come from (seed, board, destination, kind, step, that
+    /// count), so that they do not depend on the order packets to different destinations
+    /// go out in (which depends on thread timing). Steps far behind are forgotten.
+    global_counts: std::collections::HashMap<(u8, u8, u32), u32>,
+    /// The global packets sent through here are recovery envelopes
+    /// (`link_proto::reliable_global`), not bare packets.
+    pub global_envelopes: bool,
+    /// The global stall is recorded.
+    global_stalled: bool,
+    /// Step of the last global packet whose step was readable.
+    global_step: u32,
 }
 
 impl<L> FaultyLinks<L> {
@@ -390,6 +571,9 @@ impl<L> FaultyLinks<L> {
         injected: Arc<Mutex<Vec<Injected>>>,
     ) -> Self {
         let rng = Rng::new(spec.seed ^ (board_index as u64).wrapping_mul(0xA24B_AED4_963E_E407));
+        let global_seed = spec.seed
+            ^ 0x6C6F_6261_6C00_0000
+            ^ (board_index as u64).wrapping_mul(0xD6E8_FEB8_6659_FD93);
         FaultyLinks {
             inner,
             board,
@@ -400,13 +584,21 @@ impl<L> FaultyLinks<L> {
             stalled: [false; 6],
             held: VecDeque::new(),
             last_step: [0; 6],
+            global_seed,
+            global_counts: Default::default(),
+            global_envelopes: false,
+            global_stalled: false,
+            global_step: 0,
         }
     }
     fn record(&self, face: Face, step: u32, what: &str) {
+        self.record_on(format!("{face:?}"), step, what);
+    }
+    fn record_on(&self, face: String, step: u32, what: &str) {
         if let Ok(mut v) = self.injected.lock() {
             v.push(Injected {
                 board: self.board,
-                face: format!("{face:?}"),
+                face,
                 step,
                 what: what.into(),
             });
@@ -471,6 +663,11 @@ impl<L: Links> Links for FaultyLinks<L> {
             }
         }
         let (u_drop, u_corrupt, bit) = (self.rng.unit(), self.rng.unit(), self.rng.next_u64());
+        let (u_drop, u_corrupt) = if self.spec.on == FaultScope::Global {
+            (1.0, 1.0)
+        } else {
+            (u_drop, u_corrupt)
+        };
         if u_drop < self.spec.drop {
             self.record(face, step, "drop");
             return Ok(());
@@ -504,8 +701,76 @@ impl<L: Links> Links for FaultyLinks<L> {
         self.release();
         self.inner.poll();
     }
+    /// The same drop and corrupt as frames (from the global stream), and the stall; recorded
+    /// on `global to <destination>` at the packet's step (a recovery control envelope at
+    /// the last packet's step).
     fn try_send_global(&mut self, p: &[u8]) -> Result<(), SendError> {
-        self.inner.try_send_global(p)
+        let dst = p.first().copied().unwrap_or(u8::MAX);
+        let (packet, is_control) = if self.global_envelopes {
+            match link_proto::reliable_global::data_packet(p) {
+                Some(packet) => (packet, false),
+                None => (p, true),
+            }
+        } else {
+            (p, false)
+        };
+        if !is_control {
+            if let Some(s) = packet_step(packet) {
+                self.global_step = s;
+            }
+        }
+        let step = self.global_step;
+        if let Some((b, s)) = self.spec.stall {
+            if b == self.board && step as u64 >= s {
+                if !self.global_stalled {
+                    self.global_stalled = true;
+                    self.record_on(global_face(dst), step, "stall");
+                }
+                return Ok(());
+            }
+        }
+        let kind = if is_control {
+            p.get(2).copied().unwrap_or(0)
+        } else {
+            packet.get(4).copied().unwrap_or(0)
+        };
+        if self.global_counts.len() > 4096 {
+            self.global_counts
+                .retain(|k, _| k.2.saturating_add(GLOBAL_COUNT_STEPS) >= step);
+        }
+        let c = self.global_counts.entry((dst, kind, step)).or_insert(0);
+        *c += 1;
+        let key = [
+            u64::from(dst),
+            u64::from(kind),
+            u64::from(step),
+            u64::from(*c),
+        ]
+        .iter()
+        .fold(self.global_seed, |h, v| {
+            Rng::new(h ^ v.wrapping_mul(0x9E37_79B9_7F4A_7C15)).next_u64()
+        });
+        let mut rng = Rng::new(key);
+        let (u_drop, u_corrupt, bit) = (rng.unit(), rng.unit(), rng.next_u64());
+        if self.spec.on == FaultScope::Links {
+            return self.inner.try_send_global(p);
+        }
+        if u_drop < self.spec.drop {
+            self.record_on(global_face(dst), step, "drop");
+            return Ok(());
+        }
+        if u_corrupt >= self.spec.corrupt || p.is_empty() {
+            return self.inner.try_send_global(p);
+        }
+        let mut bytes = p.to_vec();
+        let k = (bit % (bytes.len() as u64 * 8)) as usize;
+        bytes[k / 8] ^= 1 << (k % 8);
+        self.record_on(global_face(dst), step, &format!("corrupt bit {k}"));
+        match self.inner.try_send_global(&bytes) {
+            // A destination corrupted into no address: the network loses the packet.
+            Err(SendError::NoLink) => Ok(()),
+            r => r,
+        }
     }
     fn try_recv_global(&mut self, b: &mut [u8]) -> Result<Option<usize>, RecvError> {
         self.inner.try_recv_global(b)
@@ -575,28 +840,78 @@ impl link_proto::reliable::Clock for SimClock {
     }
 }
 
-/// A board's links as its runtime sees them: with link recovery above the (possibly
-/// faulty) emulated links, or without.
-pub enum BoardLinks {
+/// A board's links below global recovery: with point-to-point recovery, or without.
+pub enum Faces {
     Plain(Lower),
     Recovering(Box<link_proto::reliable::Reliable<Lower, SimClock, Vec<u8>>>),
 }
 
+macro_rules! links_by_variant {
+    ($t:ty, $($v:path),+) => {
+        impl Links for $t {
+            fn try_send(&mut self, face: Face, frame: &[u8]) -> Result<(), SendError> {
+                match self { $($v(l) => l.try_send(face, frame),)+ }
+            }
+            fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+                match self { $($v(l) => l.try_recv(face, buf),)+ }
+            }
+            fn try_send_global(&mut self, p: &[u8]) -> Result<(), SendError> {
+                match self { $($v(l) => l.try_send_global(p),)+ }
+            }
+            fn try_recv_global(&mut self, b: &mut [u8]) -> Result<Option<usize>, RecvError> {
+                match self { $($v(l) => l.try_recv_global(b),)+ }
+            }
+            fn poll(&mut self) {
+                match self { $($v(l) => l.poll(),)+ }
+            }
+        }
+    };
+}
+
+links_by_variant!(Faces, Faces::Plain, Faces::Recovering);
+links_by_variant!(BoardLinks, BoardLinks::Plain, BoardLinks::Recovering);
+
+/// A board's links as its runtime sees them: with global recovery above the faces (with or
+/// without point-to-point recovery above the possibly faulty emulated links), or without.
+pub enum BoardLinks {
+    Plain(Faces),
+    Recovering(Box<link_proto::reliable_global::GlobalReliable<Faces, SimClock, Vec<u8>>>),
+}
+
 impl BoardLinks {
-    /// `lower` with recovery by `config`, or without (`None`). Fails on a configuration
-    /// the wrapper refuses (window beyond `WINDOW_MAX`, frames too long).
+    /// `lower` with point-to-point recovery by `faces` and global recovery by `global`
+    /// (each `None` for without). Fails on a configuration a wrapper refuses.
     pub fn new(
         lower: Lower,
-        config: Option<link_proto::reliable::ReliableConfig>,
+        faces: Option<link_proto::reliable::ReliableConfig>,
+        global: Option<link_proto::reliable_global::GlobalConfig>,
     ) -> Result<Self, link_proto::Error> {
         use link_proto::reliable::Reliable;
-        Ok(match config {
-            None => BoardLinks::Plain(lower),
+        use link_proto::reliable_global::GlobalReliable;
+        let address = match &lower {
+            Lower::Clean(l) => l.address,
+            Lower::Faulty(l) => l.inner.address,
+        };
+        let mid = match faces {
+            None => Faces::Plain(lower),
             Some(c) => {
                 let buf = vec![0u8; Reliable::<Lower, SimClock, Vec<u8>>::buffer_len(&c)];
-                BoardLinks::Recovering(Box::new(Reliable::new(
+                Faces::Recovering(Box::new(Reliable::new(
                     lower,
                     SimClock(Instant::now()),
+                    c,
+                    buf,
+                )?))
+            }
+        };
+        Ok(match global {
+            None => BoardLinks::Plain(mid),
+            Some(c) => {
+                let buf = vec![0u8; GlobalReliable::<Faces, SimClock, Vec<u8>>::buffer_len(&c)];
+                BoardLinks::Recovering(Box::new(GlobalReliable::new(
+                    mid,
+                    SimClock(Instant::now()),
+                    address,
                     c,
                     buf,
                 )?))
@@ -604,44 +919,42 @@ impl BoardLinks {
         })
     }
 
-    /// What recovery cost, per face, if it is on.
+    fn faces(&self) -> &Faces {
+        match self {
+            BoardLinks::Plain(f) => f,
+            BoardLinks::Recovering(g) => g.inner(),
+        }
+    }
+
+    /// What point-to-point recovery cost, per face, if it is on.
     pub fn recovery(&self) -> Option<[link_proto::reliable::FaceRecovery; 6]> {
+        match self.faces() {
+            Faces::Plain(_) => None,
+            Faces::Recovering(r) => Some(*r.stats()),
+        }
+    }
+
+    /// What global recovery cost, if it is on.
+    pub fn global_recovery(&self) -> Option<link_proto::reliable_global::GlobalRecovery> {
         match self {
             BoardLinks::Plain(_) => None,
-            BoardLinks::Recovering(r) => Some(*r.stats()),
+            BoardLinks::Recovering(g) => Some(*g.stats()),
         }
     }
-}
 
-impl Links for BoardLinks {
-    fn try_send(&mut self, face: Face, frame: &[u8]) -> Result<(), SendError> {
+    /// The global flow recovery gave up, if any: (peer address, packet number, retransmissions).
+    pub fn global_failure(&self) -> Option<(u8, u16, u8)> {
         match self {
-            BoardLinks::Plain(l) => l.try_send(face, frame),
-            BoardLinks::Recovering(l) => l.try_send(face, frame),
+            BoardLinks::Plain(_) => None,
+            BoardLinks::Recovering(g) => g.failure(),
         }
     }
-    fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+
+    /// Global packets sent and not yet acknowledged (0 without global recovery).
+    pub fn global_unacknowledged(&self) -> usize {
         match self {
-            BoardLinks::Plain(l) => l.try_recv(face, buf),
-            BoardLinks::Recovering(l) => l.try_recv(face, buf),
-        }
-    }
-    fn try_send_global(&mut self, p: &[u8]) -> Result<(), SendError> {
-        match self {
-            BoardLinks::Plain(l) => l.try_send_global(p),
-            BoardLinks::Recovering(l) => l.try_send_global(p),
-        }
-    }
-    fn try_recv_global(&mut self, b: &mut [u8]) -> Result<Option<usize>, RecvError> {
-        match self {
-            BoardLinks::Plain(l) => l.try_recv_global(b),
-            BoardLinks::Recovering(l) => l.try_recv_global(b),
-        }
-    }
-    fn poll(&mut self) {
-        match self {
-            BoardLinks::Plain(l) => l.poll(),
-            BoardLinks::Recovering(l) => l.poll(),
+            BoardLinks::Plain(_) => 0,
+            BoardLinks::Recovering(g) => g.unacknowledged(),
         }
     }
 }

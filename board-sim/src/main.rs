@@ -122,11 +122,15 @@ struct RunArgs {
     /// Stop after this much simulated time (s).
     #[arg(long)]
     duration: Option<f64>,
-    /// Inject faults: seed=S,drop=P,corrupt=P,delay=MS,stall=X.Y.Z@STEP
+    /// Inject faults: seed=S,drop=P,corrupt=P,delay=MS,stall=X.Y.Z@STEP[,on=all|links|global].
+    /// drop and corrupt apply to each point-to-point frame and each global packet a board
+    /// sends (on=links or on=global for one kind only); delay to the frames; a stalled board
+    /// sends no more frames or packets from STEP on
     #[arg(long)]
     faults: Option<String>,
-    /// Run without link-level recovery: every lost or damaged frame stops the run (for
-    /// fault detection). Default: frames are numbered, acknowledged and retransmitted.
+    /// Run without link-level and global-network recovery: every lost or damaged frame or
+    /// packet stops the run (for fault detection). Default: frames and global packets are
+    /// numbered, acknowledged and retransmitted.
     #[arg(long)]
     no_recovery: bool,
     /// A link silent this long is a fault (s).
@@ -362,13 +366,25 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
     }
     if let Some(r) = recovery_summary(&out) {
         println!(
-            "link recovery: {} frames ({} bytes) retransmitted after {} nacks; {} bytes added in all ({:.2}% of the frames' bytes: envelopes, retransmissions, acks)",
+            "link recovery: {} frames ({} bytes) retransmitted after {} nacks; {} bytes added on the links ({:.2}% of the frames' bytes: envelopes, retransmissions, acks)",
             r["retransmitted_frames"],
             r["retransmitted_bytes"],
             r["nacks_sent"],
-            r["overhead_bytes"],
+            r["faces_overhead_bytes"],
             100.0 * r["overhead_fraction_of_frame_bytes"].as_f64().unwrap_or(0.0)
         );
+        let g = &r["global"];
+        if !g.is_null() {
+            println!(
+                "global recovery: {} packets ({} bytes) retransmitted ({} after a timeout, {} nacks received); {} bytes added on the global network ({:.2}% of the packets' bytes: envelopes, retransmissions, acks of boards and sinks)",
+                g["retransmitted_packets"],
+                g["retransmitted_bytes"],
+                g["timeouts"],
+                g["nacks_received"],
+                g["overhead_bytes"],
+                100.0 * g["overhead_fraction_of_packet_bytes"].as_f64().unwrap_or(0.0)
+            );
+        }
     }
     let modelled = link_model(dir, &manifest, &a)?;
     // The frames the graphics engine could assemble (every surface node received): the
@@ -417,6 +433,7 @@ fn sim_options(
     };
     if a.no_recovery {
         opts.recovery = None;
+        opts.global_recovery = None;
     }
     if let Some(f) = &a.faults {
         let spec = FaultSpec::parse(f)?;
@@ -651,7 +668,34 @@ fn recovery_summary(out: &board_sim::SimOutput) -> Option<serde_json::Value> {
         .map(|b| b.bytes_sent.iter().sum::<u64>())
         .sum();
     let overhead: u64 = rs.iter().map(|r| r.overhead_bytes()).sum();
+    let gs: Vec<&board_sim::GlobalLinkRecovery> =
+        rs.iter().filter_map(|r| r.global.as_ref()).collect();
+    let global_overhead: u64 = gs.iter().map(|g| g.overhead_bytes()).sum();
+    let sink = out.sink_recovery.clone().unwrap_or_default();
+    let packet_bytes: u64 = out.boards.iter().map(|b| b.global.bytes_sent).sum();
+    let gsum = |f: fn(&board_sim::GlobalLinkRecovery) -> u64| gs.iter().map(|g| f(g)).sum::<u64>();
+    let global = (!gs.is_empty()).then(|| {
+        serde_json::json!({
+            "data_packets": gsum(|g| g.data_packets),
+            "retransmitted_packets": gsum(|g| g.retransmitted_packets),
+            "retransmitted_bytes": gsum(|g| g.retransmitted_bytes),
+            "timeouts": gsum(|g| g.timeouts),
+            "nacks_sent": gsum(|g| g.nacks_sent) + sink.nacks_sent,
+            "nacks_received": gsum(|g| g.nacks_received),
+            "acks_sent": gsum(|g| g.acks_sent) + sink.acks_sent,
+            "control_bytes": gsum(|g| g.control_bytes) + sink.control_bytes,
+            "damaged_received": gsum(|g| g.damaged) + sink.damaged,
+            "gaps": gsum(|g| g.gaps) + sink.gaps,
+            "duplicates": gsum(|g| g.duplicates) + sink.duplicates,
+            "sinks": sink,
+            "overhead_bytes": global_overhead + sink.control_bytes,
+            "overhead_fraction_of_packet_bytes":
+                (global_overhead + sink.control_bytes) as f64 / packet_bytes.max(1) as f64,
+        })
+    });
     Some(serde_json::json!({
+        "global": global,
+        "faces_overhead_bytes": overhead - global_overhead,
         "retransmitted_frames": sum(|r| &r.retransmitted_frames),
         "retransmitted_bytes": sum(|r| &r.retransmitted_bytes),
         "nacks_sent": sum(|r| &r.nacks_sent),
@@ -661,8 +705,8 @@ fn recovery_summary(out: &board_sim::SimOutput) -> Option<serde_json::Value> {
         "damaged_received": sum(|r| &r.damaged),
         "gaps": sum(|r| &r.gaps),
         "duplicates": sum(|r| &r.duplicates),
-        "overhead_bytes": overhead,
-        "overhead_fraction_of_frame_bytes": overhead as f64 / frame_bytes.max(1) as f64,
+        "overhead_bytes": overhead + sink.control_bytes,
+        "overhead_fraction_of_frame_bytes": (overhead - global_overhead) as f64 / frame_bytes.max(1) as f64,
     }))
 }
 

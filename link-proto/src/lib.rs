@@ -73,6 +73,7 @@ pub mod link;
 pub mod packet;
 pub mod payload;
 pub mod reliable;
+pub mod reliable_global;
 pub mod stream;
 
 pub use error::{Error, Result};

@@ -173,6 +173,16 @@ pub enum RecvError {
         /// Requests (negative acknowledgements) sent for it.
         requests: u8,
     },
+    /// Global-network recovery ([`crate::reliable_global`]) sent packet `seq` to `peer`
+    /// `requests` times again without an acknowledgement: the flow is given up.
+    GlobalRetriesExhausted {
+        /// The peer's global address.
+        peer: u8,
+        /// The packet's number in the flow to `peer`.
+        seq: u16,
+        /// Retransmissions sent for it.
+        requests: u8,
+    },
 }
 
 impl fmt::Display for SendError {
@@ -201,6 +211,14 @@ impl fmt::Display for RecvError {
             RecvError::RetriesExhausted { seq, requests } => write!(
                 f,
                 "frame {seq} lost: not received after {requests} retransmission requests"
+            ),
+            RecvError::GlobalRetriesExhausted {
+                peer,
+                seq,
+                requests,
+            } => write!(
+                f,
+                "global packet {seq} to address {peer} not acknowledged after {requests} retransmissions"
             ),
         }
     }

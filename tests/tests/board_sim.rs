@@ -307,7 +307,7 @@ fn corrupted_frames_are_detected_and_named() {
     for w in WORKERS {
         let f = faulty_with(
             &dir,
-            "seed=7,corrupt=0.01",
+            "seed=7,corrupt=0.01,on=links",
             Some(w),
             Duration::from_millis(500),
         );
@@ -334,7 +334,7 @@ fn dropped_frames_are_detected_and_named() {
     for w in WORKERS {
         let f = faulty_with(
             &dir,
-            "seed=3,drop=0.01",
+            "seed=3,drop=0.01,on=links",
             Some(w),
             Duration::from_millis(500),
         );
@@ -459,7 +459,7 @@ fn losses_beyond_the_retry_bound_stop_the_run_naming_the_link() {
     let dir = compile(&p, "builtin:coarse", "2x2x2", "retries");
     for w in [1, 8] {
         let opts = SimOptions {
-            faults: Some(FaultSpec::parse("seed=3,drop=0.5").unwrap()),
+            faults: Some(FaultSpec::parse("seed=3,drop=0.5,on=links").unwrap()),
             // Longer than recovery's requests take, so that they are what gives up.
             link_timeout: Duration::from_secs(5),
             workers: Some(w),
