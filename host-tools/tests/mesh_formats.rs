@@ -475,3 +475,27 @@ fn unmerged_duplicate_nodes_in_a_cell_are_refused() {
     let e = m.validate().expect_err("duplicate refused").to_string();
     assert!(e.contains("cell 0") && e.contains("nodes 3 and 4"), "{e}");
 }
+
+/// A compressed VTU whose DataArray header claims 2 GiB from a 2.6 kB file (found by the
+/// vtk_parse fuzzer: vtkio allocated the claim before inflating anything) is refused before
+/// vtkio runs, naming the file, the line and the claim; the genuine compressed VTU
+/// fixtures still load (the beam tests above).
+#[test]
+fn a_compressed_vtu_claiming_more_than_it_can_inflate_to_is_refused() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/regressions/vtk_parse/oom-vtu-zlib-header-2GiB.vtu");
+    let bytes = std::fs::read(&path).expect("the fuzzer's input");
+    assert!(bytes.len() < 4096, "a small file: {} bytes", bytes.len());
+    let e = host_tools::mesh::io::parse_vtu(&path, &bytes).expect_err("a damaged header");
+    let m = e.to_string();
+    assert!(
+        m.contains("oom-vtu-zlib-header-2GiB.vtu") && m.contains("damaged header"),
+        "{m}"
+    );
+    assert!(
+        m.contains("2GiB.vtu:7:"),
+        "names the line of the DataArray (7): {m}"
+    );
+    // The fixture it was mutated from loads.
+    assert!(load_mesh(&fixture("beam_hex.vtu")).is_ok());
+}

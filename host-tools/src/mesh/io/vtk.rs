@@ -58,6 +58,7 @@ pub fn parse_vtk(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
 /// appended, raw or base64, uncompressed, zlib or LZ4. Regions, node sets and node tags as
 /// for [`parse_vtk`].
 pub fn parse_vtu(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
+    check_compressed_sizes(path, bytes)?;
     let vtk = vtkio_guarded(path, "VTK XML", || vtkio::Vtk::parse_xml(bytes))?.map_err(|e| {
         perr(
             path,
@@ -69,6 +70,116 @@ pub fn parse_vtu(path: &Path, bytes: &[u8]) -> Result<Mesh, MeshError> {
         )
     })?;
     grid_mesh(path, vtk.data, "VTU")
+}
+
+/// zlib inflates a byte into at most 1032 (RFC 1950/1951: a 258-byte match per 2 bits at
+/// best); LZ4 into at most 255 + a little. Anything claiming more is not compressed data.
+const INFLATE_RATIO_MAX: u64 = 1032;
+
+/// The standard base64 alphabet's value of `c`, None for padding or anything else.
+fn b64_value(c: u8) -> Option<u32> {
+    Some(match c {
+        b'A'..=b'Z' => c - b'A',
+        b'a'..=b'z' => c - b'a' + 26,
+        b'0'..=b'9' => c - b'0' + 52,
+        b'+' => 62,
+        b'/' => 63,
+        _ => return None,
+    } as u32)
+}
+
+/// The first `n` bytes base64 `text` encodes (None if it holds fewer).
+fn b64_prefix(text: &[u8], n: usize) -> Option<Vec<u8>> {
+    let mut out = Vec::with_capacity(n + 2);
+    for quad in text.chunks(4) {
+        if out.len() >= n {
+            break;
+        }
+        let v: Vec<u32> = quad.iter().map_while(|&c| b64_value(c)).collect();
+        if v.len() < 2 {
+            return None;
+        }
+        let w = v.iter().fold(0u32, |a, &x| (a << 6) | x) << (6 * (4 - v.len()));
+        out.extend_from_slice(&w.to_be_bytes()[1..v.len()]);
+    }
+    (out.len() >= n).then(|| {
+        out.truncate(n);
+        out
+    })
+}
+
+/// A compressed VTU's inline binary arrays claim their uncompressed size in a header that
+/// vtkio allocates before it inflates anything: a damaged header (found by fuzzing: 2 GiB
+/// claimed by a 2.6 kB file) would make the tool allocate it. Each header is read here
+/// first and a claim beyond what its compressed bytes can inflate to is refused, naming
+/// the line. Appended data is left to vtkio.
+fn check_compressed_sizes(path: &Path, bytes: &[u8]) -> Result<(), MeshError> {
+    let Ok(text) = std::str::from_utf8(bytes) else {
+        return Ok(()); // raw appended data: vtkio's own checks
+    };
+    if !text.contains("compressor=") {
+        return Ok(());
+    }
+    let width = if text.contains("header_type=\"UInt64\"") {
+        8
+    } else {
+        4
+    };
+    let num = |b: &[u8]| -> u64 {
+        b.iter().rev().fold(0u64, |a, &x| (a << 8) | u64::from(x)) // little-endian
+    };
+    let mut at = 0;
+    while let Some(k) = text[at..].find("format=\"binary\"") {
+        let tag_end = match text[at + k..].find('>') {
+            Some(e) => at + k + e + 1,
+            None => break,
+        };
+        at = tag_end;
+        let body = text[tag_end..].trim_start().as_bytes();
+        let line = 1 + text[..tag_end].matches('\n').count();
+        // The header is base64-encoded on its own: block count first, then the block
+        // size, the last block's size and each block's compressed size.
+        let b64_len = |n: usize| 4 * n.div_ceil(3);
+        let Some(nb) = b64_prefix(body, width).map(|h| num(&h)) else {
+            continue;
+        };
+        let damaged = |what: String| {
+            perr(
+                path,
+                Some(line),
+                format!("a compressed DataArray's header {what}: a damaged header"),
+            )
+        };
+        // vtkio reads (and allocates) as many block sizes as the count claims.
+        if nb == 0 || nb > body.len() as u64 {
+            return Err(damaged(format!(
+                "claims {nb} blocks in {} bytes of data",
+                body.len()
+            )));
+        }
+        let full = (3 + nb as usize) * width;
+        let Some(h) = b64_prefix(&body[..b64_len(full).min(body.len())], full) else {
+            return Err(damaged(format!(
+                "claims {nb} blocks, more sizes than its data holds"
+            )));
+        };
+        let field = |i: usize| num(&h[i * width..(i + 1) * width]);
+        let (block, last) = (field(1), field(2));
+        let compressed: u64 = (3..3 + nb as usize).map(field).fold(0, u64::saturating_add);
+        let claimed = block
+            .saturating_mul(nb.saturating_sub(1))
+            .saturating_add(last);
+        if claimed
+            > compressed
+                .saturating_add(1)
+                .saturating_mul(INFLATE_RATIO_MAX)
+        {
+            return Err(damaged(format!(
+                "claims {claimed} bytes in {nb} blocks from {compressed} compressed bytes (compression inflates at most {INFLATE_RATIO_MAX}x)"
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Runs a vtkio parse, turning a panic inside vtkio (it indexes by lengths read from the
