@@ -1465,7 +1465,7 @@ mod tests {
     fn the_host_checks_what_every_board_says_it_runs() {
         let dims = [2, 2, 1];
         let bells: Vec<Arc<links::Doorbell>> = (0..4).map(|_| Default::default()).collect();
-        let (_, net) = build_links(dims, &bells);
+        let (_, net) = build_links(dims, &bells, false);
         let ours = [0x57, 0xdc, 1, 2, 3, 4, 5, 6];
         let expected = pe_firmware::image::CompilationId(ours).to_string();
         assert_eq!(expected.len(), 16, "16 hex digits: {expected}");
@@ -1495,7 +1495,7 @@ mod tests {
             "names the board and both ids: {m}"
         );
         // A hello from an address outside the machine.
-        let (_, net) = build_links(dims, &bells);
+        let (_, net) = build_links(dims, &bells, false);
         let mut check = HostCheck::new(&expected, dims);
         net.host.lock().expect("sink").push(hello(16, ours));
         let e = check
