@@ -193,11 +193,7 @@ pub fn campaign(
         ..Default::default()
     };
     let clean = run(dir, &base, &mut |_, _| {})?;
-    let u_max = clean
-        .displacements
-        .iter()
-        .flatten()
-        .fold(0.0f64, |m, v| m.max(v.abs()));
+    let u_max = host_tools::firmware::max_abs(&clean.displacements);
     if u_max <= 0.0 || clean.steps != steps {
         bail!("the clean run is trivial (max |u| {u_max} m after {} steps): choose a scene or more steps that move", clean.steps);
     }

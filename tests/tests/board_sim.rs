@@ -401,11 +401,7 @@ fn recovery_gives_the_clean_bits_under_loss_and_corruption() {
         ..Default::default()
     };
     let clean = sim(&dir, &opts(None));
-    let u_max = clean
-        .displacements
-        .iter()
-        .flatten()
-        .fold(0.0f64, |m, v| m.max(v.abs()));
+    let u_max = host_tools::firmware::max_abs(&clean.displacements);
     assert!(
         u_max > 1e-4,
         "the probe has moved the tube: max |u| {u_max} m"
