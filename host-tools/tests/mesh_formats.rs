@@ -499,3 +499,20 @@ fn a_compressed_vtu_claiming_more_than_it_can_inflate_to_is_refused() {
     // The fixture it was mutated from loads.
     assert!(load_mesh(&fixture("beam_hex.vtu")).is_ok());
 }
+
+/// A legacy VTK file announcing 9.9e18 points (found by the CI's vtk_parse mutations: the
+/// value count 3 x n overflowed) is refused naming the file and the POINTS line, with no
+/// overflow and no allocation.
+#[test]
+fn a_legacy_vtk_point_count_beyond_any_file_is_refused() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/regressions/vtk_parse/points-count-9.9e18.vtk");
+    let bytes = std::fs::read(&path).expect("the fuzzer's input");
+    assert!(bytes.len() < 4096, "a small file: {} bytes", bytes.len());
+    let e = host_tools::mesh::io::parse_vtk(&path, &bytes).expect_err("an impossible count");
+    let m = e.to_string();
+    assert!(
+        m.contains("points-count-9.9e18.vtk:5:") && m.contains("POINTS announces"),
+        "names the file, the POINTS line (5) and the count: {m}"
+    );
+}

@@ -133,6 +133,13 @@ fn last_panic() -> String {
     LAST_PANIC.with(|m| m.borrow().clone())
 }
 
+/// Fails the test with `message`, printed first: the quiet hook would swallow the panic's
+/// own message, leaving CI a bare `FAILED`.
+fn fail(message: String) -> ! {
+    eprintln!("{message}");
+    panic!("{message}");
+}
+
 /// Runs the target's check on every input, then on mutations of them for the budget;
 /// returns the mutations run. A failure names the input, or the seed and mutation number
 /// that rebuild it (and saves it).
@@ -141,11 +148,11 @@ fn run(target: &str, corpus: &[(PathBuf, Vec<u8>)], budget: Budget, seed: u64) -
     let check = check_named(target);
     for (path, bytes) in corpus {
         if std::panic::catch_unwind(|| check(bytes)).is_err() {
-            panic!(
+            fail(format!(
                 "{target}: {} fails its check: {}",
                 path.display(),
                 last_panic()
-            );
+            ));
         }
     }
     let mut rng = Rng(seed | 1);
@@ -161,12 +168,12 @@ fn run(target: &str, corpus: &[(PathBuf, Vec<u8>)], budget: Budget, seed: u64) -
         if std::panic::catch_unwind(|| check(&input)).is_err() {
             let out = std::env::temp_dir().join(format!("pe-fuzz-{target}-{seed}-{k}"));
             let _ = std::fs::write(&out, &input);
-            panic!(
+            fail(format!(
                 "{target}: mutation {k} of seed {seed} fails its check: {}\ninput saved to {} \
                  (keep it in fuzz/regressions/{target}/)",
                 last_panic(),
                 out.display()
-            );
+            ));
         }
         k += 1;
     }

@@ -350,6 +350,48 @@ fn piece_nodes(path: &Path, points: IOBuffer) -> Result<Vec<[f64; 3]>, MeshError
     Ok(nodes)
 }
 
+/// A legacy cell list (`k v1 .. vk` per cell, `num_cells` cells) as XML connectivity and
+/// end offsets. vtkio's own conversion sizes its output from `len - num_cells` and asserts
+/// the counts, so a list that does not hold its cells (short, or with numbers left over)
+/// would overflow or panic there: it is an error here.
+fn legacy_cell_list(
+    path: &Path,
+    num_cells: u32,
+    vertices: &[u32],
+) -> Result<(Vec<u64>, Vec<u64>), MeshError> {
+    let short = |c: u32| {
+        perr(
+            path,
+            None,
+            format!(
+                "CELLS announces {num_cells} cells, its list of {} numbers ends in cell {c}",
+                vertices.len()
+            ),
+        )
+    };
+    let mut connectivity = Vec::with_capacity(vertices.len());
+    let mut offsets = Vec::with_capacity((num_cells as usize).min(vertices.len()));
+    let mut at = 0usize;
+    for c in 0..num_cells {
+        let k = *vertices.get(at).ok_or_else(|| short(c))? as usize;
+        let verts = vertices.get(at + 1..at + 1 + k).ok_or_else(|| short(c))?;
+        connectivity.extend(verts.iter().map(|&v| u64::from(v)));
+        offsets.push(connectivity.len() as u64);
+        at += 1 + k;
+    }
+    if at != vertices.len() {
+        return Err(perr(
+            path,
+            None,
+            format!(
+                "CELLS announces {num_cells} cells in {at} numbers, its list holds {}",
+                vertices.len()
+            ),
+        ));
+    }
+    Ok((connectivity, offsets))
+}
+
 /// Every cell into the collector: hexahedra and wedges with their region tags, boundary
 /// cells into the node set of their tag, the rest counted as unsupported.
 fn collect_cells(
@@ -360,7 +402,13 @@ fn collect_cells(
     out: &mut CellCollector,
 ) -> Result<(), MeshError> {
     let types = cells.types;
-    let (connectivity, mut offsets) = cells.cell_verts.into_xml();
+    let (connectivity, mut offsets) = match cells.cell_verts {
+        vtkio::model::VertexNumbers::Legacy {
+            num_cells,
+            vertices,
+        } => legacy_cell_list(path, num_cells, &vertices)?,
+        xml => xml.into_xml(),
+    };
     // Legacy 5.1 OFFSETS start with the 0 the XML form leaves out.
     if offsets.len() == types.len() + 1 && offsets.first() == Some(&0) {
         offsets.remove(0);
@@ -542,7 +590,7 @@ fn walk_vtk(r: &mut Reader<'_>) -> Result<(), MeshError> {
             "POINTS" => {
                 let n: usize = r.num("number of points")?;
                 r.token("POINTS number type")?;
-                for i in 0..3 * n {
+                for i in 0..value_count(r, l, 3, n, "POINTS")? {
                     let _: f64 = r.num(&format!("coordinate {} of point {}", i % 3, i / 3))?;
                 }
             }
@@ -598,14 +646,14 @@ fn walk_vtk(r: &mut Reader<'_>) -> Result<(), MeshError> {
                     return Err(r.err(Some(l), format!("expected LOOKUP_TABLE, found {lt:?}")));
                 }
                 r.token("lookup table name")?;
-                for i in 0..attr_count * comps {
+                for i in 0..value_count(r, l, attr_count, comps, "SCALARS")? {
                     let _: f64 = r.num(&format!("value {i} of SCALARS {name:?}"))?;
                 }
             }
             "VECTORS" | "NORMALS" => {
                 let (name, _) = r.token("array name")?;
                 r.token("array type")?;
-                for i in 0..3 * attr_count {
+                for i in 0..value_count(r, l, 3, attr_count, kw)? {
                     let _: f64 = r.num(&format!("value {i} of {kw} {name:?}"))?;
                 }
             }
@@ -613,11 +661,11 @@ fn walk_vtk(r: &mut Reader<'_>) -> Result<(), MeshError> {
                 r.token("FIELD name")?;
                 let arrays: usize = r.num("number of FIELD arrays")?;
                 for _ in 0..arrays {
-                    let (name, _) = r.token("FIELD array name")?;
+                    let (name, nl) = r.token("FIELD array name")?;
                     let comps: usize = r.num("FIELD array component count")?;
                     let tuples: usize = r.num("FIELD array tuple count")?;
                     r.token("FIELD array type")?;
-                    for i in 0..comps * tuples {
+                    for i in 0..value_count(r, nl, comps, tuples, "FIELD array")? {
                         let _: f64 = r.num(&format!("value {i} of FIELD array {name:?}"))?;
                     }
                 }
@@ -626,6 +674,23 @@ fn walk_vtk(r: &mut Reader<'_>) -> Result<(), MeshError> {
             _ => return Ok(()),
         }
     }
+}
+
+/// `a * b` values of a section announced on line `l`; a product beyond `usize` (a count no
+/// file can hold) is an error naming the line, not an overflow.
+fn value_count(
+    r: &Reader<'_>,
+    l: usize,
+    a: usize,
+    b: usize,
+    what: &str,
+) -> Result<usize, MeshError> {
+    a.checked_mul(b).ok_or_else(|| {
+        r.err(
+            Some(l),
+            format!("{what} announces {a} x {b} values, more than any file holds"),
+        )
+    })
 }
 
 /// The four header lines: version, title, ASCII, `DATASET UNSTRUCTURED_GRID`; false for a
