@@ -516,3 +516,20 @@ fn a_legacy_vtk_point_count_beyond_any_file_is_refused() {
         "names the file, the POINTS line (5) and the count: {m}"
     );
 }
+
+/// A Gmsh MSH file whose element block announces more elements than the file could hold
+/// (found by the stable msh_parse mutations: the count times the nodes per element
+/// overflowed) is refused naming the file and the count, before anything is sized by it.
+#[test]
+fn an_msh_count_beyond_the_file_is_refused() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/regressions/msh_parse/element-count-overflow.msh");
+    let bytes = std::fs::read(&path).expect("the fuzzer's input");
+    assert!(bytes.len() < 16384, "a small file: {} bytes", bytes.len());
+    let e = host_tools::mesh::io::parse_msh(&path, &bytes).expect_err("an impossible count");
+    let m = e.to_string();
+    assert!(
+        m.contains("element-count-overflow.msh:") && m.contains("bytes left in the file"),
+        "names the file, the line and the count: {m}"
+    );
+}

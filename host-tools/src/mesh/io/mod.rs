@@ -306,10 +306,18 @@ impl<'a> Reader<'a> {
         }
     }
 
-    /// A `size_t` used as a count.
+    /// A `size_t` used as a count of items that each take at least one byte of the file:
+    /// more than the bytes left is an error, so that no count can size an allocation or
+    /// overflow a product or sum (a count times a node count, a sum over blocks) later.
     fn count(&mut self, what: &str) -> Result<usize, MeshError> {
         let v = self.size(what)?;
-        usize::try_from(v).map_err(|_| self.err_item(format!("{what} {v} is too large")))
+        let left = self.b.len() - self.pos.min(self.b.len());
+        match usize::try_from(v) {
+            Ok(n) if n <= left => Ok(n),
+            _ => Err(self.err_item(format!(
+                "{what} {v} is more than the {left} bytes left in the file can hold"
+            ))),
+        }
     }
 
     /// An `int` (4 bytes in binary mode).
