@@ -533,3 +533,92 @@ fn an_msh_count_beyond_the_file_is_refused() {
         "names the file, the line and the count: {m}"
     );
 }
+
+/// `beam_hex.vtu` with its inline binary arrays moved to an appended base64 section (the
+/// same base64 strings, each at its offset after the `_`).
+fn beam_vtu_appended() -> String {
+    let inline = std::fs::read_to_string(fixture("beam_hex.vtu")).expect("beam_hex.vtu");
+    let mut out = String::new();
+    let mut appended = String::new();
+    let mut rest = inline.as_str();
+    while let Some(k) = rest.find("format=\"binary\">") {
+        let (head, tail) = rest.split_at(k);
+        let tail = &tail["format=\"binary\">".len()..];
+        let end = tail.find("</DataArray>").expect("the array ends");
+        out.push_str(head);
+        out.push_str(&format!(
+            "format=\"appended\" offset=\"{}\">",
+            appended.len()
+        ));
+        appended.push_str(tail[..end].trim());
+        rest = &tail[end..];
+    }
+    let close = rest.rfind("</VTKFile>").expect("the file ends");
+    out.push_str(&rest[..close]);
+    out.push_str(&format!(
+        "<AppendedData encoding=\"base64\">\n_{appended}\n</AppendedData>\n</VTKFile>\n"
+    ));
+    out
+}
+
+/// The compressed-size check covers appended arrays too: the beam as appended base64 data
+/// loads as the same beam (the check refuses no genuine file), and with the points' header
+/// claiming a last block of 2 GiB (its compressed size unchanged, 351 bytes) it is refused
+/// naming the Points DataArray's line, before vtkio allocates the claim.
+#[test]
+fn a_compressed_appended_vtu_claiming_more_than_it_can_inflate_to_is_refused() {
+    let text = beam_vtu_appended();
+    assert_eq!(text.matches("format=\"appended\"").count(), 7, "{text}");
+    let path = Path::new("beam_appended.vtu");
+    let m = host_tools::mesh::io::parse_vtu(path, text.as_bytes()).expect("appended beam");
+    let reference = cells_by_coordinates(&load("beam_hex.vtu"));
+    assert!(!reference.is_empty());
+    assert_eq!(cells_by_coordinates(&m), reference, "the same beam");
+
+    // The points' header: 1 block of 32 KiB, last block 2376 bytes, 351 compressed.
+    let genuine = "_AQAAAACAAABICQAAXwEAAA==";
+    assert!(
+        text.contains(genuine),
+        "the points come first in the appended data"
+    );
+    let damaged = text.replace(genuine, "_AQAAAACAAAD///9/XwEAAA=="); // last block 2^31-1
+    let e = host_tools::mesh::io::parse_vtu(path, damaged.as_bytes()).expect_err("refused");
+    let msg = e.to_string();
+    let points_line = 1 + damaged[..damaged.find("Name=\"Points\"").expect("points")]
+        .matches('\n')
+        .count();
+    assert!(
+        msg.contains(&format!("beam_appended.vtu:{points_line}:"))
+            && msg.contains("claims 2147483647 bytes")
+            && msg.contains("damaged header"),
+        "names the file, the Points line ({points_line}) and the claim: {msg}"
+    );
+}
+
+/// Raw appended data (ParaView's default for `.vtu`; here the beam's compressed arrays as
+/// bytes after the `_`), which vtkio 0.7 cannot read: refused naming the file, the
+/// AppendedData line and what to write instead, not vtkio's "unknown variant".
+#[test]
+fn raw_appended_vtu_data_is_refused_saying_what_to_write() {
+    let path = fixture("beam_hex_appended_raw.vtu");
+    let bytes = std::fs::read(&path).expect("fixture");
+    assert!(
+        bytes.windows(5).any(|w| w == b"raw\">"),
+        "raw appended data"
+    );
+    let line = 1 + bytes[..bytes
+        .windows(13)
+        .position(|w| w == b"<AppendedData")
+        .expect("appended data")]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count();
+    let e = host_tools::mesh::io::parse_vtu(&path, &bytes).expect_err("refused");
+    let m = e.to_string();
+    assert!(
+        m.contains(&format!("beam_hex_appended_raw.vtu:{line}:"))
+            && m.contains("raw encoding")
+            && m.contains("base64"),
+        "names the file, the AppendedData line ({line}) and the way out: {m}"
+    );
+}
