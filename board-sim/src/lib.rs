@@ -109,59 +109,7 @@ pub struct LinkRecovery {
     /// Data envelopes sent the first time (each adds `reliable::OVERHEAD` bytes).
     pub data_frames: [u64; 6],
     /// What global recovery cost on the board's global port (with it on).
-    pub global: Option<GlobalLinkRecovery>,
-}
-
-/// What global-network recovery cost on one board's port (or in the sinks).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
-pub struct GlobalLinkRecovery {
-    /// Data envelopes sent the first time (each adds `reliable_global::OVERHEAD` bytes).
-    pub data_packets: u64,
-    /// Their bytes (envelope included).
-    pub data_bytes: u64,
-    pub retransmitted_packets: u64,
-    pub retransmitted_bytes: u64,
-    /// Retransmissions started by the ack timer (not a nack).
-    pub timeouts: u64,
-    pub acks_sent: u64,
-    pub nacks_sent: u64,
-    pub nacks_received: u64,
-    /// Bytes of acks and nacks.
-    pub control_bytes: u64,
-    pub damaged: u64,
-    pub gaps: u64,
-    pub duplicates: u64,
-    pub refused: u64,
-    /// Peers (addresses with a flow).
-    pub peers: u32,
-}
-
-impl GlobalLinkRecovery {
-    fn from_stats(g: &GlobalRecovery) -> Self {
-        GlobalLinkRecovery {
-            data_packets: g.data_packets,
-            data_bytes: g.data_bytes,
-            retransmitted_packets: g.retransmitted_packets,
-            retransmitted_bytes: g.retransmitted_bytes,
-            timeouts: g.timeouts,
-            acks_sent: g.acks_sent,
-            nacks_sent: g.nacks_sent,
-            nacks_received: g.nacks_received,
-            control_bytes: g.control_bytes,
-            damaged: g.damaged,
-            gaps: g.gaps,
-            duplicates: g.duplicates,
-            refused: g.refused,
-            peers: g.peers,
-        }
-    }
-
-    /// Bytes global recovery added: envelopes, retransmissions, acks and nacks.
-    pub fn overhead_bytes(&self) -> u64 {
-        self.data_packets * link_proto::reliable_global::OVERHEAD as u64
-            + self.retransmitted_bytes
-            + self.control_bytes
-    }
+    pub global: Option<GlobalRecovery>,
 }
 
 impl LinkRecovery {
@@ -180,7 +128,7 @@ impl LinkRecovery {
             gaps: a(|x| x.gaps),
             duplicates: a(|x| x.duplicates),
             data_frames: a(|x| x.data_frames),
-            global: global.map(GlobalLinkRecovery::from_stats),
+            global: global.copied(),
         }
     }
 
@@ -194,7 +142,7 @@ impl LinkRecovery {
             + self
                 .global
                 .as_ref()
-                .map_or(0, GlobalLinkRecovery::overhead_bytes)
+                .map_or(0, GlobalRecovery::overhead_bytes)
     }
 }
 
@@ -220,7 +168,7 @@ pub struct SimOutput {
     pub dt_s: f64,
     /// What the receiving end of global recovery cost in the graphics and host sinks (acks
     /// and nacks they sent), with global recovery on.
-    pub sink_recovery: Option<GlobalLinkRecovery>,
+    pub sink_recovery: Option<GlobalRecovery>,
 }
 
 /// A surface frame as the graphics engine assembled it from the boards' chunks.
@@ -1386,12 +1334,9 @@ pub fn run(
     }
     let tools = header.counts.tools as usize;
     let (graphics, tool_force) = collect_sinks(&net, steps, tools)?;
-    let sink_recovery = opts.global_recovery.and_then(|_| {
-        net.sink_stats
-            .lock()
-            .ok()
-            .map(|g| GlobalLinkRecovery::from_stats(&g))
-    });
+    let sink_recovery = opts
+        .global_recovery
+        .and_then(|_| net.sink_stats.lock().ok().map(|g| *g));
     Ok(SimOutput {
         sink_recovery,
         graphics,

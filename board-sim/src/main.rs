@@ -668,12 +668,14 @@ fn recovery_summary(out: &board_sim::SimOutput) -> Option<serde_json::Value> {
         .map(|b| b.bytes_sent.iter().sum::<u64>())
         .sum();
     let overhead: u64 = rs.iter().map(|r| r.overhead_bytes()).sum();
-    let gs: Vec<&board_sim::GlobalLinkRecovery> =
+    let gs: Vec<&link_proto::reliable_global::GlobalRecovery> =
         rs.iter().filter_map(|r| r.global.as_ref()).collect();
     let global_overhead: u64 = gs.iter().map(|g| g.overhead_bytes()).sum();
-    let sink = out.sink_recovery.clone().unwrap_or_default();
+    let sink = out.sink_recovery.unwrap_or_default();
     let packet_bytes: u64 = out.boards.iter().map(|b| b.global.bytes_sent).sum();
-    let gsum = |f: fn(&board_sim::GlobalLinkRecovery) -> u64| gs.iter().map(|g| f(g)).sum::<u64>();
+    let gsum = |f: fn(&link_proto::reliable_global::GlobalRecovery) -> u64| {
+        gs.iter().map(|g| f(g)).sum::<u64>()
+    };
     let global = (!gs.is_empty()).then(|| {
         serde_json::json!({
             "data_packets": gsum(|g| g.data_packets),

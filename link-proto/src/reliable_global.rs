@@ -269,8 +269,10 @@ impl Default for GlobalConfig {
     }
 }
 
-/// What recovery cost on the global port (this board's side).
+/// What recovery cost on the global port (this board's side). With the `serde` feature it
+/// serialises as is (the host's reports).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct GlobalRecovery {
     /// Data envelopes sent the first time.
     pub data_packets: u64,
@@ -302,6 +304,14 @@ pub struct GlobalRecovery {
     pub refused: u64,
     /// Peer slots taken.
     pub peers: u32,
+}
+
+impl GlobalRecovery {
+    /// Bytes recovery added: an [`OVERHEAD`]-byte envelope per data packet, the
+    /// retransmissions, the acks and nacks.
+    pub fn overhead_bytes(&self) -> u64 {
+        self.data_packets * OVERHEAD as u64 + self.retransmitted_bytes + self.control_bytes
+    }
 }
 
 #[derive(Clone, Copy, Default)]

@@ -26,6 +26,8 @@ struct Net {
     inboxes: HashMap<u8, VecDeque<Vec<u8>>>,
     late: HashMap<u8, Vec<u8>>,
     carried: usize,
+    /// Bytes handed to the network: every envelope, ack and nack.
+    carried_bytes: usize,
     rule: Rule,
     fates: HashMap<String, usize>,
 }
@@ -36,6 +38,7 @@ impl Net {
             inboxes: HashMap::new(),
             late: HashMap::new(),
             carried: 0,
+            carried_bytes: 0,
             rule,
             fates: HashMap::new(),
         }))
@@ -44,6 +47,7 @@ impl Net {
     fn route(&mut self, p: &[u8]) {
         let n = self.carried;
         self.carried += 1;
+        self.carried_bytes += p.len();
         let fate = (self.rule)(n, p);
         *self.fates.entry(format!("{fate:?}")).or_default() += 1;
         let dst = p[0];
@@ -246,6 +250,16 @@ fn lossy_exchange(config: GlobalConfig) {
     assert!(sum(|s| s.nacks_sent) > 0);
     assert_eq!(sum(|s| s.data_packets), 4 * 3 * 200);
     assert!(boards.iter().all(|b| b.failure().is_none()));
+    // The overhead the reports give is what the network carried beyond the payloads,
+    // counted at the network: envelopes, retransmissions, acks and nacks.
+    let payload_bytes = 4 * 3 * 200 * packet(0, 1, 0).len() as u64;
+    let carried = net.borrow().carried_bytes as u64;
+    let overhead = sum(|s| s.overhead_bytes());
+    assert!(
+        overhead > payload_bytes / 2,
+        "a lossy run's overhead: {overhead}"
+    );
+    assert_eq!(overhead, carried - payload_bytes, "bytes carried {carried}");
 }
 
 /// Everything from board 0 to board 1 lost: board 0 gives up the flow after `retries`
