@@ -622,3 +622,20 @@ fn raw_appended_vtu_data_is_refused_saying_what_to_write() {
         "names the file, the AppendedData line ({line}) and the way out: {m}"
     );
 }
+
+/// The same 2 GiB claim in a VTU whose comment holds bytes that are not UTF-8 (found by
+/// libFuzzer: vtkio reads such a file, the size check had skipped it as "not text") is
+/// refused naming the Points line.
+#[test]
+fn a_compressed_size_claim_is_refused_in_a_vtu_that_is_not_all_utf8() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/regressions/vtk_parse/oom-vtu-non-utf8-comment.vtu");
+    let bytes = std::fs::read(&path).expect("the fuzzer's input");
+    assert!(std::str::from_utf8(&bytes).is_err(), "not all UTF-8");
+    let e = host_tools::mesh::io::parse_vtu(&path, &bytes).expect_err("a damaged header");
+    let m = e.to_string();
+    assert!(
+        m.contains("non-utf8-comment.vtu:7:") && m.contains("damaged header"),
+        "names the file and the Points line (7): {m}"
+    );
+}
