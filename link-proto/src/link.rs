@@ -56,6 +56,11 @@ impl Face {
         Face::NegZ,
     ];
 
+    /// The face's name in reports: `+x`, `-x`, `+y`, `-y`, `+z`, `-z`.
+    pub const fn name(self) -> &'static str {
+        FACE_NAMES[self as usize]
+    }
+
     /// Index `0 .. 6` (for arrays of per-face state).
     pub const fn index(self) -> usize {
         self as usize
@@ -99,6 +104,9 @@ impl Face {
         }
     }
 }
+
+/// The faces' names in [`Face::index`] order (reports, command lines).
+pub const FACE_NAMES: [&str; Face::COUNT] = ["+x", "-x", "+y", "-y", "+z", "-z"];
 
 /// Grid coordinates `(x, y, z)` of a board id (`x + 4y + 16z`), or `None`
 /// for an id outside the array.

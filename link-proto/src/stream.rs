@@ -187,6 +187,32 @@ where
         }
     }
 
+    /// Links over ports the caller built (a `const fn`, so a board's static can hold a port
+    /// for every face, made at compile time, and link or unlink each at start with
+    /// [`StreamLinks::relink`] once it knows its place in the machine).
+    pub const fn from_ports(
+        faces: [Option<FacePort<F>>; Face::COUNT],
+        global: GlobalPort<G>,
+    ) -> Self {
+        StreamLinks { faces, global }
+    }
+
+    /// Puts `stream` under `face` (its port's queues emptied), or with `None` takes the face
+    /// off: sends and receives on it then say `NoLink`. A face that already has a port keeps
+    /// its buffers (nothing large is built); one without gets a new port.
+    pub fn relink(&mut self, face: Face, stream: Option<F>) {
+        let Some(slot) = self.faces.get_mut(face.index()) else {
+            return;
+        };
+        match (slot.as_mut(), stream) {
+            (Some(port), Some(s)) => {
+                port.replace_stream(s);
+            }
+            (None, Some(s)) => *slot = Some(StreamPort::new(s)),
+            (_, None) => *slot = None,
+        }
+    }
+
     /// Links over the given streams, indexed by [`Face::index`].
     pub fn new(faces: [Option<F>; Face::COUNT], global: G) -> Self {
         StreamLinks {

@@ -25,6 +25,9 @@ pub struct BoardProfile {
     pub link_latency_ns: u64,
     /// Global network bandwidth into one board (bytes/s).
     pub global_bytes_per_s: u64,
+    /// Face links the firmware has drivers for: a board whose schedule exchanges over more
+    /// faces cannot run on this profile (`pe compile` refuses it, naming the board).
+    pub face_ports: u8,
     /// Address of the schedule image region (`ORIGIN(IMAGE)` in the memory map), where
     /// `pe image` says to flash a board's schedule blob.
     pub image_origin: u64,
@@ -81,6 +84,7 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
     link_bytes_per_s: 3_125_000,
     link_latency_ns: 2_000,
     global_bytes_per_s: 12_500_000,
+    face_ports: 6,
     image_origin: 0x0810_0000,
     probe_chip: "STM32H743ZITx",
     contact_nodes_max: 512,
@@ -95,7 +99,8 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
 
 /// QEMU's `mps2-an500` (Cortex-M7, FLASH at 0x0 and RAM at 0x20000000, 4 MiB each), the
 /// emulation profile used in CI. The clock and the link figures are nominal (QEMU does not
-/// model time).
+/// model time). Its five CMSDK UARTs carry the global port and up to four faces
+/// ([`mps2_uarts`]).
 pub const QEMU_MPS2_AN500: BoardProfile = BoardProfile {
     name: "qemu-mps2-an500",
     clock_hz: 25_000_000,
@@ -106,11 +111,59 @@ pub const QEMU_MPS2_AN500: BoardProfile = BoardProfile {
     link_bytes_per_s: 25_000_000,
     link_latency_ns: 2_000,
     global_bytes_per_s: 12_500_000,
+    face_ports: mps2_uarts::FACE_UARTS.len() as u8,
     image_origin: 0x0020_0000,
     probe_chip: "",
     // The same firmware tables as the PE board (the RAM decides the elements).
     ..PE_BOARD
 };
+
+/// What the five CMSDK UARTs of QEMU's `mps2-an500` carry, for the firmware's drivers and
+/// for the harness that wires emulated boards together (QEMU's `-serial` number `i` is
+/// UART `i`): UART [`GLOBAL_UART`](mps2_uarts::GLOBAL_UART) is the global port; the faces a
+/// board exchanges over ([`crate::image::linked_faces`]) take the others in
+/// [`link_proto::Face::ALL`] order. Four face UARTs serve every board of a machine up to
+/// 2x2x2 (three faces each), and of 3x2x2, 3x3x1 or 5x2x1 (at most four); a board with five
+/// or six linked faces (a 3x3x2 machine's middle boards) does not fit.
+pub mod mps2_uarts {
+    /// Base addresses of UART 0 to 4.
+    pub const UART_BASES: [usize; 5] = [
+        0x4000_4000,
+        0x4000_5000,
+        0x4000_6000,
+        0x4000_7000,
+        0x4000_9000,
+    ];
+    /// Each UART's receive interrupt (its transmit interrupt is the next number), as
+    /// QEMU's `mps2-an500` wires them to the NVIC.
+    pub const RX_IRQS: [u16; 5] = [0, 2, 4, 18, 20];
+    /// The global port's UART.
+    pub const GLOBAL_UART: usize = 2;
+    /// The UARTs the faces take, in order.
+    pub const FACE_UARTS: [usize; 4] = [0, 1, 3, 4];
+
+    /// The UART of each face ([`link_proto::Face::index`] order) for a board whose linked
+    /// faces are `linked`; `Err(n)` when it has `n` linked faces, more than there are face
+    /// UARTs.
+    pub const fn face_uarts(linked: [bool; 6]) -> Result<[Option<usize>; 6], usize> {
+        let mut out = [None; 6];
+        let (mut face, mut next) = (0, 0);
+        while face < 6 {
+            if linked[face] {
+                if next < FACE_UARTS.len() {
+                    out[face] = Some(FACE_UARTS[next]);
+                }
+                next += 1;
+            }
+            face += 1;
+        }
+        if next > FACE_UARTS.len() {
+            Err(next)
+        } else {
+            Ok(out)
+        }
+    }
+}
 
 pub const PROFILES: [BoardProfile; 2] = [PE_BOARD, QEMU_MPS2_AN500];
 

@@ -236,6 +236,33 @@ fn overflowing_a_small_board_is_reported() {
     assert!(check_fit(&compile_images(&p, &plan).unwrap(), &PE_BOARD).is_ok());
 }
 
+/// The QEMU profile drives four faces per board (its fifth UART is the global port): a
+/// machine whose middle boards exchange over more is refused naming them and their faces,
+/// one whose boards need at most four is accepted.
+#[test]
+fn a_board_needing_more_face_links_than_its_profile_drives_is_named() {
+    let qemu = pe_firmware::profile::QEMU_MPS2_AN500;
+    assert_eq!(qemu.face_ports, 4);
+    assert_eq!(PE_BOARD.face_ports, 6);
+    let p = builtin_problem("coarse", 10);
+    let plan = plan(&p, Machine::parse("3x3x2").unwrap()).unwrap();
+    let images = compile_images(&p, &plan).unwrap();
+    let e = check_fit(&images, &qemu).unwrap_err().to_string();
+    // (1,1,z) has +x -x +y -y and one z face.
+    for z in 0..2 {
+        let zface = if z == 0 { "+z" } else { "-z" };
+        let want = format!(
+            "board (1,1,{z}): exchanges over 5 faces (+x -x +y -y {zface}), but the qemu-mps2-an500 firmware drives 4 face links"
+        );
+        assert!(e.contains(&want), "{e}");
+    }
+    // Edge boards need at most four.
+    assert!(!e.contains("board (0,0,0): exchanges"), "{e}");
+    assert!(check_fit(&images, &PE_BOARD).is_ok());
+    let plan = host_tools::compile::plan(&p, Machine::parse("3x2x2").unwrap()).unwrap();
+    assert!(check_fit(&compile_images(&p, &plan).unwrap(), &qemu).is_ok());
+}
+
 /// Partitions of the real meshes on 4x4x4 are balanced within the partitioner's bound,
 /// 1.05 (elements per board, max/mean), and every board holds elements.
 #[test]

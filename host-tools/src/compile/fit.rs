@@ -66,6 +66,23 @@ pub fn fit_problems(images: &[BoardImage], profile: &BoardProfile) -> Vec<String
                 ));
             }
         }
+        let linked: Vec<&str> = im
+            .header
+            .linked_faces()
+            .iter()
+            .zip(FACE_NAMES)
+            .filter(|(&l, _)| l)
+            .map(|(_, n)| n)
+            .collect();
+        if linked.len() > profile.face_ports as usize {
+            problems.push(format!(
+                "{at}: exchanges over {} faces ({}), but the {} firmware drives {} face links",
+                linked.len(),
+                linked.join(" "),
+                profile.name,
+                profile.face_ports
+            ));
+        }
         for (f, &n) in c.exchange.iter().enumerate() {
             if n as usize > link_proto::BORDER_NODES_PER_FACE_MAX {
                 problems.push(format!(

@@ -8,7 +8,7 @@ use super::partition::{node_board_range, node_elements, partition, Machine};
 use crate::problem::Problem;
 
 /// Faces in image order.
-pub const FACE_NAMES: [&str; 6] = ["+x", "-x", "+y", "-y", "+z", "-z"];
+pub use link_proto::link::FACE_NAMES;
 
 /// One exchange round of one axis on one board: per face (+axis, −axis) the global nodes to
 /// send and to receive (with how to combine), in wire order (ascending global id).

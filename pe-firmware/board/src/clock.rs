@@ -1,5 +1,6 @@
 //! Time for the runtime's link timeouts: SysTick at 1 kHz from the core clock, counted in an
-//! interrupt. Idle spins (the links are polled by the runtime).
+//! interrupt. Idle sleeps until a link moves (QEMU) or spins (the links are polled by the
+//! runtime).
 
 use core::sync::atomic::{AtomicU32, Ordering};
 
@@ -44,7 +45,13 @@ impl Environment for BoardClock {
         (self.high + ms as u64) * 1_000_000
     }
 
+    /// QEMU: sleeps until a link moves ([`crate::links::wait_for_link_event`]); the board
+    /// (no link drivers yet): spins.
     fn idle(&mut self) {
-        core::hint::spin_loop();
+        if cfg!(feature = "qemu") {
+            crate::links::wait_for_link_event();
+        } else {
+            core::hint::spin_loop();
+        }
     }
 }

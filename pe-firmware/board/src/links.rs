@@ -1,16 +1,18 @@
 //! The board's links: `link_proto::StreamLinks` over [`LinkStream`]s.
 //!
-//! On QEMU's mps2-an500 the global port is CMSDK UART 2 (no host backend: bytes go into the
-//! void, which exercises the fault-packet path without disturbing the semihosting output)
-//! and no face is linked: the emulation runs one board (a 1x1x1 machine exchanges nothing).
-//! On the PE board the six LVDS links and the global port are the MCU's UARTs; their
-//! pin/clock set-up belongs to the board support package, which is not written yet, so the
-//! board build links no face and the global port is [`LinkStream::Absent`]. An image that
-//! needs a face without a driver is refused before the first step.
+//! On QEMU's mps2-an500 the five CMSDK UARTs carry the global port and the faces, as
+//! `pe_firmware::profile::mps2_uarts` assigns them (the harness that wires emulated boards
+//! together reads the same table): UART 2 is the global port, and the faces this board
+//! exchanges over take UARTs 0, 1, 3, 4 in face order. [`take`] links them once the
+//! image has said where the board sits; a board that needs more faces than there are UARTs
+//! is refused before the first step. On the PE board the six faces and the global port
+//! belong to the board support package, which is not written yet: that build links no face
+//! and its global port is [`LinkStream::Absent`], and an image that needs a face is refused.
 
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use embedded_io::{ErrorType, Read, ReadReady, Write, WriteReady};
+use link_proto::stream::{FacePort, GlobalPort};
 use link_proto::{Face, StreamLinks};
 
 use crate::uart::{CmsdkUart, UartError};
@@ -76,23 +78,134 @@ pub type BoardLinks = StreamLinks<LinkStream, LinkStream>;
 pub unsafe fn global_stream() -> LinkStream {
     if cfg!(feature = "qemu") {
         // SAFETY: UART 2 of mps2-an500 is a CMSDK UART; exclusivity is the caller's.
-        LinkStream::Cmsdk(unsafe { CmsdkUart::new(crate::uart::MPS2_UART_BASES[2]) })
+        LinkStream::Cmsdk(unsafe {
+            CmsdkUart::new(
+                pe_firmware::profile::mps2_uarts::UART_BASES
+                    [pe_firmware::profile::mps2_uarts::GLOBAL_UART],
+            )
+        })
     } else {
         LinkStream::Absent
     }
 }
 
-/// Which faces this firmware has drivers for.
-pub fn face_linked(_face: Face) -> bool {
-    false
+/// The UART of each face for a board whose linked faces are `linked`
+/// ([`pe_firmware::image::linked_faces`]); `Err(n)`: it needs `n` face links, more than
+/// this firmware drives.
+pub fn face_drivers(linked: [bool; 6]) -> Result<[Option<usize>; 6], usize> {
+    if cfg!(feature = "qemu") {
+        pe_firmware::profile::mps2_uarts::face_uarts(linked)
+    } else {
+        match linked.iter().filter(|&&l| l).count() {
+            0 => Ok([None; 6]),
+            n => Err(n),
+        }
+    }
 }
 
-static mut LINKS: BoardLinks = StreamLinks::unlinked(LinkStream::Absent);
+const fn absent_port() -> Option<FacePort<LinkStream>> {
+    Some(FacePort::new(LinkStream::Absent))
+}
+
+/// A port for every face (built at compile time: the buffers are never a stack temporary);
+/// [`take`] links the faces the image needs and takes the others off.
+static mut LINKS: BoardLinks = StreamLinks::from_ports(
+    [
+        absent_port(),
+        absent_port(),
+        absent_port(),
+        absent_port(),
+        absent_port(),
+        absent_port(),
+    ],
+    GlobalPort::new(LinkStream::Absent),
+);
 static TAKEN: AtomicBool = AtomicBool::new(false);
 
-/// The links: a static built at compile time (about 170 KB of frame buffers: never on
-/// the stack), given the global port's stream once.
-pub fn take() -> Option<&'static mut BoardLinks> {
+/// The UARTs the links use (base addresses; 0: none), for [`wait_for_link_event`] and the
+/// interrupt handler.
+static WAKE_UARTS: [AtomicUsize; 5] = [const { AtomicUsize::new(0) }; 5];
+
+/// A UART interrupt as the NVIC numbers it.
+#[derive(Clone, Copy)]
+struct Irq(u16);
+
+// SAFETY: the numbers are mps2-an500's UART interrupts (profile::mps2_uarts::RX_IRQS and
+// the next), all below the NVIC's interrupt count.
+unsafe impl cortex_m::interrupt::InterruptNumber for Irq {
+    fn number(self) -> u16 {
+        self.0
+    }
+}
+
+/// Records UART `uart` as one the links use ([`wake_on_links`] lets it wake the core).
+fn register(uart: usize) {
+    use pe_firmware::profile::mps2_uarts::UART_BASES;
+    if let (Some(&base), Some(slot)) = (UART_BASES.get(uart), WAKE_UARTS.get(uart)) {
+        slot.store(base, Ordering::Release);
+    }
+}
+
+/// Lets the links' UARTs wake the core: their receive and transmit interrupts enabled in
+/// the UARTs and unmasked in the NVIC. Only for a binary whose `DefaultHandler` calls
+/// [`on_uart_interrupt`] (the firmware's does; cortex-m-rt's default handler would hang).
+pub fn wake_on_links() {
+    use pe_firmware::profile::mps2_uarts::{RX_IRQS, UART_BASES};
+    for (uart, slot) in WAKE_UARTS.iter().enumerate() {
+        let base = slot.load(Ordering::Acquire);
+        let (Some(&b), Some(&rx)) = (UART_BASES.get(uart), RX_IRQS.get(uart)) else {
+            continue;
+        };
+        if base == 0 || base != b {
+            continue;
+        }
+        // SAFETY: a UART the links registered; only CTRL's interrupt enables change.
+        unsafe { CmsdkUart::alias(base) }.enable_wake_interrupts();
+        // SAFETY: unmasking only lets these interrupts run the handler that clears them; no
+        // critical section relies on them being masked.
+        unsafe {
+            cortex_m::peripheral::NVIC::unmask(Irq(rx));
+            cortex_m::peripheral::NVIC::unmask(Irq(rx + 1));
+        }
+    }
+}
+
+fn wake_uarts() -> impl Iterator<Item = CmsdkUart> {
+    WAKE_UARTS
+        .iter()
+        .filter_map(|a| match a.load(Ordering::Acquire) {
+            0 => None,
+            // SAFETY: a UART the links registered; only its status registers are touched here
+            // (never DATA, which the link's own driver reads).
+            base => Some(unsafe { CmsdkUart::alias(base) }),
+        })
+}
+
+/// Sleeps until a link moves: a byte arrives or one has gone on any UART the links use (or
+/// the millisecond tick), instead of spinning. The emulated array runs many cores on few
+/// host CPUs; a sleeping core leaves them to the others and to the emulator's I/O. With
+/// interrupts masked, a byte that is already waiting skips the sleep, and one that arrives
+/// between the check and the `wfi` leaves its interrupt pending, which ends the `wfi` at
+/// once: no wake-up is lost.
+pub fn wait_for_link_event() {
+    cortex_m::interrupt::free(|_| {
+        if !wake_uarts().any(|u| u.rx_waiting()) {
+            cortex_m::asm::wfi();
+        }
+    });
+}
+
+/// What a UART interrupt does: clears the links' UARTs' interrupt status (its only purpose
+/// was to end a `wfi`; the bytes stay for the links to read).
+pub fn on_uart_interrupt() {
+    for u in wake_uarts() {
+        u.clear_interrupts();
+    }
+}
+
+/// The links (about 170 KB of frame buffers, in a static), taken once: the global port and
+/// every face of `uarts` (from [`face_drivers`]) on its UART; the other faces say `NoLink`.
+pub fn take(uarts: [Option<usize>; 6]) -> Option<&'static mut BoardLinks> {
     if TAKEN.swap(true, Ordering::AcqRel) {
         return None;
     }
@@ -100,8 +213,21 @@ pub fn take() -> Option<&'static mut BoardLinks> {
     // is not yet driven by anyone else (the fault reporter only takes it after the links
     // are dropped from use, at the end of a run).
     let links: &'static mut BoardLinks = unsafe { &mut *core::ptr::addr_of_mut!(LINKS) };
-    links
-        .global_port()
-        .replace_stream(unsafe { global_stream() });
+    let global = unsafe { global_stream() };
+    if let LinkStream::Cmsdk(_) = global {
+        register(pe_firmware::profile::mps2_uarts::GLOBAL_UART);
+    }
+    links.global_port().replace_stream(global);
+    for face in Face::ALL {
+        let stream = uarts[face.index()].and_then(|uart| {
+            let base = *pe_firmware::profile::mps2_uarts::UART_BASES.get(uart)?;
+            // SAFETY: a CMSDK UART of mps2-an500 that the plan gives this face alone (never
+            // the global port's).
+            let u = unsafe { CmsdkUart::new(base) };
+            register(uart);
+            Some(LinkStream::Cmsdk(u))
+        });
+        links.relink(face, stream);
+    }
     Some(links)
 }

@@ -57,26 +57,25 @@ fn main() -> ! {
         });
     // Every face the schedule exchanges over needs a driver.
     let machine = rt.header.machine;
-    for face in link_proto::Face::ALL {
-        let axis = face.index() / 2;
-        let neighbour = if face.sign() > 0 {
-            board[axis] + 1 < machine[axis]
-        } else {
-            board[axis] > 0
-        };
-        if neighbour && rt.header.counts.rounds[axis] > 0 && !links::face_linked(face) {
-            report::fault(
-                board,
-                format_args!(
-                    "board ({},{},{}): the schedule exchanges over link {face:?}, which this firmware has no driver for",
-                    board[0], board[1], board[2]
-                ),
-            );
-        }
-    }
-    let Some(links) = links::take() else {
+    let linked = rt.header.linked_faces();
+    let uarts = links::face_drivers(linked).unwrap_or_else(|needed| {
+        report::fault(
+            board,
+            format_args!(
+                "board ({},{},{}): the schedule exchanges over {needed} links ({}), more than this firmware has drivers for ({})",
+                board[0],
+                board[1],
+                board[2],
+                FaceList(linked),
+                if cfg!(feature = "qemu") { "4 UARTs" } else { "none yet" }
+            ),
+        )
+    });
+    let Some(links) = links::take(uarts) else {
         report::fault(board, format_args!("links taken twice"));
     };
+    // Waits sleep until a link moves (this binary's DefaultHandler clears the UARTs).
+    links::wake_on_links();
     let Some(cp) = cortex_m::Peripherals::take() else {
         report::fault(board, format_args!("core peripherals taken twice"));
     };
@@ -109,10 +108,37 @@ fn main() -> ! {
     report::exit(true)
 }
 
+/// The linked faces, for messages (`+x -y`).
+struct FaceList([bool; 6]);
+
+impl core::fmt::Display for FaceList {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let mut first = true;
+        for (name, _) in link_proto::link::FACE_NAMES
+            .iter()
+            .zip(self.0)
+            .filter(|(_, l)| *l)
+        {
+            if !first {
+                f.write_str(" ")?;
+            }
+            f.write_str(name)?;
+            first = false;
+        }
+        Ok(())
+    }
+}
+
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     let board = board_position().unwrap_or(UNKNOWN);
     report::fault(board, format_args!("panic: {info}"))
+}
+
+/// Every device interrupt: only the links' UARTs are unmasked, to wake the core.
+#[exception]
+unsafe fn DefaultHandler(_irqn: i16) {
+    links::on_uart_interrupt();
 }
 
 #[exception]

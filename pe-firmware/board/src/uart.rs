@@ -12,20 +12,17 @@ use embedded_io::{ErrorKind, ErrorType, Read, ReadReady, Write, WriteReady};
 const DATA: usize = 0x0;
 const STATE: usize = 0x4;
 const CTRL: usize = 0x8;
+/// Read: interrupt status; write ones: clear them.
+const INTSTATUS: usize = 0xC;
 const BAUDDIV: usize = 0x10;
 const STATE_TX_FULL: u32 = 1 << 0;
 const STATE_RX_FULL: u32 = 1 << 1;
 const CTRL_TX_EN: u32 = 1 << 0;
 const CTRL_RX_EN: u32 = 1 << 1;
-
-/// Base addresses of the five CMSDK UARTs of mps2-an500.
-pub const MPS2_UART_BASES: [usize; 5] = [
-    0x4000_4000,
-    0x4000_5000,
-    0x4000_6000,
-    0x4000_7000,
-    0x4000_9000,
-];
+const CTRL_TX_INT_EN: u32 = 1 << 2;
+const CTRL_RX_INT_EN: u32 = 1 << 3;
+/// TX, RX, TX overrun, RX overrun.
+const INT_ALL: u32 = 0xF;
 
 /// One CMSDK APB UART.
 #[derive(Debug)]
@@ -44,7 +41,7 @@ impl embedded_io::Error for UartError {
 }
 
 impl CmsdkUart {
-    /// Takes the UART at `base` (one of [`MPS2_UART_BASES`]) and enables TX and RX.
+    /// Takes the UART at `base` (one of `pe_firmware::profile::mps2_uarts::UART_BASES`) and enables TX and RX.
     ///
     /// # Safety
     /// `base` must be a CMSDK UART's register block that nothing else drives.
@@ -53,6 +50,34 @@ impl CmsdkUart {
         u.write_reg(BAUDDIV, 16);
         u.write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN);
         u
+    }
+
+    /// Raises the UART's interrupts when a byte arrives or one has gone (for a core that
+    /// sleeps until its links move: [`crate::links::wait_for_link_event`]).
+    pub fn enable_wake_interrupts(&self) {
+        self.write_reg(
+            CTRL,
+            CTRL_TX_EN | CTRL_RX_EN | CTRL_TX_INT_EN | CTRL_RX_INT_EN,
+        );
+    }
+
+    /// Whether a received byte waits to be read.
+    pub fn rx_waiting(&self) -> bool {
+        self.read_reg(STATE) & STATE_RX_FULL != 0
+    }
+
+    /// Clears the interrupt status (the received byte stays in DATA).
+    pub fn clear_interrupts(&self) {
+        self.write_reg(INTSTATUS, INT_ALL);
+    }
+
+    /// A second handle on the UART at `base`, for its status registers only.
+    ///
+    /// # Safety
+    /// `base` must be a CMSDK UART's register block; the handle must not touch DATA, and
+    /// may change CTRL only to enable interrupts.
+    pub unsafe fn alias(base: usize) -> Self {
+        CmsdkUart { base }
     }
 
     fn read_reg(&self, offset: usize) -> u32 {

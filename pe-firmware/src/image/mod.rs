@@ -252,6 +252,35 @@ pub struct ImageHeader {
     pub graphics: GraphicsParams,
 }
 
+impl ImageHeader {
+    /// The faces this board exchanges over: see [`linked_faces`].
+    pub fn linked_faces(&self) -> [bool; 6] {
+        linked_faces(self.board, self.machine, self.counts.rounds)
+    }
+}
+
+/// The faces (indexed by [`link_proto::Face::index`]) of board `board` in a `machine`
+/// (boards per axis) that the schedule exchanges over: those with a neighbour, on an axis
+/// with exchange rounds (`rounds` per axis, the same on every board). Both ends of a link
+/// agree on it; the links a board needs drivers (and cables) for. One rule for the runtime's
+/// Hello, the firmware's driver check and the compiler's port check.
+pub const fn linked_faces(board: [u8; 3], machine: [u8; 3], rounds: [u8; 3]) -> [bool; 6] {
+    let mut linked = [false; 6];
+    let mut i = 0;
+    while i < 6 {
+        let a = i / 2;
+        let positive = i % 2 == 0; // Face::ALL: +x, -x, +y, -y, +z, -z
+        let neighbour = if positive {
+            (board[a] as u16) + 1 < machine[a] as u16
+        } else {
+            board[a] > 0
+        };
+        linked[i] = rounds[a] > 0 && neighbour;
+        i += 1;
+    }
+    linked
+}
+
 /// How a node moves.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum NodeMotion {

@@ -69,6 +69,17 @@ pub enum FaultKind {
         ours: CompilationId,
         theirs: CompilationId,
     },
+    /// The link on `face` goes to another board or connector than the schedule's: the
+    /// neighbour's Hello says it is board `theirs_board` (of a `theirs_machine` machine)
+    /// and sent on its face `theirs_face`, where the schedule expects the board across
+    /// `face` sending on the opposite face. Cables are crossed or plugged into the wrong
+    /// connector.
+    Miscabled {
+        face: Face,
+        theirs_board: [u8; 3],
+        theirs_machine: [u8; 3],
+        theirs_face: Face,
+    },
     /// The contact search needs more room than this firmware has.
     ContactCapacity {
         what: &'static str,
@@ -121,6 +132,20 @@ impl core::fmt::Display for Fault {
                     f,
                     ": the neighbour's image is from compilation {theirs}, this board's from {ours}: the image set is mixed; recompile or load the whole set"
                 )
+            }
+            FaultKind::Miscabled { face, theirs_board: [tx, ty, tz], theirs_machine: [mx, my, mz], theirs_face } => {
+                write!(
+                    f,
+                    "link {face:?}: the cable goes to board ({tx},{ty},{tz})'s {theirs_face:?} connector ({mx}x{my}x{mz} machine)"
+                )?;
+                match neighbour(self.board, face) {
+                    Some([nx, ny, nz]) => write!(
+                        f,
+                        "; the schedule expects board ({nx},{ny},{nz})'s {:?}: cables crossed",
+                        face.opposite()
+                    ),
+                    None => write!(f, "; the schedule has no neighbour there"),
+                }
             }
             FaultKind::ContactCapacity { what, needed, max } => write!(
                 f,

@@ -32,6 +32,7 @@ use crate::physics::{CentralDifference, HexBox, HexFull, HexReduced, MaterialLaw
 pub use contact::{ContactState, BOARDS_MAX, PAIRS_MAX, TOOLS_MAX};
 pub use fault::{Fault, FaultKind};
 pub use global::GlobalStats;
+pub use hello::HelloFrame;
 pub use program::{Op, Program, ROUNDS_PER_AXIS_MAX};
 pub use storage::{Capacities, ContactStorage, Heapless, Shelf, Storage, StorageBuf};
 

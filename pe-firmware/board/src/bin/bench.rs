@@ -61,7 +61,7 @@ fn main() -> ! {
     let store = storage::take().unwrap_or_else(|| fail("storage"));
     let mut rt = Runtime::<Scalar, Element>::load(image, board, store, RuntimeConfig::default())
         .unwrap_or_else(|e| report::fault(board, format_args!("bench: image refused: {e}")));
-    let links = links::take().unwrap_or_else(|| fail("links"));
+    let links = links::take([None; 6]).unwrap_or_else(|| fail("links"));
     let mut env = CallClock(0);
     let steps = rt.header.params.steps;
     while rt.step_index() + 1 < steps {
