@@ -16,6 +16,10 @@ cargo test --workspace --release
 # and board-sim (f64, f32), faults reported. Installs qemu-system-arm if missing.
 bash scripts/qemu-check.sh
 
+# Board arrays under QEMU (one emulated Cortex-M7 per board, UARTs as cables): 2x1x1,
+# 2x2x1, 2x2x2 bit-identical to board-sim; a dead board and crossed cables reported.
+bash scripts/qemu-array.sh
+
 # The firmware's measured cost (QEMU, exact instruction counts) against the table the
 # compiler and board-sim use: fails when pe_firmware::profile::MEASURED_COST is stale.
 bash scripts/board-cost.sh

@@ -3,6 +3,7 @@
 //! (`pe_firmware::runtime`), not a copy.
 
 pub mod links;
+pub mod qemu;
 mod storage;
 pub mod timing;
 
@@ -184,7 +185,7 @@ pub struct GraphicsFrame {
 }
 
 /// The sinks' packets turned into frames and per-step tool forces (summed in board order).
-fn collect_sinks(
+pub(crate) fn collect_sinks(
     net: &links::GlobalNet,
     steps: u64,
     tools: usize,
@@ -252,7 +253,7 @@ fn collect_sinks(
 /// (flashed from another compile), a board with no neighbour to compare with included.
 ///
 /// [`PacketKind::Hello`]: link_proto::PacketKind::Hello
-struct HostCheck {
+pub(crate) struct HostCheck {
     expected: String,
     dims: [usize; 3],
     /// Host packets already looked at.
@@ -262,7 +263,7 @@ struct HostCheck {
 }
 
 impl HostCheck {
-    fn new(expected: &str, dims: [usize; 3]) -> Self {
+    pub(crate) fn new(expected: &str, dims: [usize; 3]) -> Self {
         HostCheck {
             expected: expected.to_ascii_lowercase(),
             dims,
@@ -327,7 +328,7 @@ impl HostCheck {
     }
 
     /// At the end of a run: every board has said hello.
-    fn finish(&mut self, net: &links::GlobalNet) -> Result<()> {
+    pub(crate) fn finish(&mut self, net: &links::GlobalNet) -> Result<()> {
         self.poll(net)?;
         let silent: Vec<String> = (0..self.said.len())
             .filter(|&b| !self.said[b])

@@ -86,7 +86,14 @@ pub struct SinkFault {
 pub const GLOBAL_QUEUE_PACKETS: usize = 4096;
 
 impl GlobalNet {
-    fn deliver(&self, dst: u8, src: u8, packet: &[u8]) -> Result<(), SendError> {
+    /// A network of only the graphics and host sinks (no board inboxes, no recovery): what
+    /// an emulated array's host keeps; packets between boards are routed by the caller.
+    pub fn sinks() -> Arc<GlobalNet> {
+        build_links([0, 0, 0], &[], false).1
+    }
+
+    /// Routes a packet from `src` to `dst` (a board's inbox, a sink, or every other board).
+    pub(crate) fn deliver(&self, dst: u8, src: u8, packet: &[u8]) -> Result<(), SendError> {
         use link_proto::packet::{ADDR_BROADCAST, ADDR_GRAPHICS, ADDR_HOST};
         match dst {
             ADDR_GRAPHICS => self.sink(ADDR_GRAPHICS, &self.graphics, packet),

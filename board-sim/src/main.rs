@@ -76,6 +76,46 @@ enum Command {
         #[arg(long, value_name = "DIR2")]
         swap_from: Option<PathBuf>,
     },
+    /// The firmware itself on an emulated array: one QEMU mps2-an500 (Cortex-M7) per
+    /// board of DIR (written by `pe compile --profile qemu-mps2-an500`), their UARTs wired
+    /// as the machine's cables, this process the global network, host and graphics engine.
+    /// Writes the merged final state; exits non-zero, naming boards, links and steps, when a
+    /// board faults, dies or is miscabled.
+    #[command(
+        after_help = "Example (scripts/qemu-array.sh does this on 2x1x1, 2x2x1 and 2x2x2):\n  pe compile scenes/seed-box.toml --boards 2x2x2 --profile qemu-mps2-an500 --steps 300 -o out/q8\n  board-sim qemu out/q8 --output-nodes out/q8-qemu.csv\n  board-sim run out/q8 --output-nodes out/q8-sim.csv && pe compare out/q8-sim.csv out/q8-qemu.csv\n  board-sim qemu out/q8 --kill 1,0,0@3     # a board dies: its neighbours name the dead link\n  board-sim qemu out/q8 --cross 0,0,0:+x,0,0,0:+y   # two cables crossed: refused at boot"
+    )]
+    Qemu {
+        dir: PathBuf,
+        /// node,x_m,y_m,z_m,ux_m,uy_m,uz_m of every mesh node at the end, as the boards
+        /// reported it.
+        #[arg(long)]
+        output_nodes: Option<PathBuf>,
+        /// Run report (JSON): wall time per step, per-board exits, link and global bytes.
+        #[arg(long)]
+        report: Option<PathBuf>,
+        /// The firmware ELF (default: built with cargo for the images' precision and
+        /// integration).
+        #[arg(long)]
+        firmware: Option<PathBuf>,
+        /// Where the per-board ELFs and schedule blobs go (default DIR/qemu).
+        #[arg(long)]
+        images: Option<PathBuf>,
+        /// End board X,Y,Z's QEMU S seconds after the start (X,Y,Z@S).
+        #[arg(long)]
+        kill: Option<String>,
+        /// Swap the far ends of the cables at two connectors (X,Y,Z:FACE,X,Y,Z:FACE, FACE
+        /// one of +x -x +y -y +z -z).
+        #[arg(long, allow_hyphen_values = true)]
+        cross: Option<String>,
+        /// The whole run's bound (s).
+        #[arg(long, default_value_t = 1800.0)]
+        timeout_s: f64,
+        /// The emulator.
+        #[arg(long, default_value = "qemu-system-arm")]
+        qemu: PathBuf,
+        #[arg(long)]
+        quiet: bool,
+    },
     /// The main job: compile the built-in scene (uterus, tubes, probe) for a board mesh and
     /// run it, writing OUT/images, OUT/frames (ParaView), OUT/report.json and a summary.
     #[command(after_help = "Example:\n  board-sim builtin --level coarse --out out/builtin")]
@@ -186,7 +226,126 @@ fn main() -> Result<()> {
             no_recovery,
             swap_from,
         } => campaign::campaign(&dir, swap_from.as_deref(), runs, seed, steps, !no_recovery),
+        Command::Qemu {
+            dir,
+            output_nodes,
+            report,
+            firmware,
+            images,
+            kill,
+            cross,
+            timeout_s,
+            qemu,
+            quiet,
+        } => {
+            let opts = board_sim::qemu::ArrayOptions {
+                qemu,
+                firmware,
+                images,
+                deadline: Duration::from_secs_f64(timeout_s.max(0.0)),
+                kill: kill.as_deref().map(parse_kill).transpose()?,
+                cross: cross.as_deref().map(parse_cross).transpose()?,
+                quiet,
+            };
+            qemu_array(&dir, &opts, output_nodes.as_deref(), report.as_deref())
+        }
     }
+}
+
+/// `--kill X,Y,Z@S`.
+fn parse_kill(s: &str) -> Result<([usize; 3], Duration)> {
+    let bad = || anyhow::anyhow!("--kill {s:?}: expected X,Y,Z@SECONDS, e.g. 1,0,0@3");
+    let (b, t) = s.split_once('@').ok_or_else(bad)?;
+    let c: Vec<usize> = b
+        .split(',')
+        .map(|v| v.trim().parse())
+        .collect::<Result<_, _>>()
+        .map_err(|_| bad())?;
+    let [x, y, z] = c[..] else { return Err(bad()) };
+    let t: f64 = t.trim().parse().map_err(|_| bad())?;
+    if !(t.is_finite() && t >= 0.0) {
+        return Err(bad());
+    }
+    Ok(([x, y, z], Duration::from_secs_f64(t)))
+}
+
+/// `--cross X,Y,Z:FACE,X,Y,Z:FACE`.
+fn parse_cross(s: &str) -> Result<[board_sim::qemu::Connector; 2]> {
+    let parts: Vec<&str> = s.split(',').collect();
+    if parts.len() != 6 {
+        anyhow::bail!("--cross {s:?}: expected X,Y,Z:FACE,X,Y,Z:FACE, e.g. 0,0,0:+x,0,0,0:+y");
+    }
+    let a = board_sim::qemu::Connector::parse(&parts[..3].join(","))?;
+    let b = board_sim::qemu::Connector::parse(&parts[3..].join(","))?;
+    Ok([a, b])
+}
+
+/// `board-sim qemu`: runs the array, writes the outputs, prints a summary.
+fn qemu_array(
+    dir: &std::path::Path,
+    opts: &board_sim::qemu::ArrayOptions,
+    output_nodes: Option<&std::path::Path>,
+    report: Option<&std::path::Path>,
+) -> Result<()> {
+    let manifest = host_tools::compile::read_manifest(dir)?;
+    eprintln!(
+        "{}: {} boards ({}x{}x{}) under QEMU mps2-an500, {} steps",
+        manifest.scene,
+        manifest.boards.len(),
+        manifest.machine[0],
+        manifest.machine[1],
+        manifest.machine[2],
+        manifest.steps
+    );
+    let out = match board_sim::qemu::run_array(dir, opts) {
+        Ok(o) => o,
+        Err(e) => {
+            if let (Some(p), Some(f)) = (report, e.downcast_ref::<board_sim::qemu::ArrayFault>()) {
+                let j = serde_json::json!({
+                    "finished": false,
+                    "faults": f.lines,
+                    "boards": f.boards,
+                });
+                std::fs::write(p, serde_json::to_string_pretty(&j)?)
+                    .with_context(|| format!("writing {}", p.display()))?;
+            }
+            return Err(e);
+        }
+    };
+    let max_u = host_tools::firmware::max_abs(&out.displacements);
+    let per_step = out.wall_s / out.steps.max(1) as f64;
+    println!(
+        "{} steps on {} emulated boards in {:.2} s wall: {:.3} ms per step (QEMU start included); max |u| component {:.4e} m; {} global packets between boards, {} to the host and graphics ({} surface frames)",
+        out.steps,
+        out.boards.len(),
+        out.wall_s,
+        1e3 * per_step,
+        max_u,
+        out.packets_between_boards,
+        out.packets_to_sinks,
+        out.graphics_frames
+    );
+    if let Some(p) = output_nodes {
+        let problem = manifest_problem(&manifest)?;
+        write_nodes_csv(p, &problem.mesh, &out.displacements)?;
+    }
+    if let Some(p) = report {
+        let j = serde_json::json!({
+            "finished": true,
+            "machine": out.machine,
+            "steps": out.steps,
+            "wall_s": out.wall_s,
+            "wall_s_per_step": per_step,
+            "max_displacement_component_m": max_u,
+            "packets_between_boards": out.packets_between_boards,
+            "packets_to_sinks": out.packets_to_sinks,
+            "graphics_frames": out.graphics_frames,
+            "boards": out.boards,
+        });
+        std::fs::write(p, serde_json::to_string_pretty(&j)?)
+            .with_context(|| format!("writing {}", p.display()))?;
+    }
+    Ok(())
 }
 
 fn bench(level: &str, boards: &str, steps: u64) -> Result<()> {

@@ -269,6 +269,12 @@ pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<Imag
 pub fn read_displacements(path: &Path) -> Result<Vec<Option<[f64; 3]>>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    parse_displacements(&text, &path.display().to_string())
+}
+
+/// [`read_displacements`] of a text already read; `name` (a path, or a board) names it in
+/// errors.
+pub fn parse_displacements(text: &str, name: &str) -> Result<Vec<Option<[f64; 3]>>> {
     let mut out: Vec<Option<[f64; 3]>> = Vec::new();
     if text.starts_with("node,") {
         let header = text.lines().next().unwrap_or_default().trim();
@@ -276,19 +282,19 @@ pub fn read_displacements(path: &Path) -> Result<Vec<Option<[f64; 3]>>> {
         if header != crate::output::NODES_CSV_HEADER.join(",") && header != legacy {
             bail!(
                 "{}:1: header {header:?} is not a nodes CSV's ({:?}, or {legacy:?})",
-                path.display(),
+                name,
                 crate::output::NODES_CSV_HEADER.join(",")
             );
         }
         for (k, line) in text.lines().skip(1).enumerate() {
             let f: Vec<&str> = line.split(',').collect();
             if f.len() != 7 {
-                bail!("{}:{}: expected 7 fields", path.display(), k + 2);
+                bail!("{}:{}: expected 7 fields", name, k + 2);
             }
             let v = |i: usize| -> Result<f64> {
                 f[i].trim()
                     .parse()
-                    .with_context(|| format!("{}:{}: bad number {:?}", path.display(), k + 2, f[i]))
+                    .with_context(|| format!("{}:{}: bad number {:?}", name, k + 2, f[i]))
             };
             out.push(Some([v(4)?, v(5)?, v(6)?]));
         }
@@ -298,7 +304,7 @@ pub fn read_displacements(path: &Path) -> Result<Vec<Option<[f64; 3]>>> {
     for (k, line) in text.lines().enumerate() {
         let line = line.trim();
         if line.contains("pe-board: FAULT") {
-            bail!("{}: the board reported a fault: {line}", path.display());
+            bail!("{}: the board reported a fault: {line}", name);
         }
         if line == "pe-board: begin nodes" {
             begun = true;
@@ -306,7 +312,7 @@ pub fn read_displacements(path: &Path) -> Result<Vec<Option<[f64; 3]>>> {
             ended = true;
         } else if let Some(rest) = line.strip_prefix("u,") {
             let f: Vec<&str> = rest.split(',').collect();
-            let bad = || format!("{}:{}: bad node line {line:?}", path.display(), k + 1);
+            let bad = || format!("{}:{}: bad node line {line:?}", name, k + 1);
             if f.len() != 4 || !begun || ended {
                 bail!(bad());
             }
@@ -319,14 +325,14 @@ pub fn read_displacements(path: &Path) -> Result<Vec<Option<[f64; 3]>>> {
                 out.resize(n + 1, None);
             }
             if out[n].replace(u).is_some() {
-                bail!("{}: node {n} reported twice", path.display());
+                bail!("{}: node {n} reported twice", name);
             }
         }
     }
     if !begun || !ended {
         bail!(
             "{}: no complete node report (missing 'pe-board: begin nodes'/'end nodes'): the run did not finish",
-            path.display()
+            name
         );
     }
     Ok(out)
@@ -340,6 +346,8 @@ pub struct Comparison {
     pub differing: usize,
     /// Largest |a − b| (m) over all components.
     pub max_abs_diff: f64,
+    /// Largest |component| of the reference (m): how far the compared fields are from rest.
+    pub max_abs_reference: f64,
     /// The first differences: (node, component, reference, other).
     pub first: Vec<(usize, usize, f64, f64)>,
 }
@@ -361,6 +369,7 @@ pub fn compare(reference: &Path, other: &Path) -> Result<Comparison> {
         nodes: a.len(),
         differing: 0,
         max_abs_diff: 0.0,
+        max_abs_reference: 0.0,
         first: Vec::new(),
     };
     let mut missing = Vec::new();
@@ -371,6 +380,7 @@ pub fn compare(reference: &Path, other: &Path) -> Result<Comparison> {
             continue;
         };
         for i in 0..3 {
+            c.max_abs_reference = c.max_abs_reference.max(ua[i].abs());
             if ua[i].to_bits() != ub[i].to_bits() {
                 c.differing += 1;
                 c.max_abs_diff = c.max_abs_diff.max((ua[i] - ub[i]).abs());

@@ -138,9 +138,22 @@ enum Command {
     },
     /// Compare final displacements bit for bit: REFERENCE is a nodes CSV (`pe solve
     /// --output-nodes`), OTHER a nodes CSV (board-sim) or a board's semihosting report.
-    /// Fails on any difference.
-    #[command(after_help = "Example:\n  pe compare out/nodes.csv out/board-sim.csv")]
-    Compare { reference: PathBuf, other: PathBuf },
+    /// Fails on any difference (with --tolerance, on a larger one).
+    #[command(
+        after_help = "Examples:\n  pe compare out/nodes.csv out/board-sim.csv\n  pe compare out/solve.csv out/array.csv --tolerance 1e-12 --min-displacement 1e-4"
+    )]
+    Compare {
+        reference: PathBuf,
+        other: PathBuf,
+        /// Accept differences up to this fraction of the reference's largest |component|
+        /// (default: none, bit for bit).
+        #[arg(long)]
+        tolerance: Option<f64>,
+        /// Refuse the comparison when the reference's largest |component| is below this (m):
+        /// fields at rest agree whatever the code does.
+        #[arg(long)]
+        min_displacement: Option<f64>,
+    },
     /// Show a board's compiled schedule: batches and exchange lists.
     #[command(after_help = "Example:\n  pe inspect out/compiled --board 1,0,0")]
     Inspect {
@@ -321,7 +334,12 @@ fn main() -> Result<()> {
             output,
             firmware,
         } => image(&dir, &output, firmware.as_deref())?,
-        Command::Compare { reference, other } => compare(&reference, &other)?,
+        Command::Compare {
+            reference,
+            other,
+            tolerance,
+            min_displacement,
+        } => compare(&reference, &other, tolerance, min_displacement)?,
         Command::Inspect { dir, board } => {
             let c: Vec<usize> = board
                 .split(',')
@@ -509,9 +527,28 @@ fn image(dir: &Path, output: &Path, firmware: Option<&Path>) -> Result<()> {
 }
 
 /// `pe compare`: final displacements bit for bit.
-fn compare(reference: &Path, other: &Path) -> Result<()> {
+fn compare(
+    reference: &Path,
+    other: &Path,
+    tolerance: Option<f64>,
+    min_displacement: Option<f64>,
+) -> Result<()> {
     let c = host_tools::firmware::compare(reference, other)?;
-    if c.differing > 0 {
+    if let Some(min) = min_displacement {
+        if c.max_abs_reference.is_nan() || c.max_abs_reference < min {
+            anyhow::bail!(
+                "{}: the largest |displacement| component is {:.3e} m, below --min-displacement {min:.3e} m: a comparison of fields this close to rest proves nothing",
+                reference.display(),
+                c.max_abs_reference
+            );
+        }
+    }
+    let allowed = tolerance.map_or(0.0, |t| t * c.max_abs_reference);
+    let fails = match tolerance {
+        None => c.differing > 0,
+        Some(_) => c.max_abs_diff.is_nan() || c.max_abs_diff > allowed,
+    };
+    if fails {
         for (n, i, a, b) in &c.first {
             eprintln!(
                 "  node {n} component {i}: reference {a:e} ({:016x}), other {b:e} ({:016x})",
@@ -520,19 +557,40 @@ fn compare(reference: &Path, other: &Path) -> Result<()> {
             );
         }
         anyhow::bail!(
-            "MISMATCH: {} of {} components differ between {} and {} (max |diff| {:.3e} m)",
+            "MISMATCH: {} of {} components differ between {} and {} (max |diff| {:.3e} m{})",
             c.differing,
             3 * c.nodes,
             reference.display(),
             other.display(),
-            c.max_abs_diff
+            c.max_abs_diff,
+            match tolerance {
+                Some(t) => format!(
+                    ", above the {t:e} x {:.3e} m = {allowed:.3e} m allowed",
+                    c.max_abs_reference
+                ),
+                None => String::new(),
+            }
         );
     }
-    println!(
-        "bit-identical: {} nodes of {} and {}",
-        c.nodes,
-        reference.display(),
-        other.display()
-    );
+    match tolerance {
+        Some(t) => println!(
+            "within {t:e}: {} nodes of {} and {} (max |diff| {:.3e} m = {:.2e} of max |u| {:.3e} m; {} of {} components differ in their bits)",
+            c.nodes,
+            reference.display(),
+            other.display(),
+            c.max_abs_diff,
+            c.max_abs_diff / c.max_abs_reference.max(f64::MIN_POSITIVE),
+            c.max_abs_reference,
+            c.differing,
+            3 * c.nodes
+        ),
+        None => println!(
+            "bit-identical: {} nodes of {} and {} (max |u| {:.3e} m)",
+            c.nodes,
+            reference.display(),
+            other.display(),
+            c.max_abs_reference
+        ),
+    }
     Ok(())
 }
