@@ -13,6 +13,9 @@ pub struct BoardProfile {
     /// RAM kept for the stack and the runtime itself (bytes); the link buffers and the
     /// storage are counted by [`crate::runtime::Capacities::for_board`].
     pub ram_reserved_bytes: u64,
+    /// A RAM region of its own for the link buffers (bytes; `SRAM_D2` in `memory.x`), or 0
+    /// when they share `ram_bytes` with the storage.
+    pub link_ram_bytes: u64,
     /// Flash (bytes), as in `memory.x`.
     pub flash_bytes: u64,
     /// Flash region that holds the schedule image (bytes).
@@ -41,6 +44,9 @@ pub struct BoardProfile {
     /// [`crate::runtime::Capacities::for_board`], which adds the elements and nodes):
     /// materials, exchange entries (sends and receives each), path points, loads, contact
     /// candidates found at a check, contact-node displacements sent until the next check.
+    /// Nodes a board holds (at most `link_proto::NODES_PER_BOARD_MAX`, which the frames
+    /// are sized for); the parallelepiped, external-force and graphics tables follow it.
+    pub nodes_max: u32,
     pub materials_max: u32,
     pub exchange_max: u32,
     pub path_points_max: u32,
@@ -50,8 +56,12 @@ pub struct BoardProfile {
 }
 
 /// The custom PE board: STM32H743 (Cortex-M7 at 480 MHz with a double-precision FPU),
-/// 1 MiB RAM (TCM plus AXI SRAM), 2 MiB flash (the upper 1 MiB holds the schedule image),
-/// six point-to-point links and a global network port.
+/// 2 MiB flash (bank 2, the upper 1 MiB, holds the schedule image), six point-to-point links
+/// and a global network port. RAM as `memory.x` lays it out: the runtime's storage in the
+/// 512 KiB AXI SRAM, the stack in the 128 KiB DTCM, the link buffers and the links' DMA
+/// buffers in SRAM1-3 (288 KiB); the reserve is what else the firmware keeps in the AXI
+/// SRAM (logging buffers, drivers). The AXI SRAM holds the fixed tables for 512 nodes
+/// (about 360 KiB in f64) and leaves the rest to elements.
 ///
 /// The links of a prototype built from the MCU alone (no LVDS serialiser): one SPI per
 /// face, SPI1 to SPI6 (the STM32H743 has six), full duplex (MOSI one way, MISO the other),
@@ -77,8 +87,9 @@ pub struct BoardProfile {
 pub const PE_BOARD: BoardProfile = BoardProfile {
     name: "pe-board",
     clock_hz: 480_000_000,
-    ram_bytes: 1024 * 1024,
-    ram_reserved_bytes: 128 * 1024,
+    ram_bytes: 512 * 1024,
+    ram_reserved_bytes: 16 * 1024,
+    link_ram_bytes: 288 * 1024,
     flash_bytes: 2 * 1024 * 1024,
     image_flash_bytes: 1024 * 1024,
     link_bytes_per_s: 3_125_000,
@@ -89,12 +100,30 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
     probe_chip: "STM32H743ZITx",
     contact_nodes_max: 512,
     contact_faces_max: 512,
+    nodes_max: 512,
     materials_max: 8,
     exchange_max: 4096,
     path_points_max: 64,
     loads_max: 256,
     contact_candidates_max: 2048,
     contact_sends_max: 1024,
+};
+
+/// The prototype array: STM32H743 boards (NUCLEO-H743ZI or any board with the part and the
+/// pins of `pe-firmware/board/src/bsp/stm32h743.rs`) whose six faces and global port are
+/// USART/UARTs driven by DMA, one cable (TX, RX, ground) per face. The PE board's memory and
+/// tables. Rate: 7.5 Mbaud, the USART's kernel clock (`rcc_pclk1`/`rcc_pclk2`, 120 MHz at a
+/// 480 MHz core) divided by 16 (RM0433, USART baud rate generation, 16x oversampling, as
+/// stm32h7xx-hal configures it); ten bits a byte (start, 8 data, stop): 750 000 bytes/s
+/// each way. Per frame: 5 us to restart the TX DMA stream and let the last byte leave the
+/// shift register (an assumption, to be measured). DS12110 gives the USARTs up to
+/// 12.5 Mbit/s with 8x oversampling; the PE board's SPI links (about 4x this rate) are the
+/// design for real time.
+pub const STM32H743_UART: BoardProfile = BoardProfile {
+    name: "stm32h743-uart",
+    link_bytes_per_s: 750_000,
+    link_latency_ns: 5_000,
+    ..PE_BOARD
 };
 
 /// QEMU's `mps2-an500` (Cortex-M7, FLASH at 0x0 and RAM at 0x20000000, 4 MiB each), the
@@ -106,6 +135,7 @@ pub const QEMU_MPS2_AN500: BoardProfile = BoardProfile {
     clock_hz: 25_000_000,
     ram_bytes: 4 * 1024 * 1024,
     ram_reserved_bytes: 256 * 1024,
+    link_ram_bytes: 0,
     flash_bytes: 4 * 1024 * 1024,
     image_flash_bytes: 2 * 1024 * 1024,
     link_bytes_per_s: 25_000_000,
@@ -114,7 +144,9 @@ pub const QEMU_MPS2_AN500: BoardProfile = BoardProfile {
     face_ports: mps2_uarts::FACE_UARTS.len() as u8,
     image_origin: 0x0020_0000,
     probe_chip: "",
-    // The same firmware tables as the PE board (the RAM decides the elements).
+    // The frames' node limit, and otherwise the PE board's tables (the RAM decides the
+    // elements).
+    nodes_max: link_proto::NODES_PER_BOARD_MAX as u32,
     ..PE_BOARD
 };
 
@@ -165,7 +197,7 @@ pub mod mps2_uarts {
     }
 }
 
-pub const PROFILES: [BoardProfile; 2] = [PE_BOARD, QEMU_MPS2_AN500];
+pub const PROFILES: [BoardProfile; 3] = [PE_BOARD, STM32H743_UART, QEMU_MPS2_AN500];
 
 /// Looks a profile up by name.
 pub fn profile(name: &str) -> Option<BoardProfile> {

@@ -8,7 +8,6 @@ use host_tools::compile::partition::Machine;
 use host_tools::problem::Problem;
 use host_tools::scene::builtin::builtin_scene;
 use host_tools::scene::Scene;
-use pe_firmware::profile::PE_BOARD;
 
 /// `../shared/meshes` beside the checkout (tests read the organ meshes from there).
 pub fn shared_meshes_dir() -> PathBuf {
@@ -60,18 +59,20 @@ pub fn repo_scene(name: &str) -> Problem {
     Problem::from_scene(&sc, path.parent().unwrap_or(Path::new("."))).expect("scene resolves")
 }
 
-/// Compiles `problem` for `machine` into a fresh directory.
+/// Compiles `problem` for `machine` into a fresh directory. Machines of at most two boards
+/// along each axis are compiled for the emulation profile (QEMU mps2-an500: the frames'
+/// 1024 nodes a board, so the test scenes fit one or two boards); larger ones, whose middle
+/// boards link five or six faces, for the PE board (512 nodes a board in its AXI SRAM,
+/// six links). The profiles' own limits are tested in `capacity.rs` and `schedule.rs`.
 pub fn compile(problem: &Problem, source: &str, machine: &str, name: &str) -> PathBuf {
     let dir = temp_dir(name);
-    compile_to_dir(
-        name,
-        source,
-        problem,
-        Machine::parse(machine).expect("machine"),
-        &PE_BOARD,
-        &dir,
-    )
-    .expect("compiles");
+    let m = Machine::parse(machine).expect("machine");
+    let profile = if m.dims.iter().all(|&d| d <= 2) {
+        pe_firmware::profile::QEMU_MPS2_AN500
+    } else {
+        pe_firmware::profile::PE_BOARD
+    };
+    compile_to_dir(name, source, problem, m, &profile, &dir).expect("compiles");
     dir
 }
 

@@ -220,14 +220,16 @@ fn overflowing_a_small_board_is_reported() {
         "{e}"
     );
     // On two boards each holds over 1024 nodes: more than the PE board's firmware holds
-    // (the count is the partition's).
+    // (its 512; the count is the partition's).
     let e = check_fit(&images, &PE_BOARD).unwrap_err().to_string();
     let nodes = plan.boards[0].nodes.len();
+    let held = PE_BOARD.nodes_max as usize;
+    assert_eq!(held, 512);
     assert!(nodes > 1024, "{nodes}");
     assert!(
         e.contains(&format!(
-            "board (0,0,0): {nodes} nodes exceed the 1024 the pe-board firmware holds, by {}",
-            nodes - 1024
+            "board (0,0,0): {nodes} nodes exceed the {held} the pe-board firmware holds, by {}",
+            nodes - held
         )),
         "{e}"
     );
@@ -315,8 +317,19 @@ fn memory_x_matches_the_board_profile() {
         num.parse::<u64>().unwrap() * mul
     };
     assert_eq!(len("RAM"), PE_BOARD.ram_bytes);
+    assert_eq!(len("SRAM_D2"), PE_BOARD.link_ram_bytes);
     assert_eq!(len("FLASH") + len("IMAGE"), PE_BOARD.flash_bytes);
     assert_eq!(len("IMAGE"), PE_BOARD.image_flash_bytes);
+    // The prototype's profile is the same part.
+    let proto = pe_firmware::profile::STM32H743_UART;
+    assert_eq!(
+        (proto.ram_bytes, proto.link_ram_bytes, proto.flash_bytes),
+        (
+            PE_BOARD.ram_bytes,
+            PE_BOARD.link_ram_bytes,
+            PE_BOARD.flash_bytes
+        )
+    );
 }
 
 /// memory-qemu.x (the firmware's emulation memory map) matches the QEMU profile, and both

@@ -24,7 +24,8 @@ pub struct BoardClock {
 
 impl BoardClock {
     /// Starts SysTick: `clock_hz` is the core clock.
-    pub fn start(mut syst: SYST, clock_hz: u64) -> Self {
+    pub fn start(cp: &mut cortex_m::Peripherals, clock_hz: u64) -> Self {
+        let syst: &mut SYST = &mut cp.SYST;
         let reload = (clock_hz / 1000).clamp(2, 1 << 24) as u32 - 1;
         syst.set_clock_source(SystClkSource::Core);
         syst.set_reload(reload);

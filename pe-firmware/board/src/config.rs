@@ -1,5 +1,6 @@
 //! Build-time configuration: scalar and element type (cargo features `f32`, `full`), the
-//! memory profile (feature `qemu`: QEMU mps2-an500, otherwise the PE board) and the storage
+//! board profile (feature `qemu`: QEMU mps2-an500; `stm32h743`: the prototype array of
+//! STM32H743 boards over USARTs; otherwise the PE board, no link drivers yet) and the storage
 //! capacities: the profile's capacity table ([`Capacities::for_board`]), the same figures
 //! the compiler's fit check and board-sim's board-sized storage use.
 
@@ -18,7 +19,9 @@ pub type Element = pe_firmware::physics::HexReduced<Scalar>;
 
 #[cfg(feature = "qemu")]
 pub const PROFILE: BoardProfile = pe_firmware::profile::QEMU_MPS2_AN500;
-#[cfg(not(feature = "qemu"))]
+#[cfg(feature = "stm32h743")]
+pub const PROFILE: BoardProfile = pe_firmware::profile::STM32H743_UART;
+#[cfg(not(any(feature = "qemu", feature = "stm32h743")))]
 pub const PROFILE: BoardProfile = pe_firmware::profile::PE_BOARD;
 
 /// Variant name, for the boot banner.
@@ -58,6 +61,12 @@ pub type BoardStorage = StorageBuf<
 // The table's per-node arrays (external forces, graphics nodes) take the node capacity.
 const _: () = assert!(CAPACITIES.external == CAPACITIES.nodes);
 const _: () = assert!(CAPACITIES.graphics_nodes == CAPACITIES.nodes);
+
+// The link buffers' region holds them (when the profile gives them one).
+const _: () = assert!(
+    PROFILE.link_ram_bytes == 0
+        || core::mem::size_of::<crate::links::BoardLinks>() as u64 <= PROFILE.link_ram_bytes
+);
 
 // The link buffers are what `Capacities::for_board` counts for them (the streams add a few
 // words).

@@ -9,12 +9,16 @@
 #![no_std]
 #![deny(unsafe_op_in_unsafe_fn)]
 
+#[cfg(all(feature = "qemu", feature = "stm32h743"))]
+compile_error!("features `qemu` and `stm32h743` are two boards: build with one (the board build: --no-default-features --features stm32h743,defmt)");
+
 pub mod fmt;
 
 // The defmt global logger (RTT), for every binary of the crate.
 #[cfg(feature = "defmt")]
 use defmt_rtt as _;
 
+pub mod bsp;
 pub mod clock;
 pub mod config;
 pub mod links;

@@ -3,11 +3,12 @@
 //! On QEMU's mps2-an500 the five CMSDK UARTs carry the global port and the faces, as
 //! `pe_firmware::profile::mps2_uarts` assigns them (the harness that wires emulated boards
 //! together reads the same table): UART 2 is the global port, and the faces this board
-//! exchanges over take UARTs 0, 1, 3, 4 in face order. [`take`] links them once the
-//! image has said where the board sits; a board that needs more faces than there are UARTs
-//! is refused before the first step. On the PE board the six faces and the global port
-//! belong to the board support package, which is not written yet: that build links no face
-//! and its global port is [`LinkStream::Absent`], and an image that needs a face is refused.
+//! exchanges over take UARTs 0, 1, 3, 4 in face order. On the STM32H743 prototype (feature
+//! `stm32h743`) each face and the global port is a USART/UART moved by DMA
+//! ([`crate::bsp::stm32h743`]). [`take`] links them once the image has said where the board
+//! sits; a board that needs more faces than there are drivers is refused before the first
+//! step. The PE board's own build (SPI links, no board support yet) links no face and its
+//! global port is [`LinkStream::Absent`]: an image that needs a face is refused.
 
 use core::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
@@ -21,6 +22,8 @@ use crate::uart::{CmsdkUart, UartError};
 #[derive(Debug)]
 pub enum LinkStream {
     Cmsdk(CmsdkUart),
+    #[cfg(feature = "stm32h743")]
+    Stm(crate::bsp::stm32h743::DmaSerial),
     /// No driver: reads nothing, accepts and drops writes.
     Absent,
 }
@@ -29,10 +32,19 @@ impl ErrorType for LinkStream {
     type Error = UartError;
 }
 
+#[cfg(feature = "stm32h743")]
+impl From<crate::bsp::stm32h743::DmaError> for UartError {
+    fn from(_: crate::bsp::stm32h743::DmaError) -> Self {
+        UartError
+    }
+}
+
 impl Read for LinkStream {
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, UartError> {
         match self {
             LinkStream::Cmsdk(u) => u.read(buf),
+            #[cfg(feature = "stm32h743")]
+            LinkStream::Stm(p) => Ok(p.read(buf)?),
             LinkStream::Absent => Ok(0),
         }
     }
@@ -42,6 +54,8 @@ impl ReadReady for LinkStream {
     fn read_ready(&mut self) -> Result<bool, UartError> {
         match self {
             LinkStream::Cmsdk(u) => u.read_ready(),
+            #[cfg(feature = "stm32h743")]
+            LinkStream::Stm(p) => Ok(p.read_ready()?),
             LinkStream::Absent => Ok(false),
         }
     }
@@ -51,6 +65,8 @@ impl Write for LinkStream {
     fn write(&mut self, buf: &[u8]) -> Result<usize, UartError> {
         match self {
             LinkStream::Cmsdk(u) => u.write(buf),
+            #[cfg(feature = "stm32h743")]
+            LinkStream::Stm(p) => Ok(p.write(buf)?),
             LinkStream::Absent => Ok(buf.len()),
         }
     }
@@ -64,6 +80,8 @@ impl WriteReady for LinkStream {
     fn write_ready(&mut self) -> Result<bool, UartError> {
         match self {
             LinkStream::Cmsdk(u) => u.write_ready(),
+            #[cfg(feature = "stm32h743")]
+            LinkStream::Stm(p) => Ok(p.write_ready()?),
             LinkStream::Absent => Ok(true),
         }
     }
@@ -76,6 +94,10 @@ pub type BoardLinks = StreamLinks<LinkStream, LinkStream>;
 /// # Safety
 /// Nothing else may be driving the global port's UART at the same time.
 pub unsafe fn global_stream() -> LinkStream {
+    #[cfg(feature = "stm32h743")]
+    if let Some(p) = crate::bsp::stm32h743::DmaSerial::port(crate::bsp::stm32h743::GLOBAL_PORT) {
+        return LinkStream::Stm(p);
+    }
     if cfg!(feature = "qemu") {
         // SAFETY: UART 2 of mps2-an500 is a CMSDK UART; exclusivity is the caller's.
         LinkStream::Cmsdk(unsafe {
@@ -89,12 +111,19 @@ pub unsafe fn global_stream() -> LinkStream {
     }
 }
 
-/// The UART of each face for a board whose linked faces are `linked`
-/// ([`pe_firmware::image::linked_faces`]); `Err(n)`: it needs `n` face links, more than
-/// this firmware drives.
+/// The driver of each face for a board whose linked faces are `linked`
+/// ([`pe_firmware::image::linked_faces`]): QEMU, the UART number; the STM32H743 prototype,
+/// its port (one per face). `Err(n)`: it needs `n` face links, more than this firmware
+/// drives.
 pub fn face_drivers(linked: [bool; 6]) -> Result<[Option<usize>; 6], usize> {
     if cfg!(feature = "qemu") {
         pe_firmware::profile::mps2_uarts::face_uarts(linked)
+    } else if cfg!(feature = "stm32h743") {
+        let mut d = [None; 6];
+        for (f, slot) in d.iter_mut().enumerate() {
+            *slot = linked[f].then_some(f);
+        }
+        Ok(d)
     } else {
         match linked.iter().filter(|&&l| l).count() {
             0 => Ok([None; 6]),
@@ -103,12 +132,32 @@ pub fn face_drivers(linked: [bool; 6]) -> Result<[Option<usize>; 6], usize> {
     }
 }
 
+/// The stream of face driver `d` (from [`face_drivers`]).
+fn face_stream(d: usize) -> Option<LinkStream> {
+    #[cfg(feature = "stm32h743")]
+    {
+        crate::bsp::stm32h743::DmaSerial::port(d).map(LinkStream::Stm)
+    }
+    #[cfg(not(feature = "stm32h743"))]
+    {
+        let base = *pe_firmware::profile::mps2_uarts::UART_BASES.get(d)?;
+        // SAFETY: a CMSDK UART of mps2-an500 that the plan gives one face alone (never the
+        // global port's).
+        let u = unsafe { CmsdkUart::new(base) };
+        register(d);
+        Some(LinkStream::Cmsdk(u))
+    }
+}
+
 const fn absent_port() -> Option<FacePort<LinkStream>> {
     Some(FacePort::new(LinkStream::Absent))
 }
 
 /// A port for every face (built at compile time: the buffers are never a stack temporary);
-/// [`take`] links the faces the image needs and takes the others off.
+/// [`take`] links the faces the image needs and takes the others off. On the board it sits
+/// in the `.links` section of SRAM1-3 (the AXI SRAM holds the storage), which the start-up
+/// code does not initialise: [`take`] copies it from flash first.
+#[cfg_attr(not(feature = "qemu"), link_section = ".links")]
 static mut LINKS: BoardLinks = StreamLinks::from_ports(
     [
         absent_port(),
@@ -121,6 +170,27 @@ static mut LINKS: BoardLinks = StreamLinks::from_ports(
     GlobalPort::new(LinkStream::Absent),
 );
 static TAKEN: AtomicBool = AtomicBool::new(false);
+
+/// Copies the `.links` section (LINKS's initial value) from its load address in flash to
+/// SRAM1-3, as the start-up code does for `.data` (`memory.x` defines the symbols).
+///
+/// # Safety
+/// Once, before anything reads or references LINKS.
+#[cfg(not(feature = "qemu"))]
+unsafe fn init_link_section() {
+    extern "C" {
+        static mut __slinks: u32;
+        static mut __elinks: u32;
+        static __silinks: u32;
+    }
+    // SAFETY: the linker's symbols bound the section (word-aligned) and its load image.
+    unsafe {
+        let start = core::ptr::addr_of_mut!(__slinks);
+        let end = core::ptr::addr_of_mut!(__elinks);
+        let words = (end as usize - start as usize) / 4;
+        core::ptr::copy_nonoverlapping(core::ptr::addr_of!(__silinks), start, words);
+    }
+}
 
 /// The UARTs the links use (base addresses; 0: none), for [`wait_for_link_event`] and the
 /// interrupt handler.
@@ -204,11 +274,17 @@ pub fn on_uart_interrupt() {
 }
 
 /// The links (about 170 KB of frame buffers, in a static), taken once: the global port and
-/// every face of `uarts` (from [`face_drivers`]) on its UART; the other faces say `NoLink`.
-pub fn take(uarts: [Option<usize>; 6]) -> Option<&'static mut BoardLinks> {
+/// every face of `drivers` (from [`face_drivers`]) on its driver; the other faces say
+/// `NoLink`.
+pub fn take(drivers: [Option<usize>; 6]) -> Option<&'static mut BoardLinks> {
     if TAKEN.swap(true, Ordering::AcqRel) {
         return None;
     }
+    #[cfg(not(feature = "qemu"))]
+    // SAFETY: before any reference to LINKS exists (TAKEN), once.
+    unsafe {
+        init_link_section()
+    };
     // SAFETY: TAKEN makes this the only reference to LINKS, created once; the global port
     // is not yet driven by anyone else (the fault reporter only takes it after the links
     // are dropped from use, at the end of a run).
@@ -219,14 +295,7 @@ pub fn take(uarts: [Option<usize>; 6]) -> Option<&'static mut BoardLinks> {
     }
     links.global_port().replace_stream(global);
     for face in Face::ALL {
-        let stream = uarts[face.index()].and_then(|uart| {
-            let base = *pe_firmware::profile::mps2_uarts::UART_BASES.get(uart)?;
-            // SAFETY: a CMSDK UART of mps2-an500 that the plan gives this face alone (never
-            // the global port's).
-            let u = unsafe { CmsdkUart::new(base) };
-            register(uart);
-            Some(LinkStream::Cmsdk(u))
-        });
+        let stream = drivers[face.index()].and_then(face_stream);
         links.relink(face, stream);
     }
     Some(links)

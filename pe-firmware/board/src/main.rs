@@ -6,10 +6,12 @@
 #![no_main]
 
 use cortex_m_rt::{entry, exception, ExceptionFrame};
+#[cfg(not(feature = "stm32h743"))]
+use pe_board::clock;
 use pe_board::config::{Element, Scalar, CAPACITIES, PROFILE, VARIANT};
 use pe_board::log_info;
 use pe_board::region::{board_position, schedule_image};
-use pe_board::{clock, links, report, storage};
+use pe_board::{links, report, storage};
 use pe_firmware::physics::Real;
 use pe_firmware::runtime::{Fault, FaultKind, Runtime, RuntimeConfig};
 
@@ -58,7 +60,7 @@ fn main() -> ! {
     // Every face the schedule exchanges over needs a driver.
     let machine = rt.header.machine;
     let linked = rt.header.linked_faces();
-    let uarts = links::face_drivers(linked).unwrap_or_else(|needed| {
+    let drivers = links::face_drivers(linked).unwrap_or_else(|needed| {
         report::fault(
             board,
             format_args!(
@@ -71,15 +73,22 @@ fn main() -> ! {
             ),
         )
     });
-    let Some(links) = links::take(uarts) else {
-        report::fault(board, format_args!("links taken twice"));
-    };
-    // Waits sleep until a link moves (this binary's DefaultHandler clears the UARTs).
-    links::wake_on_links();
-    let Some(cp) = cortex_m::Peripherals::take() else {
+    let Some(mut cp) = cortex_m::Peripherals::take() else {
         report::fault(board, format_args!("core peripherals taken twice"));
     };
-    let mut env = clock::BoardClock::start(cp.SYST, PROFILE.clock_hz);
+    // Time, and the board's own hardware (clocks, ports) before the links use it.
+    #[cfg(feature = "stm32h743")]
+    let mut env = pe_board::bsp::stm32h743::start(&mut cp)
+        .unwrap_or_else(|e| report::fault(board, format_args!("board start-up: {e}")));
+    #[cfg(not(feature = "stm32h743"))]
+    let mut env = clock::BoardClock::start(&mut cp, PROFILE.clock_hz);
+    let Some(links) = links::take(drivers) else {
+        report::fault(board, format_args!("links taken twice"));
+    };
+    // QEMU: waits sleep until a link moves (this binary's DefaultHandler clears the UARTs).
+    if cfg!(feature = "qemu") {
+        links::wake_on_links();
+    }
     log_info!(
         "pe-board: image for ({},{},{}) of {}x{}x{}: {} elements, {} nodes, {} steps",
         board[0],

@@ -2,10 +2,11 @@
 //!
 //! [`CmsdkUart`] drives the ARM CMSDK APB UART of the MPS2 FPGA images (and of QEMU's
 //! `mps2-an500`): DATA at +0x0, STATE at +0x4 (bit 0 TX full, bit 1 RX full), CTRL at +0x8
-//! (bit 0 TX enable, bit 1 RX enable), BAUDDIV at +0x10. Nothing blocks: `write_ready` and
-//! `read_ready` say whether a byte can move, as `StreamPort` expects. On the PE board the
-//! links are LVDS UARTs of the MCU; their HAL's serial types implement the same
-//! `embedded-io` traits and plug into `StreamLinks` unchanged.
+//! (bit 0 TX enable, bit 1 RX enable, bits 2 and 3 their interrupts), INTSTATUS/INTCLEAR at
+//! +0xC, BAUDDIV at +0x10. Nothing blocks: `write_ready` and `read_ready` say whether a byte
+//! can move, as `StreamPort` expects. The prototype board's USARTs
+//! ([`crate::bsp::stm32h743`]) implement the same `embedded-io` traits and plug into
+//! `StreamLinks` unchanged.
 
 use embedded_io::{ErrorKind, ErrorType, Read, ReadReady, Write, WriteReady};
 

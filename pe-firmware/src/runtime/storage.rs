@@ -77,14 +77,19 @@ impl Capacities {
     }
 
     /// What a board of profile `p` holds for scalar `T` and element `E`: the profile's
-    /// table, as many parallelepipeds as nodes with reduced integration (a board's block of
-    /// cells has fewer cells than nodes), and as many general elements as the RAM allows
-    /// after the reserve (stack, the runtime), the link buffers ([`LinkBuffers`]) and the
-    /// rest of the storage.
+    /// table (its nodes, at most the frames' limit), as many parallelepipeds as nodes with
+    /// reduced integration (a board's block of cells has fewer cells than nodes), and as
+    /// many general elements as the RAM allows after the reserve (stack, the runtime), the
+    /// link buffers ([`LinkBuffers`], unless the profile gives them a region of their own)
+    /// and the rest of the storage.
     pub const fn for_board<T: crate::physics::Real, E: ElementRecord<T>>(
         p: &BoardProfile,
     ) -> Capacities {
-        let nodes = link_proto::NODES_PER_BOARD_MAX;
+        let nodes = if (p.nodes_max as usize) < link_proto::NODES_PER_BOARD_MAX {
+            p.nodes_max as usize
+        } else {
+            link_proto::NODES_PER_BOARD_MAX
+        };
         let mut c = Capacities {
             materials: p.materials_max as usize,
             elements: 0,
@@ -103,8 +108,12 @@ impl Capacities {
             contact_sends: p.contact_sends_max as usize,
             graphics_nodes: nodes,
         };
-        let ram = (p.ram_bytes.saturating_sub(p.ram_reserved_bytes) as usize)
-            .saturating_sub(size_of::<LinkBuffers>());
+        let links = if p.link_ram_bytes == 0 {
+            size_of::<LinkBuffers>()
+        } else {
+            0 // in a region of their own
+        };
+        let ram = (p.ram_bytes.saturating_sub(p.ram_reserved_bytes) as usize).saturating_sub(links);
         c.elements = ram.saturating_sub(c.bytes::<T, E>()) / size_of::<E>();
         c
     }

@@ -99,7 +99,7 @@ fn main() -> ! {
         .flatten()
         .fold(0.0f64, |m, v| m.max(v.to_f64().abs()));
     pe_board::log_info!(
-        "bench,{},{},{},{},{},{},{},{:e}",
+        "bench,{},{},{},{},{},{},{},{}",
         VARIANT,
         ne,
         nb,
