@@ -105,8 +105,13 @@ pub fn repo_root() -> PathBuf {
 
 /// Cargo features of the firmware for a manifest's precision, integration and profile.
 pub fn firmware_features(precision: &str, integration: &str, profile: &str) -> Vec<&'static str> {
+    use pe_firmware::profile::{PE_BOARD, STM32H743_UART};
     let mut f = Vec::new();
-    if profile == pe_firmware::profile::PE_BOARD.name {
+    if profile == STM32H743_UART.name {
+        // The prototype's board support (USART faces and global port by DMA, clocks).
+        f.push("stm32h743");
+        f.push("defmt");
+    } else if profile == PE_BOARD.name {
         f.push("defmt"); // logs and fault messages over RTT (probe-rs attach)
     } else {
         f.push("qemu");
@@ -147,7 +152,7 @@ pub fn build_firmware(features: &[&str], bin: &str) -> Result<PathBuf> {
 }
 
 /// One board's flashable artefacts.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, serde::Deserialize)]
 pub struct ImageBoard {
     pub board: [usize; 3],
     /// The firmware with this board's position (OUT/board-X-Y-Z.elf).
@@ -161,9 +166,12 @@ pub struct ImageBoard {
 }
 
 /// `OUT/manifest.json` of `pe image`.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, serde::Deserialize)]
 pub struct ImageManifest {
     pub scene: String,
+    /// The compilation every board's schedule comes from (16 hex digits).
+    #[serde(default)]
+    pub compilation: String,
     pub machine: [usize; 3],
     pub profile: String,
     pub precision: String,
@@ -247,6 +255,7 @@ pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<Imag
     }
     let manifest = ImageManifest {
         scene: m.scene,
+        compilation: m.compilation,
         machine: m.machine,
         profile: m.profile,
         precision: m.precision,
@@ -260,6 +269,18 @@ pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<Imag
     std::fs::write(&p, serde_json::to_string_pretty(&manifest)?)
         .with_context(|| format!("writing {}", p.display()))?;
     Ok(manifest)
+}
+
+/// Reads `OUT/manifest.json` written by `pe image`.
+pub fn read_image_manifest(out: &Path) -> Result<ImageManifest> {
+    let p = out.join("manifest.json");
+    let text = std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
+    serde_json::from_str(&text).with_context(|| {
+        format!(
+            "parsing {}: not the manifest of `pe image` (a `pe compile` directory needs `pe image DIR -o OUT` first)",
+            p.display()
+        )
+    })
 }
 
 /// Final displacements by mesh node index, from a nodes CSV (`pe solve --output-nodes`,

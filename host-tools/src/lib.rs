@@ -7,6 +7,7 @@
 pub mod analysis;
 pub mod compile;
 pub mod firmware;
+pub mod flash;
 pub mod geom;
 pub mod mesh;
 pub mod output;

@@ -105,7 +105,9 @@ enum Command {
         /// Machine size, X x Y x Z boards.
         #[arg(long, default_value = "4x4x4")]
         boards: String,
-        /// Board profile the images must fit: pe-board | qemu-mps2-an500.
+        /// Board profile the images must fit: pe-board (the PE board's design, SPI links),
+        /// stm32h743-uart (the prototype array: STM32H743 boards over USART cables) or
+        /// qemu-mps2-an500 (the emulation).
         #[arg(long, default_value = "pe-board")]
         profile: String,
         /// Output directory.
@@ -135,6 +137,26 @@ enum Command {
         /// schedule: qemu for the emulation profile, f32, full). Without it, cargo builds it.
         #[arg(long)]
         firmware: Option<PathBuf>,
+    },
+    /// Flash every board of an array with probe-rs, each through the probe a board map
+    /// names, and check what each board then holds (its identity record and the head of its
+    /// schedule); then reset them all. OUT is a `pe image` directory of a board profile.
+    #[command(
+        after_help = "Example:\n  pe compile scenes/seed-box.toml --boards 2x2x2 --profile stm32h743-uart -o out/c\n  pe image out/c -o out/img\n  cat boards.toml   # [[board]] position = [0, 0, 0]  probe = \"0483:374e:002C00283132510D33353533\" ... one per board\n  pe flash out/img --map boards.toml --dry-run   # the commands, nothing run\n  pe flash out/img --map boards.toml"
+    )]
+    Flash {
+        /// Directory written by `pe image`.
+        out: PathBuf,
+        /// Board map (TOML): one `[[board]]` with `position = [x, y, z]` and `probe =
+        /// "VID:PID:SERIAL"` per board of the machine.
+        #[arg(long)]
+        map: PathBuf,
+        /// The probe-rs binary (default: probe-rs on PATH).
+        #[arg(long)]
+        probe_rs: Option<PathBuf>,
+        /// Print the commands, run none.
+        #[arg(long)]
+        dry_run: bool,
     },
     /// Compare final displacements bit for bit: REFERENCE is a nodes CSV (`pe solve
     /// --output-nodes`), OTHER a nodes CSV (board-sim) or a board's semihosting report.
@@ -334,6 +356,31 @@ fn main() -> Result<()> {
             output,
             firmware,
         } => image(&dir, &output, firmware.as_deref())?,
+        Command::Flash {
+            out,
+            map,
+            probe_rs,
+            dry_run,
+        } => {
+            let probe_rs = host_tools::flash::probe_rs_path(probe_rs);
+            let boards = host_tools::flash::flash_array(&out, &map, &probe_rs, dry_run)?;
+            for b in &boards {
+                let [x, y, z] = b.board;
+                if dry_run {
+                    for c in &b.commands {
+                        println!("{} {}", probe_rs.display(), c.join(" "));
+                    }
+                } else {
+                    println!(
+                        "board ({x},{y},{z}): flashed through probe {}, identity and schedule read back",
+                        b.probe
+                    );
+                }
+            }
+            if !dry_run {
+                println!("{} boards flashed, checked and reset", boards.len());
+            }
+        }
         Command::Compare {
             reference,
             other,
@@ -481,7 +528,14 @@ fn compile(
     overrides.apply(&mut sc);
     let machine = host_tools::compile::partition::Machine::parse(boards)?;
     let prof = pe_firmware::profile::profile(profile).with_context(|| {
-        format!("--profile {profile:?}: known profiles are pe-board, qemu-mps2-an500")
+        let known: Vec<&str> = pe_firmware::profile::PROFILES
+            .iter()
+            .map(|p| p.name)
+            .collect();
+        format!(
+            "--profile {profile:?}: known profiles are {}",
+            known.join(", ")
+        )
     })?;
     let problem = Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
     problem.print_notes();
