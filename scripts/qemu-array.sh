@@ -20,32 +20,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
-export RUST_BACKTRACE=0
-unset PE_SCHEDULE_IMAGE
-
-if ! command -v qemu-system-arm >/dev/null 2>&1; then
-    echo "qemu-array: installing qemu-system-arm"
-    apt-get update -qq && apt-get install -y -qq qemu-system-arm >/dev/null
-fi
-rustup target add thumbv7em-none-eabihf >/dev/null 2>&1 || rustup target add thumbv7em-none-eabihf
-
 TARGET_DIR=${CARGO_TARGET_DIR:-$ROOT/target}
 STEPS=${STEPS:-120}
 OUT=${OUT:-$TARGET_DIR/qemu-array}
 rm -rf "$OUT" && mkdir -p "$OUT"
-
-cargo build --release -q -p host-tools -p board-sim --bins
-PE=$TARGET_DIR/release/pe
-SIM=$TARGET_DIR/release/board-sim
-
-build_firmware() { # FEATURES -> prints the ELF path (a copy per variant)
-    cargo build --release -q --target thumbv7em-none-eabihf \
-        --manifest-path pe-firmware/board/Cargo.toml --target-dir "$TARGET_DIR" \
-        --bin pe-board --no-default-features --features "$1"
-    local elf=$OUT/pe-board-${1//,/-}.elf
-    cp "$TARGET_DIR/thumbv7em-none-eabihf/release/pe-board" "$elf"
-    echo "$elf"
-}
+source scripts/qemu-lib.sh
 ELF_F64=$(build_firmware qemu)
 ELF_F32=$(build_firmware qemu,f32)
 

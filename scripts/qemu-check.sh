@@ -13,39 +13,15 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
-export RUST_BACKTRACE=0
-# The schedule comes from the loader here, never linked into the ELF.
-unset PE_SCHEDULE_IMAGE
-
-if ! command -v qemu-system-arm >/dev/null 2>&1; then
-    echo "qemu-check: installing qemu-system-arm"
-    apt-get update -qq && apt-get install -y -qq qemu-system-arm >/dev/null
-fi
-rustup target add thumbv7em-none-eabihf >/dev/null 2>&1 || rustup target add thumbv7em-none-eabihf
-
 TARGET_DIR=${CARGO_TARGET_DIR:-$ROOT/target}
 STEPS=${STEPS:-1000}
 OUT=${OUT:-$TARGET_DIR/qemu-check}
 rm -rf "$OUT" && mkdir -p "$OUT"
-
-cargo build --release -q -p host-tools -p board-sim --bins
-PE=$TARGET_DIR/release/pe
-SIM=$TARGET_DIR/release/board-sim
+source scripts/qemu-lib.sh
 QEMU=(timeout 120 qemu-system-arm -cpu cortex-m7 -machine mps2-an500 -nographic
       -semihosting-config enable=on,target=native)
 ORIGIN=0x00200000   # ORIGIN(IMAGE) of memory-qemu.x (pe image's manifest says the same)
 
-build_firmware() { # FEATURES -> prints the ELF path (a copy per variant)
-    cargo build --release -q --target thumbv7em-none-eabihf \
-        --manifest-path pe-firmware/board/Cargo.toml --target-dir "$TARGET_DIR" \
-        --bin pe-board --no-default-features --features "$1"
-    local elf=$OUT/pe-board-${1//,/-}.elf
-    cp "$TARGET_DIR/thumbv7em-none-eabihf/release/pe-board" "$elf"
-    echo "$elf"
-}
-
-# Each element kernel: the built-in anatomy (every cell distorted: the general kernel) and
-# the seed's box at 10x5x5 cells (every cell a parallelepiped: the cheap kernel).
 sed 's/cells = \[20, 10, 10\]/cells = [10, 5, 5]/' scenes/seed-box.toml >"$OUT/box.toml"
 grep -q 'cells = \[10, 5, 5\]' "$OUT/box.toml"
 for SCENE in builtin box; do

@@ -256,12 +256,7 @@ fn main() -> Result<()> {
 fn parse_kill(s: &str) -> Result<([usize; 3], Duration)> {
     let bad = || anyhow::anyhow!("--kill {s:?}: expected X,Y,Z@SECONDS, e.g. 1,0,0@3");
     let (b, t) = s.split_once('@').ok_or_else(bad)?;
-    let c: Vec<usize> = b
-        .split(',')
-        .map(|v| v.trim().parse())
-        .collect::<Result<_, _>>()
-        .map_err(|_| bad())?;
-    let [x, y, z] = c[..] else { return Err(bad()) };
+    let [x, y, z] = board_sim::qemu::parse_board(b).ok_or_else(bad)?;
     let t: f64 = t.trim().parse().map_err(|_| bad())?;
     if !(t.is_finite() && t >= 0.0) {
         return Err(bad());

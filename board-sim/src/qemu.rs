@@ -54,17 +54,21 @@ impl std::fmt::Display for Connector {
     }
 }
 
+/// Board coordinates `X,Y,Z`.
+pub fn parse_board(s: &str) -> Option<[usize; 3]> {
+    let c: Vec<usize> = s
+        .split(',')
+        .map(|v| v.trim().parse().ok())
+        .collect::<Option<_>>()?;
+    c.try_into().ok()
+}
+
 impl Connector {
     /// `X,Y,Z:FACE`, e.g. `0,0,0:+x`.
     pub fn parse(s: &str) -> Result<Self> {
         let bad = || anyhow!("{s:?}: expected a connector X,Y,Z:FACE such as 0,0,0:+x");
         let (b, f) = s.split_once(':').ok_or_else(bad)?;
-        let c: Vec<usize> = b
-            .split(',')
-            .map(|v| v.trim().parse())
-            .collect::<Result<_, _>>()
-            .map_err(|_| bad())?;
-        let [x, y, z] = c[..] else { return Err(bad()) };
+        let [x, y, z] = parse_board(b).ok_or_else(bad)?;
         let face = link_proto::link::FACE_NAMES
             .iter()
             .position(|n| *n == f.trim())
@@ -189,12 +193,7 @@ fn timed_out_neighbour(text: &str) -> Option<[usize; 3]> {
     if !text.contains("no frame within the timeout") {
         return None;
     }
-    let inside = text.strip_prefix("board (")?.split(')').next()?;
-    let c: Vec<usize> = inside
-        .split(',')
-        .map(|v| v.parse().ok())
-        .collect::<Option<_>>()?;
-    let [x, y, z] = c[..] else { return None };
+    let [x, y, z] = parse_board(text.strip_prefix("board (")?.split(')').next()?)?;
     let face = text.split(": link ").nth(1)?.split(':').next()?;
     let f = Face::ALL.into_iter().find(|f| format!("{f:?}") == face)?;
     let n = pe_firmware::runtime::fault::neighbour([x as u8, y as u8, z as u8], f)?;
@@ -224,11 +223,9 @@ impl Activity {
     }
 }
 
-/// Copies `from` to `to` until `from` ends, counting bytes; once `to` fails the bytes are
-/// read and dropped (a dead board's cable: the sender must not stall on it).
-fn relay(mut from: TcpStream, mut to: TcpStream, sent: Arc<AtomicU64>, act: Arc<Activity>) {
+/// Reads `from` until it ends, counting the bytes, handing each chunk to `take`.
+fn pump(mut from: TcpStream, sent: &AtomicU64, act: &Activity, mut take: impl FnMut(&[u8])) {
     let mut buf = [0u8; 4096];
-    let mut open = true;
     loop {
         let n = match from.read(&mut buf) {
             Ok(0) | Err(_) => break,
@@ -236,10 +233,19 @@ fn relay(mut from: TcpStream, mut to: TcpStream, sent: Arc<AtomicU64>, act: Arc<
         };
         sent.fetch_add(n as u64, Ordering::Relaxed);
         act.bump(n);
-        if open && to.write_all(&buf[..n]).is_err() {
+        take(&buf[..n]);
+    }
+}
+
+/// Copies `from` to `to` until `from` ends, counting bytes; once `to` fails the bytes are
+/// read and dropped (a dead board's cable: the sender must not stall on it).
+fn relay(from: TcpStream, mut to: TcpStream, sent: Arc<AtomicU64>, act: Arc<Activity>) {
+    let mut open = true;
+    pump(from, &sent, &act, |bytes| {
+        if open && to.write_all(bytes).is_err() {
             open = false;
         }
-    }
+    });
 }
 
 /// The global network: packets from board `src`'s global port, routed on their destination.
@@ -304,19 +310,11 @@ impl GlobalSwitch {
     }
 
     /// Reads board `src`'s global port until it closes.
-    fn serve(&self, src: u8, mut from: TcpStream, sent: Arc<AtomicU64>, act: Arc<Activity>) {
+    fn serve(&self, src: u8, from: TcpStream, sent: Arc<AtomicU64>, act: Arc<Activity>) {
         let mut decoder = link_proto::framing::StreamDecoder::<
             { link_proto::limits::PACKET_COBS_LEN_MAX },
         >::new();
-        let mut buf = [0u8; 4096];
-        loop {
-            let n = match from.read(&mut buf) {
-                Ok(0) | Err(_) => break,
-                Ok(n) => n,
-            };
-            sent.fetch_add(n as u64, Ordering::Relaxed);
-            act.bump(n);
-            let mut rest = &buf[..n];
+        pump(from, &sent, &act, |mut rest| {
             while !rest.is_empty() {
                 let (used, event) = decoder.push(rest);
                 rest = &rest[used..];
@@ -333,7 +331,7 @@ impl GlobalSwitch {
                     None => {}
                 }
             }
-        }
+        });
     }
 }
 
