@@ -100,7 +100,8 @@ enum Command {
         /// Where the per-board ELFs and schedule blobs go (default DIR/qemu).
         #[arg(long)]
         images: Option<PathBuf>,
-        /// End board X,Y,Z's QEMU S seconds after the start (X,Y,Z@S).
+        /// End board X,Y,Z's QEMU S seconds after every board began (X,Y,Z@S): each has
+        /// told the host its compilation id, before its step 0.
         #[arg(long)]
         kill: Option<String>,
         /// Swap the far ends of the cables at two connectors (X,Y,Z:FACE,X,Y,Z:FACE, FACE

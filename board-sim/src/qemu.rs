@@ -92,7 +92,8 @@ pub struct ArrayOptions {
     pub images: Option<PathBuf>,
     /// The whole run's bound.
     pub deadline: Duration,
-    /// End this board's QEMU this long after the start (a dead board).
+    /// End this board's QEMU this long after every board began (told the host its
+    /// compilation id, before its step 0): a board dying mid-run.
     pub kill: Option<([usize; 3], Duration)>,
     /// Swap the far ends of the cables at these two connectors.
     pub cross: Option<[Connector; 2]>,
@@ -333,6 +334,15 @@ impl GlobalSwitch {
             }
         });
     }
+}
+
+/// Hello packets the host has taken (each board sends one before its step 0).
+fn hellos(net: &GlobalNet) -> usize {
+    net.host.lock().map_or(0, |h| {
+        h.iter()
+            .filter(|p| p.get(4) == Some(&PacketKind::Hello.code()))
+            .count()
+    })
 }
 
 /// Accepts one connection on `l` within `deadline`, while `alive` says the QEMU that
@@ -641,9 +651,15 @@ pub fn run_array(dir: &Path, opts: &ArrayOptions) -> Result<ArrayOutput> {
     let timeout = Duration::from_nanos(RuntimeConfig::default().link_timeout_ns);
     let quiet_limit = 2 * timeout + Duration::from_secs(5);
     let (mut last_activity, mut last_seen) = (act.get(), Instant::now());
+    // When every board had told the host its compilation id (before its step 0): the run
+    // has begun, and `--kill` counts from there.
+    let mut begun: Option<Instant> = None;
     loop {
         let now = Instant::now();
         let t = now.duration_since(start);
+        if begun.is_none() && hellos(&switch.sinks) >= boards.len() {
+            begun = Some(now);
+        }
         let mut running = 0;
         for e in &mut boards {
             if e.exited.is_none() {
@@ -678,10 +694,13 @@ pub fn run_array(dir: &Path, opts: &ArrayOptions) -> Result<ArrayOutput> {
             }
             let why = match (&end_all, opts.kill) {
                 (Some(w), _) => Some(w.clone()),
-                (None, Some((b, at))) if b == e.board && t >= at => Some(format!(
-                    "killed by the harness at {:.2} s (--kill)",
-                    t.as_secs_f64()
-                )),
+                (None, Some((b, after))) if b == e.board && begun.is_some_and(|s| now >= s + after) => {
+                    Some(format!(
+                        "killed by the harness at {:.2} s, {:.2} s after every board began (--kill)",
+                        t.as_secs_f64(),
+                        begun.map_or(0.0, |s| now.duration_since(s).as_secs_f64())
+                    ))
+                }
                 _ => None,
             };
             if let Some(w) = why {
