@@ -16,12 +16,12 @@
 # Writes OUT/timing.md: the emulated array's wall time per step beside board-sim's.
 #
 # Installs what it needs (qemu-system-arm with apt, the thumbv7em target).
-# Env: STEPS (default 120), OUT (default $CARGO_TARGET_DIR/qemu-array or target/qemu-array).
+# Env: STEPS (default 80), OUT (default $CARGO_TARGET_DIR/qemu-array or target/qemu-array).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
 TARGET_DIR=${CARGO_TARGET_DIR:-$ROOT/target}
-STEPS=${STEPS:-120}
+STEPS=${STEPS:-80}
 OUT=${OUT:-$TARGET_DIR/qemu-array}
 rm -rf "$OUT" && mkdir -p "$OUT"
 source scripts/qemu-lib.sh
