@@ -142,14 +142,21 @@ pub fn elf_address(elf: &[u8], offset: usize) -> Option<u64> {
     None
 }
 
-/// Hex bytes as probe-rs prints them (`0x`-prefixed or not, any separators).
+/// Hex bytes as probe-rs prints them: its plain form (`00 1f 2a ...`, byte width) or a
+/// table of lines `ADDRESS: BYTES` with an optional `|ASCII|` column, which is dropped.
 fn parse_hex_bytes(text: &str) -> Vec<u8> {
-    text.split(|c: char| c.is_whitespace() || c == ',' || c == '[' || c == ']')
-        .filter_map(|t| {
-            let t = t.trim().trim_start_matches("0x");
-            (t.len() == 2)
-                .then(|| u8::from_str_radix(t, 16).ok())
-                .flatten()
+    text.lines()
+        .flat_map(|line| {
+            let line = line.split('|').next().unwrap_or("");
+            let line = line.rsplit_once(':').map_or(line, |(_, rest)| rest);
+            line.split(|c: char| c.is_whitespace() || c == ',' || c == '[' || c == ']')
+                .filter_map(|t| {
+                    let t = t.trim().trim_start_matches("0x");
+                    (t.len() == 2)
+                        .then(|| u8::from_str_radix(t, 16).ok())
+                        .flatten()
+                })
+                .collect::<Vec<u8>>()
         })
         .collect()
 }
@@ -345,4 +352,19 @@ pub fn flash_array(
 /// `probe-rs` from PATH unless given.
 pub fn probe_rs_path(given: Option<PathBuf>) -> PathBuf {
     given.unwrap_or_else(|| PathBuf::from("probe-rs"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_hex_bytes;
+
+    /// Both of probe-rs's forms give the bytes, and only them.
+    #[test]
+    fn probe_rs_read_output_parses_in_either_form() {
+        assert_eq!(parse_hex_bytes("00 1f 2a ff\n"), [0x00, 0x1f, 0x2a, 0xff]);
+        let table = "0x08100000: 50 45 2d 42 |PE-B|\n0x08100004: 4f 41 |OA|\n";
+        assert_eq!(parse_hex_bytes(table), [0x50, 0x45, 0x2d, 0x42, 0x4f, 0x41]);
+        assert_eq!(parse_hex_bytes("[0x01, 0x02]"), [1, 2]);
+        assert!(parse_hex_bytes("Error: no probe").is_empty());
+    }
 }
