@@ -348,6 +348,9 @@ pub struct GlobalReliable<L, C, B> {
     address: u8,
     buf: B,
     peers: [Peer; PEERS_MAX],
+    /// Peers in use: `peers[..peers_used]` (taken in order, never given back), so the
+    /// timers and the flush walk only those.
+    peers_used: usize,
     /// Free send slots (bit set: free).
     free: [u64; TX_SLOTS_MAX / 64],
     /// Received packets not yet taken: `count` from ring slot `head` on.
@@ -398,6 +401,7 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
             address,
             buf,
             peers: [Peer::default(); PEERS_MAX],
+            peers_used: 0,
             free: [u64::MAX; TX_SLOTS_MAX / 64],
             head: 0,
             count: 0,
@@ -478,21 +482,24 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
 
     /// The slot of `addr`, taking a free one for a new address.
     fn peer(&mut self, addr: u8) -> Option<usize> {
-        let n = self.config.peers_max;
-        if let Some(i) = self.peers[..n]
+        let used = self.peers_used;
+        if let Some(i) = self.peers[..used]
             .iter()
             .position(|p| p.used && p.addr == addr)
         {
             return Some(i);
         }
-        let i = self.peers[..n].iter().position(|p| !p.used)?;
-        self.peers[i] = Peer {
+        if used >= self.config.peers_max {
+            return None;
+        }
+        self.peers[used] = Peer {
             addr,
             used: true,
             ..Peer::default()
         };
+        self.peers_used = used + 1;
         self.stats.peers += 1;
-        Some(i)
+        Some(used)
     }
 
     fn send_control(&mut self, dst: u8, kind: u8, seq: u16) -> bool {
@@ -624,7 +631,7 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
             self.config.retransmit_after_ns,
             self.config.retransmit_backoff_max_ns,
         );
-        for i in 0..self.config.peers_max {
+        for i in 0..self.peers_used {
             let p = &mut self.peers[i];
             if !p.used || p.base == p.next || now < p.timer_at || p.resend.is_some() {
                 continue;
@@ -645,7 +652,7 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
             p.timer_at = now.saturating_add(wait);
             self.stats.timeouts += 1;
         }
-        for i in 0..self.config.peers_max {
+        for i in 0..self.peers_used {
             self.flush(i);
         }
     }
