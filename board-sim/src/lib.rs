@@ -15,6 +15,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
 use host_tools::compile::{check_image_set, image_file_name, read_manifest, ImageFile, Manifest};
+use host_tools::solver::batched::board::{BoardBatches, BoardElements};
+use host_tools::solver::batched::Isa;
 use link_proto::reliable::{FaceRecovery, ReliableConfig};
 use link_proto::reliable_global::{GlobalConfig, GlobalRecovery};
 use link_proto::Links;
@@ -57,6 +59,10 @@ pub struct SimOptions {
     /// and its receiving end in the graphics and host sinks; `None` runs without (a lost or
     /// damaged global packet then stops the run).
     pub global_recovery: Option<GlobalConfig>,
+    /// Each board's element batches on the host's SIMD lanes
+    /// (`host_tools::solver::batched::board`, the bits of the firmware's scalar loop), or
+    /// the firmware's scalar loop itself (false).
+    pub batched: bool,
 }
 
 impl Default for SimOptions {
@@ -71,6 +77,7 @@ impl Default for SimOptions {
             check_manifest: true,
             recovery: Some(ReliableConfig::default()),
             global_recovery: Some(GlobalConfig::default()),
+            batched: true,
         }
     }
 }
@@ -787,11 +794,13 @@ struct BoardCtx {
     /// Boards that finished or stopped on a fault, of `total`.
     finished: Arc<AtomicUsize>,
     total: usize,
+    /// Element batches on the host's lanes ([`SimOptions::batched`]).
+    batched: bool,
 }
 
 /// Runs a worker's boards: each is polled in turn as far as its links allow; when no board
 /// can move, the worker waits on its doorbell.
-fn run_worker<T: WireReal, E: ElementRecord<T>>(
+fn run_worker<T: WireReal + 'static, E: ElementRecord<T> + 'static>(
     boards: Vec<BoardCtx>,
     sizing: StorageSizing,
     links: &mut [BoxedLinks],
@@ -821,6 +830,33 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
             Runtime::load(&ctx.image, ctx.coords.map(|c| c as u8), st, ctx.config)
                 .map_err(load_fault(ctx.coords))?,
         );
+    }
+    // Each board's element batches, packed for the host's lanes (or the scalar loop).
+    let mut kernels: Vec<BoardBatches<T, E>> = Vec::with_capacity(rts.len());
+    for (rt, ctx) in rts.iter().zip(&boards) {
+        let (general, laws) = rt.elements();
+        let counts = rt.header.counts;
+        let board = BoardElements {
+            general,
+            boxes: rt.boxes(),
+            laws,
+            general_ends: counts.batch_ends,
+            box_ends: counts.box_batch_ends,
+        };
+        let isa = if ctx.batched {
+            Some(Isa::detect())
+        } else {
+            None
+        };
+        let k = match isa {
+            Some(isa) => BoardBatches::build(&board, isa),
+            None => Ok(BoardBatches::scalar()),
+        };
+        kernels.push(k.map_err(|e| Fault {
+            board: ctx.coords.map(|v| v as u8),
+            step: 0,
+            kind: pe_firmware::runtime::FaultKind::Physics(e),
+        })?);
     }
     let send_frame = |rt: &Runtime<'_, T, E>, step: u64| {
         let nodes = rt
@@ -926,7 +962,7 @@ fn run_worker<T: WireReal, E: ElementRecord<T>>(
                 }
                 let before = rt.progress();
                 let mut link: &mut (dyn Links + Send) = &mut *links[i];
-                let complete = match rt.poll_step(&mut link, env) {
+                let complete = match rt.poll_step_with(&mut link, env, &kernels[i]) {
                     Ok(c) => c,
                     Err(f) => {
                         failed(rt, f);
@@ -1255,6 +1291,7 @@ pub fn run(
             stop: stop.clone(),
             finished: finished.clone(),
             total: count,
+            batched: opts.batched,
         };
         let lower = match &opts.faults {
             Some(spec) => {

@@ -174,6 +174,11 @@ struct RunArgs {
     /// numbered, acknowledged and retransmitted.
     #[arg(long)]
     no_recovery: bool,
+    /// Run the boards' element batches on the firmware's scalar loop, as a board does.
+    /// Default: on the host's SIMD lanes (AVX where the CPU has it), which compute the same
+    /// bits.
+    #[arg(long)]
+    scalar_kernel: bool,
     /// A link silent this long is a fault (s).
     #[arg(long, default_value_t = 10.0)]
     link_timeout_s: f64,
@@ -371,15 +376,20 @@ fn bench(level: &str, boards: &str, steps: u64) -> Result<()> {
         problem.mesh.cells.len()
     );
     println!("  serial solver: {:.1} steps/s", steps as f64 / serial_s);
-    for workers in [cores, machine.count()] {
+    // The boards' element batches on the host's lanes (the default) and on the firmware's
+    // scalar loop, on as many workers as cores; then one worker per board.
+    let runs = [(cores, true), (cores, false), (machine.count(), true)];
+    for (workers, batched) in runs {
         let opts = SimOptions {
             workers: Some(workers),
+            batched,
             ..Default::default()
         };
         let out = run(&dir, &opts, &mut |_, _| {})?;
         let d = host_tools::firmware::max_rel_diff(&serial.displacements, &out.displacements);
+        let kernel = if batched { "batched" } else { "scalar" };
         println!(
-            "  board-sim, {workers} worker threads: {:.1} steps/s = {:.2}x the serial run's time (max relative difference {d:.1e})",
+            "  board-sim, {workers} worker threads, {kernel} element kernel: {:.1} steps/s = {:.2}x the serial run's time (max relative difference {d:.1e})",
             steps as f64 / out.wall_s,
             out.wall_s / serial_s
         );
@@ -584,6 +594,7 @@ fn sim_options(
         link_timeout: Duration::from_secs_f64(a.link_timeout_s),
         workers: a.workers,
         storage,
+        batched: !a.scalar_kernel,
         ..Default::default()
     };
     if a.no_recovery {

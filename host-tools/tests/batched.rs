@@ -288,3 +288,135 @@ fn a_node_outside_the_mesh_is_named_as_the_scalar_loop_names_it() {
     bad_index_for::<f64>();
     bad_index_for::<f32>();
 }
+
+/// One board's batches (board-sim: `solver::batched::board`) from zero forces, batch by
+/// batch in step order, by the firmware's scalar loop and by the packs; `cuts` are the
+/// batch ends (fractions of each list), so batches of 0, 1 and uneven counts occur.
+#[allow(clippy::type_complexity)]
+fn board_both<T: Real>(
+    c: &Case<T>,
+    isa: Isa,
+    cuts: [f64; 4],
+) -> (
+    (Result<(), PhysicsError>, Vec<[T; 3]>),
+    (Result<(), PhysicsError>, Vec<[T; 3]>),
+) {
+    use host_tools::solver::batched::board::{BoardBatches, BoardElements};
+    use pe_firmware::physics::{HexBox, HexElement};
+    use pe_firmware::runtime::{BatchForces, BatchSlices, ScalarBatches};
+    fn run<T: Real, E: HexElement<T>>(
+        k: &impl BatchForces<T, E>,
+        board: &BoardElements<'_, T, E>,
+        c: &Case<T>,
+    ) -> (Result<(), PhysicsError>, Vec<[T; 3]>) {
+        let mut f = vec![[T::ZERO; 3]; c.u.len()];
+        let start = |ends: [u32; 4], b: usize| if b == 0 { 0 } else { ends[b - 1] as usize };
+        for b in 0..4 {
+            let (g0, x0) = (start(board.general_ends, b), start(board.box_ends, b));
+            let slices = BatchSlices {
+                index: b,
+                general: &board.general[g0..board.general_ends[b] as usize],
+                first_general: g0 as u32,
+                boxes: &board.boxes[x0..board.box_ends[b] as usize],
+                first_box: (board.general.len() + x0) as u32,
+            };
+            let r = k.batch_forces(slices, board.laws, &c.u, &mut f);
+            if r.is_err() {
+                return (r, f);
+            }
+        }
+        (Ok(()), f)
+    }
+    fn both_of<T: Real + 'static, E: HexElement<T> + Copy + 'static>(
+        general: &[E],
+        boxes: &[HexBox<T>],
+        c: &Case<T>,
+        isa: Isa,
+        cuts: [f64; 4],
+    ) -> (
+        (Result<(), PhysicsError>, Vec<[T; 3]>),
+        (Result<(), PhysicsError>, Vec<[T; 3]>),
+    ) {
+        let ends = |n: usize| cuts.map(|x| (x * n as f64).round() as u32);
+        let board = BoardElements {
+            general,
+            boxes,
+            laws: &c.laws,
+            general_ends: ends(general.len()),
+            box_ends: ends(boxes.len()),
+        };
+        let packed = BoardBatches::build(&board, isa).expect("packs");
+        assert!(
+            !packed.describe().contains("scalar"),
+            "{}: packed for lanes",
+            packed.describe()
+        );
+        (run(&ScalarBatches, &board, c), run(&packed, &board, c))
+    }
+    match &c.elements {
+        Elements::Reduced { general, boxes, .. } => both_of(general, boxes, c, isa, cuts),
+        Elements::Full(v) => both_of::<T, _>(v, &[], c, isa, cuts),
+    }
+}
+
+/// board-sim's boards run their batches on the lanes with the bits of the firmware's scalar
+/// loop: f64 and f32, reduced (general and parallelepiped kernels, laws of three kinds) and
+/// full, batches cut unevenly (an empty one, odd counts), from forces far from trivial.
+#[test]
+fn a_boards_batches_on_lanes_give_the_scalar_loops_bits() {
+    fn for_type<T: Real + 'static>() {
+        for cuts in [[0.25, 0.5, 0.75, 1.0], [0.0, 0.3, 0.35, 1.0]] {
+            for full in [false, true] {
+                let c = case::<T>(29, 23, full, 11);
+                for isa in isas() {
+                    let ((rs, fs), (rb, fb)) = board_both(&c, isa, cuts);
+                    let what = format!("board {} full {full} {isa:?} cuts {cuts:?}", T::NAME);
+                    assert_eq!(rs, Ok(()), "{what}: scalar");
+                    assert_eq!(rb, Ok(()), "{what}: lanes");
+                    assert_same_bits(&fs, &fb, &what);
+                }
+            }
+        }
+    }
+    for_type::<f64>();
+    for_type::<f32>();
+}
+
+/// An inverted element in a board's batch: the lanes report what the board's scalar loop
+/// reports (the element numbered as the board numbers it, its Jacobian), with the same
+/// forces added before it.
+#[test]
+fn an_inverted_element_in_a_boards_batch_is_named_as_the_board_names_it() {
+    fn for_type<T: Real + 'static>() {
+        for full in [false, true] {
+            let mut c = case::<T>(13, 11, full, 3);
+            let cell6 = match &c.elements {
+                Elements::Reduced { general, .. } => general[6].connectivity.nodes,
+                Elements::Full(v) => v[6].connectivity.nodes,
+            };
+            for &n in &cell6[4..] {
+                c.u[n as usize][2] = T::from_f64(-0.03);
+            }
+            for isa in isas() {
+                // Cell 6 in the second batch (elements 3 to 8 of 13).
+                let ((rs, fs), (rb, fb)) = board_both(&c, isa, [0.25, 0.7, 0.8, 1.0]);
+                let what = format!("board {} full {full} {isa:?}", T::NAME);
+                match rs {
+                    Err(PhysicsError::InvertedElement { element, .. }) => {
+                        assert!((3..=6).contains(&element), "{what}: names {element}")
+                    }
+                    ref e => panic!("{what}: unexpected {e:?}"),
+                }
+                assert_eq!(rb, rs, "{what}: the same error");
+                assert_eq!(fs.len(), fb.len());
+                let added = fs.iter().flatten().filter(|v| v.to_f64() != 0.0).count();
+                assert!(added > 0, "{what}: the batches before it added forces");
+                for (x, y) in fs.iter().flatten().zip(fb.iter().flatten()) {
+                    assert_eq!(x.to_f64().to_bits(), y.to_f64().to_bits(), "{what}");
+                }
+            }
+        }
+    }
+    for_type::<f64>();
+    for_type::<f32>();
+}

@@ -19,14 +19,23 @@ fn one_board_equals_serial_bit_for_bit() {
     let p = builtin_problem("coarse", 1000);
     let serial = solver::run(&p, "serial", &mut ()).unwrap().displacements;
     let dir = compile(&p, "builtin:coarse", "1x1x1", "b111");
-    let out = sim(&dir, &SimOptions::default());
-    assert_eq!(out.steps, 1000);
     let u_max = max_abs(&serial);
     assert!(
         u_max > 1e-4,
         "the probe has moved the tube: max |u| {u_max} m"
     );
-    assert_bit_identical(&serial, &out.displacements, "1x1x1 against serial");
+    // The board's element batches on the host's lanes (the default) and on the firmware's
+    // scalar loop itself.
+    for batched in [true, false] {
+        let opts = SimOptions {
+            batched,
+            ..Default::default()
+        };
+        let out = sim(&dir, &opts);
+        assert_eq!(out.steps, 1000);
+        let what = format!("1x1x1 against serial, batched {batched}");
+        assert_bit_identical(&serial, &out.displacements, &what);
+    }
 }
 
 /// The parallel solver (`pe solve --threads N`) computes the bits of one thread and of one

@@ -27,7 +27,9 @@ use link_proto::{Face, Links, Values};
 
 use crate::image::*;
 use crate::physics::explicit::{accumulate_internal_forces, update_node, NodeMove};
-use crate::physics::{CentralDifference, HexBox, HexFull, HexReduced, MaterialLaw, Real};
+use crate::physics::{
+    CentralDifference, HexBox, HexElement, HexFull, HexReduced, MaterialLaw, PhysicsError, Real,
+};
 
 pub use contact::{ContactState, BOARDS_MAX, PAIRS_MAX, TOOLS_MAX};
 pub use fault::{Fault, FaultKind};
@@ -59,6 +61,50 @@ pub trait Environment {
     fn now_ns(&mut self) -> u64;
     /// Called while waiting for a link (spin, yield, sleep until an interrupt...).
     fn idle(&mut self);
+}
+
+/// One batch of the step program's elements, as [`BatchForces`] sees it: the batch's
+/// general elements (numbered from `first_general` in errors), then its parallelepipeds
+/// (numbered from `first_box`, after all the general ones).
+pub struct BatchSlices<'s, T, E> {
+    /// The batch's index (0 to 3: x, y, z, inner).
+    pub index: usize,
+    pub general: &'s [E],
+    pub first_general: u32,
+    pub boxes: &'s [HexBox<T>],
+    pub first_box: u32,
+}
+
+/// Who computes a batch's internal forces: the board's scalar element loop
+/// ([`ScalarBatches`], what the firmware runs) or, on the host, a batched kernel over the
+/// same elements (board-sim). An implementation adds into `f` the bits of
+/// [`accumulate_internal_forces`] over the general elements and then the parallelepipeds,
+/// and fails with its error on the same element.
+pub trait BatchForces<T, E> {
+    fn batch_forces(
+        &self,
+        batch: BatchSlices<'_, T, E>,
+        laws: &[MaterialLaw<T>],
+        u: &[[T; 3]],
+        f: &mut [[T; 3]],
+    ) -> Result<(), PhysicsError>;
+}
+
+/// The scalar element loop ([`accumulate_internal_forces`]).
+pub struct ScalarBatches;
+
+impl<T: Real, E: HexElement<T>> BatchForces<T, E> for ScalarBatches {
+    #[inline(always)]
+    fn batch_forces(
+        &self,
+        b: BatchSlices<'_, T, E>,
+        laws: &[MaterialLaw<T>],
+        u: &[[T; 3]],
+        f: &mut [[T; 3]],
+    ) -> Result<(), PhysicsError> {
+        accumulate_internal_forces(b.general, b.first_general, laws, u, f)
+            .and_then(|()| accumulate_internal_forces(b.boxes, b.first_box, laws, u, f))
+    }
 }
 
 /// Runtime settings that are not part of the scene.
@@ -182,8 +228,8 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
     }
 
     /// Batch `b`: its general elements, then its parallelepipeds (numbered after all the
-    /// general ones in faults).
-    fn batch(&mut self, b: usize) -> Result<(), Fault> {
+    /// general ones in faults), by `kernel`.
+    fn batch(&mut self, b: usize, kernel: &impl BatchForces<T, E>) -> Result<(), Fault> {
         let c = self.header.counts;
         let range = |ends: [u32; 4]| {
             let start = if b == 0 { 0 } else { ends[b - 1] as usize };
@@ -192,23 +238,16 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         let (general, boxes) = (range(c.batch_ends), range(c.box_batch_ends));
         let st = &mut self.st;
         let n = c.nodes as usize;
-        accumulate_internal_forces(
-            &st.elements[general.clone()],
-            general.start as u32,
-            st.laws,
-            &st.u[..n],
-            &mut st.force[..n],
-        )
-        .and_then(|()| {
-            accumulate_internal_forces(
-                &st.boxes[boxes.clone()],
-                c.elements + boxes.start as u32,
-                st.laws,
-                &st.u[..n],
-                &mut st.force[..n],
-            )
-        })
-        .map_err(|e| self.fault(FaultKind::Physics(e)))
+        let slices = BatchSlices {
+            index: b,
+            general: &st.elements[general.clone()],
+            first_general: general.start as u32,
+            boxes: &st.boxes[boxes.clone()],
+            first_box: c.elements + boxes.start as u32,
+        };
+        kernel
+            .batch_forces(slices, st.laws, &st.u[..n], &mut st.force[..n])
+            .map_err(|e| self.fault(FaultKind::Physics(e)))
     }
 
     /// Subtracts the external force of the owned nodes of `stage`: their records' gravity,
@@ -253,6 +292,16 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         links: &mut impl Links,
         env: &mut impl Environment,
     ) -> Result<bool, Fault> {
+        self.poll_step_with(links, env, &ScalarBatches)
+    }
+
+    /// [`Self::poll_step`] with the batches' internal forces computed by `kernel`.
+    pub fn poll_step_with(
+        &mut self,
+        links: &mut impl Links,
+        env: &mut impl Environment,
+        kernel: &impl BatchForces<T, E>,
+    ) -> Result<bool, Fault> {
         if !self.hello.is_done() {
             if !self.hello_poll(links)? {
                 let now = env.now_ns();
@@ -274,7 +323,7 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
                 Op::Graphics => self.graphics_poll(links)?,
                 Op::Contact => self.contact_poll(links)?,
                 Op::Batch(k) => {
-                    self.batch(k as usize)?;
+                    self.batch(k as usize, kernel)?;
                     true
                 }
                 Op::External(stage) => {

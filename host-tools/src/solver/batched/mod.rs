@@ -31,6 +31,7 @@ use crate::problem::elements::Elements;
 
 #[cfg(target_arch = "x86_64")]
 mod avx;
+pub mod board;
 
 /// Up to `N` consecutive elements of one kernel, packed.
 pub struct Batch<K, L, const N: usize> {

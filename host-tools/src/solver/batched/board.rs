@@ -1,0 +1,240 @@
+//! The batched kernel on one board of a machine (board-sim's boards): each batch of the
+//! board's step program (x, y, z, inner) packed on its own, so the board's runtime computes
+//! its element forces on the host's lanes ([`BatchForces`]) with the bits of the firmware's
+//! scalar loop: the packs run the firmware's kernel code lane by lane and add each lane's
+//! forces in the scalar loop's order (see the parent module); a failed pack is rerun by the
+//! scalar kernel, which names the element as the board would.
+
+use std::any::Any;
+
+use pe_firmware::physics::{
+    HexBox, HexElement, HexFull, HexReduced, LaneKernel, LaneReal, Lanes, MaterialLaw, Pack,
+    PhysicsError, Real,
+};
+use pe_firmware::runtime::{BatchForces, BatchSlices, ScalarBatches};
+
+use super::{pack, run, Batch, Isa};
+
+/// Packs per batch of one kernel list.
+type PerBatch<K, L, const N: usize> = Vec<Vec<Batch<K, L, N>>>;
+
+/// One board's element batches, packed for the host's lanes (or the scalar loop where the
+/// scalar type has no lane type).
+pub struct BoardBatches<T, E> {
+    lanes: Option<Box<dyn BatchRun<T, E> + Send + Sync>>,
+}
+
+trait BatchRun<T, E> {
+    fn run(
+        &self,
+        b: BatchSlices<'_, T, E>,
+        laws: &[MaterialLaw<T>],
+        u: &[[T; 3]],
+        f: &mut [[T; 3]],
+    ) -> Result<(), PhysicsError>;
+    fn describe(&self) -> String;
+}
+
+struct Packed<K, L, const N: usize> {
+    general: PerBatch<K, L, N>,
+    boxes: PerBatch<HexBox<L>, L, N>,
+    /// Elements of each batch the packs hold (general, parallelepipeds).
+    counts: Vec<(usize, usize)>,
+    isa: Isa,
+}
+
+impl<S, E, K, L, const N: usize> BatchRun<S, E> for Packed<K, L, N>
+where
+    S: Real,
+    E: HexElement<S>,
+    K: LaneKernel<S, L, N>,
+    HexBox<L>: LaneKernel<S, L, N>,
+    L: LaneReal<S, N>,
+{
+    fn run(
+        &self,
+        b: BatchSlices<'_, S, E>,
+        laws: &[MaterialLaw<S>],
+        u: &[[S; 3]],
+        f: &mut [[S; 3]],
+    ) -> Result<(), PhysicsError> {
+        let i = b.index;
+        let (Some(g), Some(x), Some(&counts)) =
+            (self.general.get(i), self.boxes.get(i), self.counts.get(i))
+        else {
+            return ScalarBatches.batch_forces(b, laws, u, f);
+        };
+        if counts != (b.general.len(), b.boxes.len()) {
+            // Not the batch these packs were made from: the scalar loop.
+            return ScalarBatches.batch_forces(b, laws, u, f);
+        }
+        run(g, b.general, b.first_general as usize, laws, u, f, self.isa)
+            .and_then(|()| run(x, b.boxes, b.first_box as usize, laws, u, f, self.isa))
+    }
+    fn describe(&self) -> String {
+        let isa = match self.isa {
+            Isa::Avx => "avx",
+            Isa::Portable => "portable",
+        };
+        format!("{}x{N} {isa}", S::NAME)
+    }
+}
+
+/// Adds `offset` to the element an error names.
+fn offset_error(e: PhysicsError, offset: u32) -> PhysicsError {
+    match e {
+        PhysicsError::BadIndex { element } => PhysicsError::BadIndex {
+            element: element + offset,
+        },
+        PhysicsError::InvertedElement { element, jacobian } => PhysicsError::InvertedElement {
+            element: element + offset,
+            jacobian,
+        },
+        e => e,
+    }
+}
+
+/// The board's batches: `ends` are the step program's batch ends (`batch_ends`,
+/// `box_batch_ends` of the image's counts) into `general` and `boxes`.
+pub struct BoardElements<'s, T, E> {
+    pub general: &'s [E],
+    pub boxes: &'s [HexBox<T>],
+    pub laws: &'s [MaterialLaw<T>],
+    pub general_ends: [u32; 4],
+    pub box_ends: [u32; 4],
+}
+
+impl<T: Real, E> BoardElements<'_, T, E> {
+    /// The element ranges of every batch (general, parallelepipeds), checked against the
+    /// lists.
+    fn ranges(&self) -> Option<Vec<(std::ops::Range<usize>, std::ops::Range<usize>)>> {
+        let cut = |ends: [u32; 4], len: usize| -> Option<Vec<std::ops::Range<usize>>> {
+            let mut start = 0;
+            let mut out = Vec::with_capacity(4);
+            for &e in &ends {
+                let e = e as usize;
+                if e < start || e > len {
+                    return None;
+                }
+                out.push(start..e);
+                start = e;
+            }
+            Some(out)
+        };
+        let g = cut(self.general_ends, self.general.len())?;
+        let b = cut(self.box_ends, self.boxes.len())?;
+        Some(g.into_iter().zip(b).collect())
+    }
+}
+
+/// Packs a board's batches with lane type `L` when `T` is `S` and `E` is `ES`.
+fn packed<T, E, S, ES, L, const N: usize>(
+    board: &BoardElements<'_, T, E>,
+    isa: Isa,
+) -> Option<Result<Box<dyn BatchRun<T, E> + Send + Sync>, PhysicsError>>
+where
+    T: Real + 'static,
+    E: Copy + 'static,
+    S: Real + 'static,
+    ES: HexElement<S> + Pack<S, L, N> + Copy + 'static,
+    ES::Packed: LaneKernel<S, L, N> + Send + Sync + 'static,
+    HexBox<S>: Pack<S, L, N, Packed = HexBox<L>>,
+    HexBox<L>: LaneKernel<S, L, N> + Send + Sync,
+    MaterialLaw<S>: Pack<S, L, N, Packed = MaterialLaw<L>>,
+    MaterialLaw<L>: Send + Sync,
+    L: LaneReal<S, N> + Send + Sync + 'static,
+{
+    let general = board.general.to_vec();
+    let boxes = board.boxes.to_vec();
+    let laws = board.laws.to_vec();
+    let general = (&general as &dyn Any).downcast_ref::<Vec<ES>>()?;
+    let boxes = (&boxes as &dyn Any).downcast_ref::<Vec<HexBox<S>>>()?;
+    let laws = (&laws as &dyn Any).downcast_ref::<Vec<MaterialLaw<S>>>()?;
+    let Some(ranges) = board.ranges() else {
+        return Some(Err(PhysicsError::BadIndex { element: 0 }));
+    };
+    let mut p = Packed::<ES::Packed, L, N> {
+        general: Vec::new(),
+        boxes: Vec::new(),
+        counts: Vec::new(),
+        isa,
+    };
+    let general_count = general.len() as u32;
+    for (g, b) in ranges {
+        let packs = pack::<ES, S, L, N>(&general[g.clone()], laws)
+            .map_err(|e| offset_error(e, g.start as u32));
+        let box_packs = pack::<HexBox<S>, S, L, N>(&boxes[b.clone()], laws)
+            .map_err(|e| offset_error(e, general_count + b.start as u32));
+        match (packs, box_packs) {
+            (Ok(x), Ok(y)) => {
+                p.general.push(x);
+                p.boxes.push(y);
+                p.counts.push((g.len(), b.len()));
+            }
+            (Err(e), _) | (_, Err(e)) => return Some(Err(e)),
+        }
+    }
+    let b: Box<dyn BatchRun<S, ES> + Send + Sync> = Box::new(p);
+    // S is T and ES is E here: the downcasts above succeeded.
+    let any: Box<dyn Any> = Box::new(b);
+    any.downcast::<Box<dyn BatchRun<T, E> + Send + Sync>>()
+        .ok()
+        .map(|b| Ok(*b))
+}
+
+impl<T: Real + 'static, E: HexElement<T> + Copy + 'static> BoardBatches<T, E> {
+    /// Packs `board`'s batches for `isa` ([`Isa::detect`] for the best): 4 lanes in f64,
+    /// 8 in f32, reduced (general and parallelepiped kernels) or full integration; any
+    /// other scalar or element type runs the scalar loop.
+    pub fn build(board: &BoardElements<'_, T, E>, isa: Isa) -> Result<Self, PhysicsError> {
+        type Red<S> = HexReduced<S>;
+        type Full<S> = HexFull<S>;
+        let found = match isa {
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx => {
+                use super::avx::{F32x8, F64x4};
+                packed::<T, E, f64, Red<f64>, F64x4, 4>(board, isa)
+                    .or_else(|| packed::<T, E, f64, Full<f64>, F64x4, 4>(board, isa))
+                    .or_else(|| packed::<T, E, f32, Red<f32>, F32x8, 8>(board, isa))
+                    .or_else(|| packed::<T, E, f32, Full<f32>, F32x8, 8>(board, isa))
+            }
+            _ => {
+                let isa = Isa::Portable;
+                packed::<T, E, f64, Red<f64>, Lanes<f64, 4>, 4>(board, isa)
+                    .or_else(|| packed::<T, E, f64, Full<f64>, Lanes<f64, 4>, 4>(board, isa))
+                    .or_else(|| packed::<T, E, f32, Red<f32>, Lanes<f32, 8>, 8>(board, isa))
+                    .or_else(|| packed::<T, E, f32, Full<f32>, Lanes<f32, 8>, 8>(board, isa))
+            }
+        };
+        Ok(BoardBatches {
+            lanes: found.transpose()?,
+        })
+    }
+
+    /// The firmware's scalar loop.
+    pub fn scalar() -> Self {
+        BoardBatches { lanes: None }
+    }
+
+    /// What runs: the lane type ("f64x4 avx", ...) or "scalar".
+    pub fn describe(&self) -> String {
+        self.lanes
+            .as_ref()
+            .map_or_else(|| format!("{} scalar", T::NAME), |l| l.describe())
+    }
+}
+
+impl<T: Real, E: HexElement<T>> BatchForces<T, E> for BoardBatches<T, E> {
+    fn batch_forces(
+        &self,
+        b: BatchSlices<'_, T, E>,
+        laws: &[MaterialLaw<T>],
+        u: &[[T; 3]],
+        f: &mut [[T; 3]],
+    ) -> Result<(), PhysicsError> {
+        match &self.lanes {
+            Some(l) => l.run(b, laws, u, f),
+            None => ScalarBatches.batch_forces(b, laws, u, f),
+        }
+    }
+}
