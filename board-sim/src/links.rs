@@ -7,6 +7,7 @@
 //! replays exactly.
 
 use std::collections::VecDeque;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
@@ -48,6 +49,9 @@ impl Doorbell {
 /// One directed link: a bounded queue of frames plus the receiver's doorbell.
 pub struct Channel {
     queue: Mutex<VecDeque<Vec<u8>>>,
+    /// Frames in `queue`, kept beside it so that a receiver polling an empty link does not
+    /// take the lock (a board polls its links far more often than frames arrive).
+    len: AtomicUsize,
     bell: Arc<Doorbell>,
 }
 
@@ -231,6 +235,7 @@ fn push(ch: &Channel, packet: &[u8], max: usize) -> Result<(), SendError> {
         return Err(SendError::WouldBlock);
     }
     q.push_back(packet.to_vec());
+    ch.len.store(q.len(), Ordering::Release);
     drop(q);
     ch.bell.ring();
     Ok(())
@@ -254,6 +259,7 @@ impl Links for EmuLinks {
             return Err(SendError::WouldBlock);
         }
         q.push_back(frame.to_vec());
+        ch.len.store(q.len(), Ordering::Release);
         drop(q);
         ch.bell.ring();
         Ok(())
@@ -261,7 +267,7 @@ impl Links for EmuLinks {
 
     fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
         let ch = self.rx[face.index()].as_ref().ok_or(RecvError::NoLink)?;
-        pop_into(&ch.queue, buf)
+        pop_into(ch, buf)
     }
 
     fn try_send_global(&mut self, packet: &[u8]) -> Result<(), SendError> {
@@ -278,7 +284,7 @@ impl Links for EmuLinks {
         let Some(Some(ch)) = net.inboxes.get(self.address as usize) else {
             return Ok(None);
         };
-        pop_into(&ch.queue, buf)
+        pop_into(ch, buf)
     }
 }
 
@@ -306,6 +312,7 @@ pub fn build_links(
         if let Some(a) = link_proto::link::board_at(c[0], c[1], c[2]) {
             inboxes[a as usize] = Some(Arc::new(Channel {
                 queue: Mutex::new(VecDeque::new()),
+                len: AtomicUsize::new(0),
                 bell: bells[b].clone(),
             }));
             addresses[b] = a;
@@ -352,6 +359,7 @@ pub fn build_links(
             let nb = index(d);
             let ch = Arc::new(Channel {
                 queue: Mutex::new(VecDeque::new()),
+                len: AtomicUsize::new(0),
                 bell: bells[nb].clone(),
             });
             links[b].tx[face.index()] = Some(ch.clone());
@@ -784,10 +792,17 @@ impl<L: Links> Links for FaultyLinks<L> {
     }
 }
 
-/// Takes the oldest frame of `queue` into `buf`: its length, or None when the queue is empty.
-fn pop_into(queue: &Mutex<VecDeque<Vec<u8>>>, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
-    let mut q = queue.lock().map_err(|_| RecvError::NoLink)?;
-    match q.pop_front() {
+/// Takes the oldest frame of `ch` into `buf`: its length, or None when the queue is empty
+/// (seen without the lock; a frame pushed meanwhile is taken at the next poll, which its
+/// doorbell brings).
+fn pop_into(ch: &Channel, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
+    if ch.len.load(Ordering::Acquire) == 0 {
+        return Ok(None);
+    }
+    let mut q = ch.queue.lock().map_err(|_| RecvError::NoLink)?;
+    let front = q.pop_front();
+    ch.len.store(q.len(), Ordering::Release);
+    match front {
         None => Ok(None),
         Some(f) => {
             let dst = buf
