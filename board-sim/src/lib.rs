@@ -843,14 +843,10 @@ fn run_worker<T: WireReal + 'static, E: ElementRecord<T> + 'static>(
             general_ends: counts.batch_ends,
             box_ends: counts.box_batch_ends,
         };
-        let isa = if ctx.batched {
-            Some(Isa::detect())
+        let k = if ctx.batched {
+            BoardBatches::build(&board, Isa::detect())
         } else {
-            None
-        };
-        let k = match isa {
-            Some(isa) => BoardBatches::build(&board, isa),
-            None => Ok(BoardBatches::scalar()),
+            Ok(BoardBatches::scalar())
         };
         kernels.push(k.map_err(|e| Fault {
             board: ctx.coords.map(|v| v as u8),

@@ -216,20 +216,26 @@ fn batched_loop_gives_the_scalar_loops_bits_f32() {
     same_bits_for::<f32>();
 }
 
+/// 13 general cells and 11 boxes (or 24 full) with cell 6 folded (general, lane 2 of the
+/// second pack of 4, the first of 8): its top face (nodes of x-station 7, z = 1) pushed
+/// through its bottom.
+fn folded_case<T: Real>(full: bool) -> Case<T> {
+    let mut c = case::<T>(13, 11, full, 3);
+    let cell6 = match &c.elements {
+        Elements::Reduced { general, .. } => general[6].connectivity.nodes,
+        Elements::Full(v) => v[6].connectivity.nodes,
+    };
+    for &n in &cell6[4..] {
+        c.u[n as usize][2] = T::from_f64(-0.03);
+    }
+    c
+}
+
 /// An inverted element in the middle of a pack: the batched loop reports what the scalar
 /// loop reports (element, Jacobian), with the same forces added before it.
 fn inverted_for<T: Real>() {
     for full in [false, true] {
-        let mut c = case::<T>(13, 11, full, 3);
-        // Fold cell 6 (general, lane 2 of the second pack of 4, the first of 8):
-        // push its top face (nodes of x-station 7, z = 1) through its bottom.
-        let cell6 = match &c.elements {
-            Elements::Reduced { general, .. } => general[6].connectivity.nodes,
-            Elements::Full(v) => v[6].connectivity.nodes,
-        };
-        for &n in &cell6[4..] {
-            c.u[n as usize][2] = T::from_f64(-0.03);
-        }
+        let c = folded_case::<T>(full);
         for isa in isas() {
             let ((rs, fs), (rb, fb)) = both(&c, isa);
             let what = format!("{} full {full} {isa:?}", T::NAME);
@@ -303,22 +309,24 @@ fn board_both<T: Real>(
 ) {
     use host_tools::solver::batched::board::{BoardBatches, BoardElements};
     use pe_firmware::physics::{HexBox, HexElement};
-    use pe_firmware::runtime::{BatchForces, BatchSlices, ScalarBatches};
+    use pe_firmware::runtime::{batch_range, BatchForces, BatchSlices, ScalarBatches};
     fn run<T: Real, E: HexElement<T>>(
         k: &impl BatchForces<T, E>,
         board: &BoardElements<'_, T, E>,
         c: &Case<T>,
     ) -> (Result<(), PhysicsError>, Vec<[T; 3]>) {
         let mut f = vec![[T::ZERO; 3]; c.u.len()];
-        let start = |ends: [u32; 4], b: usize| if b == 0 { 0 } else { ends[b - 1] as usize };
         for b in 0..4 {
-            let (g0, x0) = (start(board.general_ends, b), start(board.box_ends, b));
+            let (g, x) = (
+                batch_range(board.general_ends, b),
+                batch_range(board.box_ends, b),
+            );
             let slices = BatchSlices {
                 index: b,
-                general: &board.general[g0..board.general_ends[b] as usize],
-                first_general: g0 as u32,
-                boxes: &board.boxes[x0..board.box_ends[b] as usize],
-                first_box: (board.general.len() + x0) as u32,
+                first_general: g.start as u32,
+                general: &board.general[g],
+                first_box: (board.general.len() + x.start) as u32,
+                boxes: &board.boxes[x],
             };
             let r = k.batch_forces(slices, board.laws, &c.u, &mut f);
             if r.is_err() {
@@ -389,14 +397,7 @@ fn a_boards_batches_on_lanes_give_the_scalar_loops_bits() {
 fn an_inverted_element_in_a_boards_batch_is_named_as_the_board_names_it() {
     fn for_type<T: Real + 'static>() {
         for full in [false, true] {
-            let mut c = case::<T>(13, 11, full, 3);
-            let cell6 = match &c.elements {
-                Elements::Reduced { general, .. } => general[6].connectivity.nodes,
-                Elements::Full(v) => v[6].connectivity.nodes,
-            };
-            for &n in &cell6[4..] {
-                c.u[n as usize][2] = T::from_f64(-0.03);
-            }
+            let c = folded_case::<T>(full);
             for isa in isas() {
                 // Cell 6 in the second batch (elements 3 to 8 of 13).
                 let ((rs, fs), (rb, fb)) = board_both(&c, isa, [0.25, 0.7, 0.8, 1.0]);

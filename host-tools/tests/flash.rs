@@ -104,43 +104,43 @@ struct Setup {
     state: PathBuf,
 }
 
-fn setup(tag: &str) -> Setup {
-    let dir = temp_dir(tag);
-    let compiled = dir.join("compiled");
-    let out = Command::new(PE)
-        .args([
-            "compile",
-            "--builtin",
-            "--level",
-            "coarse",
-            "--boards",
-            "2x1x1",
-        ])
-        .args(["--profile", "stm32h743-uart", "--steps", "10", "-o"])
-        .arg(&compiled)
-        .output()
-        .unwrap();
+/// Runs a `pe` command that must succeed (its stderr shown if not).
+fn pe_ok(cmd: &mut Command) {
+    let out = cmd.output().unwrap();
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+}
+
+fn setup(tag: &str) -> Setup {
+    let dir = temp_dir(tag);
+    let compiled = dir.join("compiled");
+    pe_ok(
+        Command::new(PE)
+            .args([
+                "compile",
+                "--builtin",
+                "--level",
+                "coarse",
+                "--boards",
+                "2x1x1",
+            ])
+            .args(["--profile", "stm32h743-uart", "--steps", "10", "-o"])
+            .arg(&compiled),
+    );
     let fw = dir.join("fake.elf");
     std::fs::write(&fw, fake_firmware()).unwrap();
     let images = dir.join("images");
-    let out = Command::new(PE)
-        .arg("image")
-        .arg(&compiled)
-        .arg("-o")
-        .arg(&images)
-        .arg("--firmware")
-        .arg(&fw)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    pe_ok(
+        Command::new(PE)
+            .arg("image")
+            .arg(&compiled)
+            .arg("-o")
+            .arg(&images)
+            .arg("--firmware")
+            .arg(&fw),
     );
     let probe_rs = dir.join("probe-rs");
     std::fs::write(&probe_rs, FAKE_PROBE_RS).unwrap();

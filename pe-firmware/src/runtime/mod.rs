@@ -75,6 +75,14 @@ pub struct BatchSlices<'s, T, E> {
     pub first_box: u32,
 }
 
+/// Batch `b`'s range (`b` < 4) in a kernel list cut at `ends` (the image counts'
+/// `batch_ends` or `box_batch_ends`).
+#[inline(always)]
+pub fn batch_range(ends: [u32; 4], b: usize) -> core::ops::Range<usize> {
+    let start = if b == 0 { 0 } else { ends[b - 1] as usize };
+    start..ends[b] as usize
+}
+
 /// Who computes a batch's internal forces: the board's scalar element loop
 /// ([`ScalarBatches`], what the firmware runs) or, on the host, a batched kernel over the
 /// same elements (board-sim). An implementation adds into `f` the bits of
@@ -231,11 +239,10 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
     /// general ones in faults), by `kernel`.
     fn batch(&mut self, b: usize, kernel: &impl BatchForces<T, E>) -> Result<(), Fault> {
         let c = self.header.counts;
-        let range = |ends: [u32; 4]| {
-            let start = if b == 0 { 0 } else { ends[b - 1] as usize };
-            start..ends[b] as usize
-        };
-        let (general, boxes) = (range(c.batch_ends), range(c.box_batch_ends));
+        let (general, boxes) = (
+            batch_range(c.batch_ends, b),
+            batch_range(c.box_batch_ends, b),
+        );
         let st = &mut self.st;
         let n = c.nodes as usize;
         let slices = BatchSlices {

@@ -6,12 +6,13 @@
 //! scalar kernel, which names the element as the board would.
 
 use std::any::Any;
+use std::ops::Range;
 
 use pe_firmware::physics::{
     HexBox, HexElement, HexFull, HexReduced, LaneKernel, LaneReal, Lanes, MaterialLaw, Pack,
     PhysicsError, Real,
 };
-use pe_firmware::runtime::{BatchForces, BatchSlices, ScalarBatches};
+use pe_firmware::runtime::{batch_range, BatchForces, BatchSlices, ScalarBatches};
 
 use super::{pack, run, Batch, Isa};
 
@@ -21,18 +22,9 @@ type PerBatch<K, L, const N: usize> = Vec<Vec<Batch<K, L, N>>>;
 /// One board's element batches, packed for the host's lanes (or the scalar loop where the
 /// scalar type has no lane type).
 pub struct BoardBatches<T, E> {
-    lanes: Option<Box<dyn BatchRun<T, E> + Send + Sync>>,
-}
-
-trait BatchRun<T, E> {
-    fn run(
-        &self,
-        b: BatchSlices<'_, T, E>,
-        laws: &[MaterialLaw<T>],
-        u: &[[T; 3]],
-        f: &mut [[T; 3]],
-    ) -> Result<(), PhysicsError>;
-    fn describe(&self) -> String;
+    lanes: Option<Box<dyn BatchForces<T, E> + Send + Sync>>,
+    /// What runs ([`Self::describe`]).
+    describe: String,
 }
 
 struct Packed<K, L, const N: usize> {
@@ -43,7 +35,7 @@ struct Packed<K, L, const N: usize> {
     isa: Isa,
 }
 
-impl<S, E, K, L, const N: usize> BatchRun<S, E> for Packed<K, L, N>
+impl<S, E, K, L, const N: usize> BatchForces<S, E> for Packed<K, L, N>
 where
     S: Real,
     E: HexElement<S>,
@@ -51,7 +43,7 @@ where
     HexBox<L>: LaneKernel<S, L, N>,
     L: LaneReal<S, N>,
 {
-    fn run(
+    fn batch_forces(
         &self,
         b: BatchSlices<'_, S, E>,
         laws: &[MaterialLaw<S>],
@@ -70,13 +62,6 @@ where
         }
         run(g, b.general, b.first_general as usize, laws, u, f, self.isa)
             .and_then(|()| run(x, b.boxes, b.first_box as usize, laws, u, f, self.isa))
-    }
-    fn describe(&self) -> String {
-        let isa = match self.isa {
-            Isa::Avx => "avx",
-            Isa::Portable => "portable",
-        };
-        format!("{}x{N} {isa}", S::NAME)
     }
 }
 
@@ -107,19 +92,12 @@ pub struct BoardElements<'s, T, E> {
 impl<T: Real, E> BoardElements<'_, T, E> {
     /// The element ranges of every batch (general, parallelepipeds), checked against the
     /// lists.
-    fn ranges(&self) -> Option<Vec<(std::ops::Range<usize>, std::ops::Range<usize>)>> {
-        let cut = |ends: [u32; 4], len: usize| -> Option<Vec<std::ops::Range<usize>>> {
-            let mut start = 0;
-            let mut out = Vec::with_capacity(4);
-            for &e in &ends {
-                let e = e as usize;
-                if e < start || e > len {
-                    return None;
-                }
-                out.push(start..e);
-                start = e;
-            }
-            Some(out)
+    fn ranges(&self) -> Option<Vec<(Range<usize>, Range<usize>)>> {
+        let cut = |ends: [u32; 4], len: usize| -> Option<Vec<Range<usize>>> {
+            let rs: Vec<Range<usize>> = (0..4).map(|b| batch_range(ends, b)).collect();
+            rs.iter()
+                .all(|r| r.start <= r.end && r.end <= len)
+                .then_some(rs)
         };
         let g = cut(self.general_ends, self.general.len())?;
         let b = cut(self.box_ends, self.boxes.len())?;
@@ -131,7 +109,7 @@ impl<T: Real, E> BoardElements<'_, T, E> {
 fn packed<T, E, S, ES, L, const N: usize>(
     board: &BoardElements<'_, T, E>,
     isa: Isa,
-) -> Option<Result<Box<dyn BatchRun<T, E> + Send + Sync>, PhysicsError>>
+) -> Option<Result<BoardBatches<T, E>, PhysicsError>>
 where
     T: Real + 'static,
     E: Copy + 'static,
@@ -174,12 +152,16 @@ where
             (Err(e), _) | (_, Err(e)) => return Some(Err(e)),
         }
     }
-    let b: Box<dyn BatchRun<S, ES> + Send + Sync> = Box::new(p);
+    let b: Box<dyn BatchForces<S, ES> + Send + Sync> = Box::new(p);
     // S is T and ES is E here: the downcasts above succeeded.
     let any: Box<dyn Any> = Box::new(b);
-    any.downcast::<Box<dyn BatchRun<T, E> + Send + Sync>>()
-        .ok()
-        .map(|b| Ok(*b))
+    let lanes = any
+        .downcast::<Box<dyn BatchForces<T, E> + Send + Sync>>()
+        .ok()?;
+    Some(Ok(BoardBatches {
+        lanes: Some(*lanes),
+        describe: isa.describe_lanes::<S, N>(),
+    }))
 }
 
 impl<T: Real + 'static, E: HexElement<T> + Copy + 'static> BoardBatches<T, E> {
@@ -206,21 +188,20 @@ impl<T: Real + 'static, E: HexElement<T> + Copy + 'static> BoardBatches<T, E> {
                     .or_else(|| packed::<T, E, f32, Full<f32>, Lanes<f32, 8>, 8>(board, isa))
             }
         };
-        Ok(BoardBatches {
-            lanes: found.transpose()?,
-        })
+        found.unwrap_or_else(|| Ok(Self::scalar()))
     }
 
     /// The firmware's scalar loop.
     pub fn scalar() -> Self {
-        BoardBatches { lanes: None }
+        BoardBatches {
+            lanes: None,
+            describe: format!("{} scalar", T::NAME),
+        }
     }
 
-    /// What runs: the lane type ("f64x4 avx", ...) or "scalar".
-    pub fn describe(&self) -> String {
-        self.lanes
-            .as_ref()
-            .map_or_else(|| format!("{} scalar", T::NAME), |l| l.describe())
+    /// What runs: the lane type ("f64x4 avx", ...) or "f64 scalar".
+    pub fn describe(&self) -> &str {
+        &self.describe
     }
 }
 
@@ -233,7 +214,7 @@ impl<T: Real, E: HexElement<T>> BatchForces<T, E> for BoardBatches<T, E> {
         f: &mut [[T; 3]],
     ) -> Result<(), PhysicsError> {
         match &self.lanes {
-            Some(l) => l.run(b, laws, u, f),
+            Some(l) => l.batch_forces(b, laws, u, f),
             None => ScalarBatches.batch_forces(b, laws, u, f),
         }
     }

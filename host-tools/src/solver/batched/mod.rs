@@ -215,6 +215,15 @@ pub enum Isa {
 }
 
 impl Isa {
+    /// `N` lanes of `S` on this instruction set: "f64x4 avx", "f32x8 portable".
+    fn describe_lanes<S: Real, const N: usize>(self) -> String {
+        let isa = match self {
+            Isa::Avx => "avx",
+            Isa::Portable => "portable",
+        };
+        format!("{}x{N} {isa}", S::NAME)
+    }
+
     /// The best this CPU runs.
     pub fn detect() -> Isa {
         #[cfg(target_arch = "x86_64")]
@@ -338,11 +347,7 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
         r.map_err(|e| elements.in_mesh(e))
     }
     fn describe(&self) -> String {
-        let isa = match self.isa {
-            Isa::Avx => "avx",
-            Isa::Portable => "portable",
-        };
-        format!("{}x{N} {isa}", S::NAME)
+        self.isa.describe_lanes::<S, N>()
     }
     fn plan(&self, parts: usize, node_count: usize) -> Option<Plan> {
         let lists: [Vec<([[u32; 8]; N], usize)>; 2] = match &self.packs {
