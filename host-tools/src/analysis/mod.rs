@@ -3,5 +3,6 @@
 
 pub mod bench;
 pub mod hourglass;
+pub mod plan;
 pub mod stability;
 pub mod tradeoff;

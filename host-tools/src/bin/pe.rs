@@ -220,6 +220,36 @@ enum Command {
         #[arg(long)]
         fine: bool,
     },
+    /// The cheapest model of a scene within an accuracy budget on its quantities of
+    /// interest (tool forces, the displacement of the touched surfaces): a coarser level,
+    /// the elements the loads hardly move pruned, then mass scaling and precision, each
+    /// measured against the full scene. Writes DIR/scene.toml and its mesh (a scene every
+    /// command takes), read back and run again to prove it, and DIR/plan.md, .json, .png.
+    #[command(
+        after_help = "Example:\n  pe plan --builtin --budget 2% --target boards=4x4x4 -o out/plan\n  pe solve out/plan/scene.toml"
+    )]
+    Plan {
+        #[command(flatten)]
+        scene: SceneArgs,
+        /// Largest error accepted on each quantity of interest, relative to its largest
+        /// value in the full scene: "2%" or "0.02". 0 returns the full model.
+        #[arg(long, default_value = "2%")]
+        budget: String,
+        /// real-time (`pe solve` keeps real time here), boards=XxYxZ (the compiler's
+        /// verdict on that array) or cheapest.
+        #[arg(long, default_value = "cheapest")]
+        target: String,
+        /// A node set of the mesh whose displacement is a quantity of interest too (and
+        /// is never pruned); repeat for more.
+        #[arg(long)]
+        watch: Vec<String>,
+        /// Board profile of the array's figures.
+        #[arg(long, default_value = "pe-board")]
+        profile: String,
+        /// Output directory.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
     /// Run the stability suite and write a readable report.
     #[command(after_help = "Example:\n  pe stability --only poisson -o out/stability.md")]
     Stability {
@@ -428,6 +458,23 @@ fn main() -> Result<()> {
                 level: scene.builtin.then(|| scene.level.clone()),
             };
             host_tools::analysis::tradeoff::run_cli(&sc, &dir, &name, &opts, &output)?
+        }
+        Command::Plan {
+            scene,
+            budget,
+            target,
+            watch,
+            profile,
+            output,
+        } => {
+            let (sc, dir, name) = scene.load()?;
+            let opts = host_tools::analysis::plan::Options {
+                budget_rel: host_tools::analysis::plan::parse_budget(&budget)?,
+                target: target.parse()?,
+                watch,
+                profile,
+            };
+            host_tools::analysis::plan::run_cli(&sc, &dir, &name, &opts, &output)?
         }
         Command::Stability { output, long, only } => {
             host_tools::analysis::stability::run_cli(output.as_deref(), long, only.as_deref())?

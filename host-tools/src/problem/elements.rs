@@ -128,4 +128,35 @@ impl<T: Real> Elements<T> {
             Elements::Full(v) => stored_energy(v, laws, u),
         }
     }
+
+    /// Stored energy of each mesh cell (J), in mesh order: [`Self::stored_energy`] cell by
+    /// cell.
+    pub fn cell_energies(
+        &self,
+        laws: &[MaterialLaw<T>],
+        u: &[[T; 3]],
+    ) -> Result<Vec<f64>, PhysicsError> {
+        let mut out = vec![0.0; self.len()];
+        match self {
+            Elements::Reduced {
+                general,
+                boxes,
+                cells,
+            } => {
+                let per = general
+                    .chunks(1)
+                    .map(|e| stored_energy(e, laws, u))
+                    .chain(boxes.chunks(1).map(|e| stored_energy(e, laws, u)));
+                for (k, w) in per.enumerate() {
+                    out[cells[k] as usize] = w.map_err(|e| self.in_mesh(e))?;
+                }
+            }
+            Elements::Full(v) => {
+                for (k, e) in v.chunks(1).enumerate() {
+                    out[k] = stored_energy(e, laws, u)?;
+                }
+            }
+        }
+        Ok(out)
+    }
 }

@@ -511,6 +511,16 @@ impl Problem {
         Ok(problem)
     }
 
+    /// The nodes the selector `s` picks on this problem's mesh, as `[[fixed]]`,
+    /// `[[prescribed]]`, `[[load]]` and `[[surface]]` pick them (`what` names it in errors).
+    pub fn select_nodes(&self, s: Selector<'_>, what: &str) -> Result<Vec<u32>> {
+        NodeSelector {
+            mesh: &self.mesh,
+            node_sets: &self.node_sets,
+        }
+        .select(s, what)
+    }
+
     /// True for the nodes on the mesh's boundary (the surface the graphics engine draws).
     pub fn surface_node_mask(&self) -> Vec<bool> {
         let mut m = vec![false; self.mesh.nodes.len()];

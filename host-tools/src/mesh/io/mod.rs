@@ -27,9 +27,11 @@ mod cells;
 mod msh;
 mod msh2;
 mod vtk;
+mod write;
 
 pub use msh::parse_msh;
 pub use vtk::{parse_vtk, parse_vtu};
+pub use write::to_msh22;
 
 /// Load a hexahedral mesh, choosing the reader by extension (case-insensitive): `.msh`
 /// (Gmsh MSH 4.1 or 2.2, see [`parse_msh`]), `.vtk` (legacy VTK unstructured grid up to

@@ -1,0 +1,453 @@
+//! `pe plan`: the planned model's error, measured here independently of the planner, stays
+//! within the budget on the built-in scene (tool and contact) and on a shared mesh with a
+//! load; a budget of 0 gives back the full model; pruning never removes what a tool, a
+//! contact surface, a load or a prescribed motion touches; the written scene runs unchanged
+//! through the solver, the compiler and board-sim.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use host_tools::analysis::plan::{self, prune, CellKind, Options, PlanReport, Target};
+use host_tools::problem::{NodeKind, Problem};
+use host_tools::scene::builtin::builtin_scene;
+use host_tools::scene::Scene;
+use host_tools::solver;
+use system_tests::*;
+
+fn options(budget_rel: f64) -> Options {
+    Options {
+        budget_rel,
+        target: Target::Cheapest,
+        watch: vec![],
+        profile: "pe-board".into(),
+    }
+}
+
+/// The scene on the shared parametric uterus (320 cells): held at its lower end, a 5 mN
+/// downward load on the tip of the left tube (the nodes within 4 mm of the tube's node
+/// farthest from the mesh's centre), ramped in over 50 ms; 0.1 s.
+fn loaded_uterus(dir: &Path, prescribed: bool) -> PathBuf {
+    let mesh_path = shared_meshes_dir().join("uterus_scaffold_hex320.msh");
+    let mesh = host_tools::mesh::io::load_mesh(&mesh_path).expect("shared mesh");
+    let tube = *mesh
+        .region_names
+        .iter()
+        .find(|(_, n)| *n == "left_oviduct")
+        .expect("left_oviduct region")
+        .0;
+    let tip = |region: i32| {
+        let c: [f64; 3] = core::array::from_fn(|i| {
+            mesh.nodes.iter().map(|p| p[i]).sum::<f64>() / mesh.nodes.len() as f64
+        });
+        let d = |p: &[f64; 3]| (0..3).map(|i| (p[i] - c[i]).powi(2)).sum::<f64>();
+        mesh.cells
+            .iter()
+            .zip(&mesh.cell_regions)
+            .filter(|(_, r)| **r == region)
+            .flat_map(|(cell, _)| cell.iter().map(|&n| mesh.nodes[n as usize]))
+            .fold([0.0; 3], |best, p| if d(&p) > d(&best) { p } else { best })
+    };
+    let t = tip(tube);
+    let mut text = format!(
+        r#"[mesh]
+file = "{}"
+
+[material]
+law = "neo-hookean"
+youngs_modulus = 10.0e3
+poisson_ratio = 0.45
+density = 1000.0
+
+[[fixed]]
+box = [[-1.0, -1.0, -1.0], [1.0, 1.0, -0.07]]
+
+[[load]]
+sphere = {{ center = [{}, {}, {}], radius = 0.004 }}
+force = [0.0, 0.0, -0.005]
+ramp = [[0.0, 0.0], [0.05, 1.0]]
+
+[solver]
+damping = 20.0
+duration = 0.1
+"#,
+        mesh_path.display(),
+        t[0],
+        t[1],
+        t[2]
+    );
+    if prescribed {
+        let right = *mesh
+            .region_names
+            .iter()
+            .find(|(_, n)| *n == "right_oviduct")
+            .expect("right_oviduct region")
+            .0;
+        let r = tip(right);
+        text += &format!(
+            "\n[[prescribed]]\nsphere = {{ center = [{}, {}, {}], radius = 0.004 }}\npath = [[0.0, 0.0, 0.0, 0.0], [0.05, 0.0, 0.002, 0.0]]\n",
+            r[0], r[1], r[2]
+        );
+    }
+    let p = dir.join("scene.toml");
+    std::fs::write(&p, text).expect("scene written");
+    p
+}
+
+/// Node of the full mesh at each node of the planned mesh, by exact coordinates (the plan
+/// writes coordinates in their shortest round-trip form).
+fn node_match(full: &Problem, planned: &Problem) -> Vec<usize> {
+    let key = |p: &[f64; 3]| p.map(f64::to_bits);
+    let at: HashMap<[u64; 3], usize> = full
+        .mesh
+        .nodes
+        .iter()
+        .enumerate()
+        .map(|(n, p)| (key(p), n))
+        .collect();
+    planned
+        .mesh
+        .nodes
+        .iter()
+        .map(|p| {
+            *at.get(&key(p))
+                .expect("a planned node is a node of the full mesh")
+        })
+        .collect()
+}
+
+/// Tool force averaged over each of `windows` equal windows of `duration_s` (a run with a
+/// constant step `dt_s`; `series[step * tools + tool]`).
+fn window_means(
+    series: &[[f64; 3]],
+    tools: usize,
+    dt_s: f64,
+    duration_s: f64,
+    windows: usize,
+) -> Vec<Vec<f64>> {
+    (0..tools)
+        .map(|t| {
+            let per: Vec<[f64; 3]> = series.iter().skip(t).step_by(tools).copied().collect();
+            (1..=windows)
+                .map(|k| {
+                    let (lo, hi) = (
+                        duration_s * (k - 1) as f64 / windows as f64,
+                        duration_s * k as f64 / windows as f64,
+                    );
+                    let inside: Vec<[f64; 3]> = per
+                        .iter()
+                        .enumerate()
+                        .filter(|(s, _)| {
+                            let time = (*s as f64 + 1.0) * dt_s;
+                            time > lo && time <= hi
+                        })
+                        .map(|(_, f)| *f)
+                        .collect();
+                    assert!(!inside.is_empty(), "window {k} holds a step");
+                    let m: [f64; 3] = core::array::from_fn(|i| {
+                        inside.iter().map(|f| f[i]).sum::<f64>() / inside.len() as f64
+                    });
+                    (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt()
+                })
+                .collect()
+        })
+        .collect()
+}
+
+fn norm(v: [f64; 3]) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+/// Checks a plan independently of the planner: the full scene and the written one run
+/// here, the final displacements of the touched nodes (contact surfaces, loads) compared
+/// node by node, and, with a tool, the tool force's window means (its magnitude: a
+/// weaker check than the planner's vector difference, done from the raw per-step series).
+/// Returns (planned problem, displacement error, force error).
+fn check_plan(
+    full_scene: &Scene,
+    dir: &Path,
+    out: &Path,
+    r: &PlanReport,
+) -> (Problem, f64, Option<f64>) {
+    let full = Problem::from_scene(full_scene, dir).expect("full scene");
+    let planned_scene = Scene::from_file(&out.join("scene.toml")).expect("written scene parses");
+    let planned = Problem::from_scene(&planned_scene, out).expect("written scene resolves");
+    assert_eq!(planned.mesh.cells.len(), r.final_model.elements);
+    let a = solver::run(&full, "full", &mut ()).expect("full run");
+    let b = solver::run(&planned, "planned", &mut ()).expect("planned run");
+    let map = node_match(&full, &planned);
+    assert_eq!(map.len(), b.displacements.len());
+    let mut touched: Vec<usize> = full.loads.iter().map(|l| l.node as usize).collect();
+    if let Some(c) = &full.contact {
+        touched.extend(c.node_globals.iter().map(|&n| n as usize));
+    }
+    touched.sort_unstable();
+    touched.dedup();
+    assert!(!touched.is_empty());
+    let back: HashMap<usize, usize> = map.iter().enumerate().map(|(k, &n)| (n, k)).collect();
+    let u_ref = touched
+        .iter()
+        .map(|&n| norm(a.displacements[n]))
+        .fold(0.0, f64::max);
+    assert!(u_ref > 1e-4, "the touched nodes moved: {u_ref:e} m");
+    let mut e = 0.0f64;
+    for &n in &touched {
+        let k = back[&n];
+        let d: [f64; 3] = core::array::from_fn(|i| a.displacements[n][i] - b.displacements[k][i]);
+        e = e.max(norm(d));
+    }
+    let force = full.contact.as_ref().map(|c| {
+        let tools = c.tool_names.len();
+        assert!(tools > 0);
+        let duration = full_scene.solver.duration.expect("duration");
+        let fa = window_means(
+            &a.tool_force,
+            tools,
+            full.time_step.dt_s,
+            duration,
+            plan::trace::SAMPLES,
+        );
+        let fb = window_means(
+            &b.tool_force,
+            tools,
+            planned.time_step.dt_s,
+            duration,
+            plan::trace::SAMPLES,
+        );
+        assert_eq!(fa.len(), fb.len());
+        fa.iter()
+            .zip(&fb)
+            .map(|(x, y)| {
+                assert_eq!(x.len(), y.len());
+                let peak = x.iter().copied().fold(0.0, f64::max);
+                assert!(
+                    peak > 1e-4,
+                    "the tool pressed: peak window force {peak:e} N"
+                );
+                x.iter()
+                    .zip(y)
+                    .map(|(p, q)| (p - q).abs())
+                    .fold(0.0, f64::max)
+                    / peak
+            })
+            .fold(0.0, f64::max)
+    });
+    (planned, e / u_ref, force)
+}
+
+/// The built-in scene (coarse, its 0.6 s), budget 2%: a model with fewer elements, its
+/// error within the budget by the planner's measure and by this test's own, and the
+/// written scene runs through the compiler and board-sim: one board bit-identical to the
+/// solver, a 2x2x2 machine within round-off of the sums' order.
+#[test]
+fn the_planned_builtin_scene_stays_within_its_budget_and_runs_everywhere() {
+    let out = temp_dir("plan-builtin");
+    let scene = builtin_scene("coarse").expect("builtin");
+    let r = plan::run(
+        &scene,
+        Path::new("."),
+        "builtin:coarse",
+        &options(0.02),
+        &out,
+    )
+    .expect("plan");
+    assert!(r.within_budget, "{:?}", r.final_model);
+    let full_elements = r.rows[0].elements;
+    assert!(
+        r.final_model.elements < full_elements,
+        "the plan pruned: {} of {full_elements}",
+        r.final_model.elements
+    );
+    let (planned, u_err, f_err) = check_plan(&scene, Path::new("."), &out, &r);
+    println!("builtin coarse: {} of {full_elements} elements, displacement error {u_err:e}, tool force error {f_err:?}", planned.mesh.cells.len());
+    assert!(u_err <= 0.02, "displacement error {u_err:e}");
+    let f_err = f_err.expect("the scene has a tool");
+    assert!(f_err <= 0.02, "tool force error {f_err:e}");
+    for name in ["plan.md", "plan.json", "plan.png", "mesh.msh"] {
+        let len = std::fs::metadata(out.join(name))
+            .map(|m| m.len())
+            .unwrap_or(0);
+        assert!(len > 100, "{name} written ({len} bytes)");
+    }
+    // Unchanged through the compiler and board-sim.
+    let serial = solver::run(&planned, "planned", &mut ())
+        .expect("solve")
+        .displacements;
+    assert!(max_abs(&serial) > 1e-4);
+    let src = out.join("scene.toml").display().to_string();
+    let one = compile(&planned, &src, "1x1x1", "plan-b111");
+    let sim =
+        board_sim::run(&one, &board_sim::SimOptions::default(), &mut |_, _| {}).expect("board-sim");
+    assert_bit_identical(
+        &serial,
+        &sim.displacements,
+        "planned scene, 1x1x1 against the solver",
+    );
+    let eight = compile(&planned, &src, "2x2x2", "plan-b222");
+    let sim = board_sim::run(&eight, &board_sim::SimOptions::default(), &mut |_, _| {})
+        .expect("board-sim");
+    let d = max_rel_diff(&serial, &sim.displacements);
+    let tol = match planned.solver.precision {
+        pe_firmware::image::Precision::F64 => 1e-12,
+        pe_firmware::image::Precision::F32 => 1e-4,
+    };
+    assert!(d < tol, "2x2x2 against the solver: {d:e}");
+}
+
+/// A shared mesh with a load (no tool): the same, by the displacement of the loaded nodes.
+#[test]
+fn a_planned_shared_mesh_with_a_load_stays_within_its_budget() {
+    let dir = temp_dir("plan-load");
+    let path = loaded_uterus(&dir, false);
+    let scene = Scene::from_file(&path).expect("scene");
+    let out = dir.join("plan");
+    let r = plan::run(&scene, &dir, "uterus320 loaded", &options(0.02), &out).expect("plan");
+    assert!(r.within_budget, "{:?}", r.final_model);
+    assert!(
+        r.final_model.elements < r.rows[0].elements,
+        "the plan pruned"
+    );
+    let (planned, u_err, f_err) = check_plan(&scene, &dir, &out, &r);
+    println!(
+        "uterus320: {} of {} elements, displacement error {u_err:e}",
+        planned.mesh.cells.len(),
+        r.rows[0].elements
+    );
+    assert!(f_err.is_none());
+    assert!(u_err <= 0.02, "displacement error {u_err:e}");
+}
+
+/// Budget 0: nothing may change, so the written model is the full one, run to the same
+/// bits.
+#[test]
+fn a_budget_of_zero_gives_the_full_model() {
+    let out = temp_dir("plan-zero");
+    let scene = builtin_scene("coarse").expect("builtin");
+    let r = plan::run(
+        &scene,
+        Path::new("."),
+        "builtin:coarse",
+        &options(0.0),
+        &out,
+    )
+    .expect("plan");
+    let full = Problem::from_scene(&scene, Path::new(".")).expect("full");
+    assert_eq!(r.rows.len(), 1, "only the reference ran");
+    assert_eq!(r.final_model.elements, full.mesh.cells.len());
+    assert_eq!(r.pruned_elements, 0);
+    let planned = Problem::from_scene(
+        &Scene::from_file(&out.join("scene.toml")).expect("parses"),
+        &out,
+    )
+    .expect("resolves");
+    assert_eq!(planned.mesh.cells, full.mesh.cells);
+    assert_eq!(planned.mesh.nodes, full.mesh.nodes);
+    assert_eq!(planned.solver.precision, full.solver.precision);
+    assert_eq!(planned.time_step.dt_s, full.time_step.dt_s);
+    assert_eq!(r.final_model.displacement_err_rel, 0.0);
+    assert_eq!(r.final_model.tool_force_err_rel, Some(0.0));
+    assert!(r.within_budget);
+}
+
+/// Pruning as hard as it goes (everything moving less than half the largest motion) still
+/// keeps every element around a tool's or a contact pair's surface node, a loaded node and
+/// a prescribed node (found here from the resolved problem), holds none of those nodes,
+/// and gives the reduced problem the same loads, contact faces and prescribed nodes.
+#[test]
+fn pruning_never_removes_what_tools_contacts_loads_or_prescribed_motions_touch() {
+    let dir = temp_dir("plan-prune");
+    let path = loaded_uterus(&dir, true);
+    let uterus = Scene::from_file(&path).expect("scene");
+    let builtin = builtin_scene("coarse").expect("builtin");
+    for (scene, sdir) in [(uterus, dir.clone()), (builtin, PathBuf::from("."))] {
+        let mut scene = scene;
+        scene.solver.duration = None;
+        scene.solver.steps = Some(1500);
+        let p = Problem::from_scene(&scene, &sdir).expect("resolves");
+        let pilot = plan::trace::run(&p, "pilot").expect("pilot");
+        let mut touched = vec![false; p.mesh.nodes.len()];
+        for l in &p.loads {
+            touched[l.node as usize] = true;
+        }
+        for (n, k) in p.node_kind.iter().enumerate() {
+            if matches!(k, NodeKind::Prescribed(_)) {
+                touched[n] = true;
+            }
+        }
+        if let Some(c) = &p.contact {
+            for s in &c.surfaces {
+                for (q, _) in &s.faces {
+                    for &n in q {
+                        touched[n as usize] = true;
+                    }
+                }
+            }
+        }
+        let driven = prune::driven_nodes(&p, &scene, &[]).expect("driven");
+        let pilot = prune::Pilot {
+            motion_m: &pilot.motion_m,
+            energy_j: &pilot.energy_j,
+        };
+        let r = prune::prune(&p, &scene, pilot, &driven, Some(0.5)).expect("prunes");
+        let pruned = r
+            .cell_kind
+            .iter()
+            .filter(|k| **k == CellKind::Pruned)
+            .count();
+        assert!(pruned > 0, "{}: something was pruned", p.mesh.source);
+        assert!(touched.iter().any(|&t| t));
+        for (c, cell) in p.mesh.cells.iter().enumerate() {
+            if cell.iter().any(|&n| touched[n as usize]) {
+                assert_ne!(
+                    r.cell_kind[c],
+                    CellKind::Pruned,
+                    "cell {c} touches a driven node"
+                );
+            }
+        }
+        let q = r.problem().expect("the reduced scene resolves");
+        let held: Vec<usize> = (0..p.mesh.nodes.len())
+            .filter(|&n| touched[n])
+            .map(|n| r.node_map[n].expect("a touched node is kept") as usize)
+            .filter(|&k| q.node_kind[k] == NodeKind::Fixed)
+            .collect();
+        let fixed_before: usize = (0..p.mesh.nodes.len())
+            .filter(|&n| touched[n] && p.node_kind[n] == NodeKind::Fixed)
+            .count();
+        assert_eq!(
+            held.len(),
+            fixed_before,
+            "no touched node is held at the cut"
+        );
+        assert_eq!(q.loads.len(), p.loads.len());
+        for (a, b) in p.loads.iter().zip(&q.loads) {
+            assert_eq!(r.node_map[a.node as usize], Some(b.node));
+            assert_eq!(a.force, b.force);
+        }
+        let presc = |pp: &Problem| {
+            pp.node_kind
+                .iter()
+                .filter(|k| matches!(k, NodeKind::Prescribed(_)))
+                .count()
+        };
+        assert_eq!(presc(&q), presc(&p));
+        match (&p.contact, &q.contact) {
+            (Some(a), Some(b)) => {
+                assert_eq!(a.surfaces.len(), b.surfaces.len());
+                for (sa, sb) in a.surfaces.iter().zip(&b.surfaces) {
+                    let mut fa: Vec<[u32; 4]> = sa
+                        .faces
+                        .iter()
+                        .map(|(f, _)| f.map(|n| r.node_map[n as usize].unwrap_or(u32::MAX)))
+                        .collect();
+                    let mut fb: Vec<[u32; 4]> = sb.faces.iter().map(|(f, _)| *f).collect();
+                    fa.sort_unstable();
+                    fb.sort_unstable();
+                    assert!(!fa.is_empty());
+                    assert_eq!(fa, fb, "surface {} keeps exactly its faces", sa.name);
+                }
+            }
+            (None, None) => {}
+            _ => panic!("contact kept or lost"),
+        }
+    }
+}
