@@ -21,7 +21,10 @@
 //! 2. pruning: the elements whose motion and stored energy in the current model's run stay
 //!    below a fraction of the largest (tried from 10% down to 0.01%; the first that passes
 //!    is bisected towards the one before it), see [`prune`];
-//! 3. solver settings: a longer step where the pruned model allows one (with contact,
+//! 3. contact surfaces cut down to the faces with a node that came within half (then one)
+//!    longest face diagonal of a tool or of the paired surface in the current model's run
+//!    (contact costs per surface node every step);
+//! 4. solver settings: a longer step where the pruned model allows one (with contact,
 //!    first keeping the contact stiffness, see [`PENALTY_MAX`]), mass scaling 16, then 4
 //!    (the step grows by its root), then f32.
 //!
@@ -562,7 +565,12 @@ pub fn run(
     // The sampled runs record every step; the final model's speed is timed as `pe solve`
     // runs it: no observer, every core.
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let timed = crate::solver::run_threads(&p_final, &format!("{name} [planned, timed]"), &mut (), cores)?;
+    let timed = crate::solver::run_threads(
+        &p_final,
+        &format!("{name} [planned, timed]"),
+        &mut (),
+        cores,
+    )?;
     final_model.host_wall_s = timed.report.wall_s;
     final_model.host_real_time_factor = timed.report.real_time_factor;
     let (target_met, target_note, boards) = match opts.target {
@@ -649,6 +657,126 @@ fn quantities(p: &Problem, t: &Trace, watched: &[usize]) -> Vec<String> {
     };
     q.push(format!("displacement over time of {what}"));
     q
+}
+
+/// Contact-surface margins tried, in longest face diagonals of the contact surfaces.
+pub const TRIM_FACE_DIAMETERS: [f64; 2] = [0.5, 1.0];
+
+/// Distance (m) from `x` to the capsule `a`–`b` of radius `r` (negative inside).
+fn capsule_distance(x: [f64; 3], a: [f64; 3], b: [f64; 3], r: f64) -> f64 {
+    let ab: [f64; 3] = core::array::from_fn(|i| b[i] - a[i]);
+    let ax: [f64; 3] = core::array::from_fn(|i| x[i] - a[i]);
+    let l2 = ab.iter().map(|v| v * v).sum::<f64>();
+    let t = if l2 > 0.0 {
+        (ax.iter().zip(&ab).map(|(p, q)| p * q).sum::<f64>() / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    norm(core::array::from_fn(|i| ax[i] - t * ab[i])) - r
+}
+
+/// The held model with each contact surface cut down to its faces with a node that came
+/// within `k` longest face diagonals of a tool of the surface or of a node of the surface
+/// it pairs with, at a sample of the held model's run (a face is kept whole: the other
+/// side's nodes meet it anywhere on it); measured. None when it changes nothing or would
+/// leave a surface without a face.
+fn try_trim(s: &mut Search<'_>, held: &Held, watch: &[String], k: f64) -> Result<Option<Held>> {
+    let p = &held.problem;
+    let Some(c) = &p.contact else {
+        return Ok(None);
+    };
+    let (mut r, view) = match &held.model {
+        Model::Pruned(r) => ((**r).clone(), held.view.clone()),
+        Model::Full { scene } => {
+            let d = prune::driven_nodes(p, scene, watch)?;
+            let pilot = prune::Pilot {
+                motion_m: &held.trace.motion_m,
+                energy_j: &held.trace.energy_j,
+            };
+            let r = prune::prune(p, scene, pilot, &d, None)?;
+            let v = held.view.then_pruned(&r.node_map);
+            (r, v)
+        }
+    };
+    let margin = k * c.face_diameter_max_m;
+    let at = |n: usize, smp: usize| -> [f64; 3] {
+        core::array::from_fn(|i| p.mesh.nodes[n][i] + held.trace.u[smp][n][i])
+    };
+    let nodes_of = |si: usize| -> Vec<usize> {
+        let mut v: Vec<usize> = c.surfaces[si]
+            .faces
+            .iter()
+            .flat_map(|(q, _)| q.iter().map(|&n| n as usize))
+            .collect();
+        v.sort_unstable();
+        v.dedup();
+        v
+    };
+    let mut near = vec![f64::INFINITY; p.mesh.nodes.len()];
+    for (si, _) in c.surfaces.iter().enumerate() {
+        let mine = nodes_of(si);
+        for smp in 0..held.trace.u.len() {
+            let t = held.trace.times_s[smp];
+            for tool in c.tools.iter().filter(|t| t.surface as usize == si) {
+                let d = p.paths[tool.path as usize].at(t);
+                let a: [f64; 3] = core::array::from_fn(|i| tool.capsule.a[i] + d[i]);
+                let b: [f64; 3] = core::array::from_fn(|i| tool.capsule.b[i] + d[i]);
+                for &n in &mine {
+                    near[n] =
+                        near[n].min(capsule_distance(at(n, smp), a, b, tool.capsule.radius_m));
+                }
+            }
+            for pair in &c.pairs {
+                let other = match (pair.a as usize, pair.b as usize) {
+                    (a, b) if a == si => b,
+                    (a, b) if b == si => a,
+                    _ => continue,
+                };
+                let theirs: Vec<[f64; 3]> = nodes_of(other).iter().map(|&n| at(n, smp)).collect();
+                for &n in &mine {
+                    let x = at(n, smp);
+                    for y in &theirs {
+                        near[n] = near[n].min(norm(core::array::from_fn(|i| x[i] - y[i])));
+                    }
+                }
+            }
+        }
+    }
+    let mut dropped = 0usize;
+    for (si, surf) in c.surfaces.iter().enumerate() {
+        let kept: Vec<u32> = {
+            let mut v: Vec<u32> = surf
+                .faces
+                .iter()
+                .filter(|(q, _)| q.iter().any(|&n| near[n as usize] <= margin))
+                .flat_map(|(q, _)| q.iter().copied())
+                .collect();
+            v.sort_unstable();
+            v.dedup();
+            v
+        };
+        if kept.is_empty() {
+            return Ok(None);
+        }
+        dropped += nodes_of(si).len() - kept.len();
+        r.node_sets.insert(format!("plan_surface_{si}"), kept);
+    }
+    if dropped == 0 {
+        return Ok(None);
+    }
+    let q = r.problem()?;
+    let kept_nodes = q.contact.as_ref().map_or(0, |c| c.node_globals.len());
+    let choice = format!(
+        "contact surfaces cut to what came within {k} face diagonals ({:.2} mm) of a tool or the paired surface: {kept_nodes} contact nodes of {}",
+        1e3 * margin,
+        c.node_globals.len()
+    );
+    Ok(s.try_model(&choice, &q, &view)?.map(|t| Held {
+        model: Model::Pruned(Box::new(r)),
+        problem: q,
+        trace: t,
+        view,
+    }))
 }
 
 /// What one pruning fraction gave.
@@ -763,6 +891,15 @@ fn search(s: &mut Search<'_>, held: &mut Held, scene: &Scene, watch: &[String]) 
         }
         if let Some((_, h)) = passed {
             *held = *h;
+        }
+    }
+    // 2b. Contact surfaces trimmed to what came near the tool or the other surface.
+    if held.problem.contact.is_some() {
+        for k in TRIM_FACE_DIAMETERS {
+            if let Some(h) = try_trim(s, held, watch, k)? {
+                *held = h;
+                break;
+            }
         }
     }
     // 3. Solver settings on the model held.
