@@ -382,7 +382,7 @@ fn pruning_never_removes_what_tools_contacts_loads_or_prescribed_motions_touch()
                 }
             }
         }
-        let driven = prune::driven_nodes(&p, &scene, &[]).expect("driven");
+        let driven = prune::driven_nodes(&p, &[]).expect("driven");
         let pilot = prune::Pilot {
             motion_m: &pilot.motion_m,
             energy_j: &pilot.energy_j,

@@ -511,6 +511,19 @@ impl Problem {
         Ok(problem)
     }
 
+    /// Fixes `scene`'s simulated time rather than its step count, for studies whose runs
+    /// change `dt`: a scene given by `steps` gets the `duration` those steps cover, and
+    /// `steps` is cleared.
+    pub fn hold_duration(scene: &mut Scene, scene_dir: &Path) -> Result<()> {
+        if scene.solver.duration.is_none() {
+            let p = Problem::from_scene(scene, scene_dir)?;
+            let dt = p.time_step.dt_s;
+            scene.solver.duration = Some(p.steps(dt) as f64 * dt);
+        }
+        scene.solver.steps = None;
+        Ok(())
+    }
+
     /// The nodes the selector `s` picks on this problem's mesh, as `[[fixed]]`,
     /// `[[prescribed]]`, `[[load]]` and `[[surface]]` pick them (`what` names it in errors).
     pub fn select_nodes(&self, s: Selector<'_>, what: &str) -> Result<Vec<u32>> {

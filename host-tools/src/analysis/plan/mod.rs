@@ -478,17 +478,12 @@ pub fn run(
         _ => Machine { dims: [4, 4, 4] },
     };
     let mut scene = scene.clone();
-    if scene.solver.duration.is_none() {
-        // Candidates change dt: hold the simulated time fixed, not the step count.
-        let p = Problem::from_scene(&scene, dir)?;
-        let dt = p.time_step.dt_s;
-        scene.solver.duration = Some(p.steps(dt) as f64 * dt);
-    }
-    scene.solver.steps = None;
+    // Candidates change dt: hold the simulated time fixed, not the step count.
+    Problem::hold_duration(&mut scene, dir)?;
     scene.solver.dt = None;
     let p_ref = Problem::from_scene(&scene, dir).with_context(|| format!("scene {name}"))?;
     p_ref.print_notes();
-    let driven = prune::driven_nodes(&p_ref, &scene, &opts.watch)?;
+    let driven = prune::driven_nodes(&p_ref, &opts.watch)?;
     let watched = watched_nodes(&p_ref, &driven);
     eprintln!("plan: reference: {} elements", p_ref.mesh.cells.len());
     let reference = trace::run(&p_ref, &format!("{name} [reference]"))?;
@@ -525,7 +520,7 @@ pub fn run(
     let reduced = match &held.model {
         Model::Pruned(r) => (**r).clone(),
         Model::Full { scene: sc, .. } => {
-            let d = prune::driven_nodes(&held.problem, sc, &opts.watch)?;
+            let d = prune::driven_nodes(&held.problem, &opts.watch)?;
             let pilot = prune::Pilot {
                 motion_m: &held.trace.motion_m,
                 energy_j: &held.trace.energy_j,
@@ -688,7 +683,7 @@ fn try_trim(s: &mut Search<'_>, held: &Held, watch: &[String], k: f64) -> Result
     let (mut r, view) = match &held.model {
         Model::Pruned(r) => ((**r).clone(), held.view.clone()),
         Model::Full { scene } => {
-            let d = prune::driven_nodes(p, scene, watch)?;
+            let d = prune::driven_nodes(p, watch)?;
             let pilot = prune::Pilot {
                 motion_m: &held.trace.motion_m,
                 energy_j: &held.trace.energy_j,
@@ -861,7 +856,7 @@ fn search(s: &mut Search<'_>, held: &mut Held, scene: &Scene, watch: &[String]) 
     // 2. Pruning: the first fraction that passes, then bisected (geometric mean) towards
     // the last that failed.
     if let Model::Full { scene: sc } = held.model.clone() {
-        let driven = prune::driven_nodes(&held.problem, &sc, watch)?;
+        let driven = prune::driven_nodes(&held.problem, watch)?;
         let mut tried: Vec<usize> = Vec::new();
         let mut failed: Option<f64> = None;
         let mut passed: Option<(f64, Box<Held>)> = None;

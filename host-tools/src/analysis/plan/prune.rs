@@ -59,7 +59,7 @@ pub struct Reduced {
 pub const MESH_FILE: &str = "mesh.msh";
 
 /// Nodes of `p` that pruning must keep with every element around them.
-pub fn driven_nodes(p: &Problem, scene: &Scene, watch: &[String]) -> Result<Vec<bool>> {
+pub fn driven_nodes(p: &Problem, watch: &[String]) -> Result<Vec<bool>> {
     let mut d = vec![false; p.mesh.nodes.len()];
     if let Some(c) = &p.contact {
         for &n in &c.node_globals {
@@ -85,7 +85,6 @@ pub fn driven_nodes(p: &Problem, scene: &Scene, watch: &[String]) -> Result<Vec<
             d[n as usize] = true;
         }
     }
-    let _ = scene;
     Ok(d)
 }
 

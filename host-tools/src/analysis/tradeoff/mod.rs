@@ -429,13 +429,8 @@ pub fn run(
     progress: &mut dyn FnMut(&str),
 ) -> Result<Vec<Row>> {
     let mut scene = scene.clone();
-    if scene.solver.duration.is_none() {
-        // The grid changes dt: hold the simulated time, not the step count, fixed.
-        let p = Problem::from_scene(&scene, dir)?;
-        let dt = p.time_step.dt_s;
-        scene.solver.duration = Some(p.steps(dt) as f64 * dt);
-    }
-    scene.solver.steps = None;
+    // The grid changes dt: hold the simulated time, not the step count, fixed.
+    Problem::hold_duration(&mut scene, dir)?;
     let (levels, base_level) = levels_of(&scene, opts);
     let configs = grid(&scene, &levels, &base_level);
     let mut done: Vec<Done> = Vec::new();
