@@ -1,5 +1,6 @@
 //! The compile report's real-time verdict: the busiest board's compute within half the
-//! step and every link direction's exchange within the step.
+//! step, every link direction's exchange within the step, and with contact every global
+//! port's contact traffic at rest within the step.
 
 use host_tools::compile::partition::Machine;
 use host_tools::compile::{compile_images, plan, report, summary, CompileReport};
@@ -185,4 +186,107 @@ fn verdict_matches_an_independent_computation() {
         assert_eq!(v.compute_fits, compute <= dt / 2.0, "{name}");
         assert_eq!(v.reasons.is_empty(), keeps, "{name}");
     }
+}
+
+/// With contact, every contact board's global port carries the node packets of the runtime's
+/// box test every step; the verdict counts them with the tissue at rest. Computed here
+/// independently from the contact setup and the plan: each board's box holds the
+/// pair-surface nodes it owns (reference positions); boards whose boxes grown by the margin
+/// overlap are partners; a board sends a partner every owned pair node inside the partner's
+/// grown box, in packets of at most `NODES_PER_PACKET_MAX` entries and at least one a
+/// step (header, node header and CRC each, 28 bytes an entry). The busiest port (the larger
+/// of in and out) over the global rate must equal the report's to a relative 1e-12, and
+/// the built-in coarse scene on 2x2x2 (compute and links made 1000x faster, so only the
+/// global port can decide) must fail on it, naming that board, and keep real time once the
+/// global network is 1000x faster too.
+#[test]
+fn contact_traffic_on_the_global_ports_is_in_the_verdict() {
+    use link_proto::payload::{NODES_HEADER_LEN, NODES_PER_PACKET_MAX, NODE_ENTRY_LEN};
+    let p = system_tests::builtin_problem("coarse", 10);
+    let fast = BoardProfile {
+        link_bytes_per_s: PE_BOARD.link_bytes_per_s * 1000,
+        link_latency_ns: 1,
+        ..fast_clock(&PE_BOARD)
+    };
+    let machine = Machine::parse("2x2x2").expect("machine");
+    let pl = plan(&p, machine).expect("plans");
+    let images = compile_images(&p, &pl).expect("images");
+    let r = report("coarse", &p, &pl, &images, &fast).expect("report");
+    let c = p.contact.as_ref().expect("the built-in scene has contact");
+    let margin = r.contact.as_ref().expect("contact report").box_margin_m;
+    assert!(margin > 0.0);
+    let mask = pe_firmware::physics::contact::pair_surface_mask(&c.pairs);
+    let boards = machine.count();
+    // Owned pair-surface nodes and their box, per board.
+    let mut owned: Vec<Vec<[f64; 3]>> = vec![Vec::new(); boards];
+    for (&g, &s) in c.node_globals.iter().zip(&c.node_surfaces) {
+        if s & mask != 0 {
+            owned[pl.node_owner[g as usize] as usize].push(p.mesh.nodes[g as usize]);
+        }
+    }
+    let grown = |pts: &[[f64; 3]]| -> ([f64; 3], [f64; 3]) {
+        let lo = core::array::from_fn(|k| pts.iter().map(|q| q[k]).fold(f64::INFINITY, f64::min));
+        let hi =
+            core::array::from_fn(|k| pts.iter().map(|q| q[k]).fold(f64::NEG_INFINITY, f64::max));
+        (lo.map(|v: f64| v - margin), hi.map(|v: f64| v + margin))
+    };
+    let inside =
+        |q: &[f64; 3], b: &([f64; 3], [f64; 3])| (0..3).all(|k| b.0[k] <= q[k] && q[k] <= b.1[k]);
+    let packet = |n: usize| {
+        n.div_ceil(NODES_PER_PACKET_MAX).max(1)
+            * (link_proto::PACKET_HEADER_LEN + NODES_HEADER_LEN + link_proto::CRC_LEN)
+            + n * NODE_ENTRY_LEN
+    };
+    let (mut bytes_in, mut bytes_out) = (vec![0usize; boards], vec![0usize; boards]);
+    let contact_boards: Vec<usize> = (0..boards).filter(|&b| !owned[b].is_empty()).collect();
+    assert!(contact_boards.len() >= 2, "a global exchange to check");
+    for &a in &contact_boards {
+        for &b in &contact_boards {
+            let (ga, gb) = (grown(&owned[a]), grown(&owned[b]));
+            // Boxes grown by the margin overlap iff one grown box meets the other's points'
+            // box; test the grown boxes against each other shrunk once.
+            let overlap =
+                (0..3).all(|k| gb.0[k] + margin <= ga.1[k] && ga.0[k] <= gb.1[k] - margin);
+            if a == b || !overlap {
+                continue;
+            }
+            let sent = owned[a].iter().filter(|q| inside(q, &gb)).count();
+            bytes_out[a] += packet(sent);
+            bytes_in[b] += packet(sent);
+        }
+    }
+    let busiest = (0..boards)
+        .map(|b| bytes_in[b].max(bytes_out[b]))
+        .max()
+        .expect("boards");
+    assert!(busiest > 0);
+    let time = busiest as f64 / PE_BOARD.global_bytes_per_s as f64;
+    let v = &r.real_time;
+    let g = v.global_busiest.as_ref().expect("a global port load");
+    assert_eq!(g.bytes_in_per_step.max(g.bytes_out_per_step), busiest);
+    assert!((g.time_per_step_s - time).abs() <= 1e-12 * time);
+    println!(
+        "global port {busiest} bytes per step, {time:e} s against dt {:e}",
+        r.dt_s
+    );
+    assert!(v.compute_fits && v.links_over_count == 0, "{:?}", v.reasons);
+    assert_eq!(v.keeps_real_time, time <= r.dt_s);
+    assert!(
+        time > r.dt_s,
+        "the case is meant to be over the global rate"
+    );
+    let [x, y, z] = g.board;
+    assert!(
+        v.reasons.len() == 1
+            && v.reasons[0].starts_with(&format!("board ({x},{y},{z})'s global port")),
+        "{:?}",
+        v.reasons
+    );
+    let faster = BoardProfile {
+        global_bytes_per_s: PE_BOARD.global_bytes_per_s * 1000,
+        ..fast
+    };
+    let r = report("coarse", &p, &pl, &images, &faster).expect("report");
+    assert!(r.real_time.keeps_real_time, "{:?}", r.real_time.reasons);
+    assert!(summary(&r).contains("every global port's contact traffic at rest within dt"));
 }

@@ -45,6 +45,8 @@ pub struct CompileReport {
     pub bandwidth_total_bytes_per_s: f64,
     pub bandwidth_per_link_max_bytes_per_s: f64,
     pub link_bandwidth_bytes_per_s: u64,
+    /// The global network's rate into (and out of) one board (bytes/s).
+    pub global_bytes_per_s: u64,
     /// Fraction of a step the busiest link is busy at the scene's step rate.
     pub link_utilisation_max: f64,
     /// Per-frame cost of a link (s), beside `link_bandwidth_bytes_per_s`.
@@ -93,6 +95,28 @@ pub struct ContactCompileReport {
     pub bytes_per_s_at_rest: f64,
     pub seed_vectors_per_step: usize,
     pub seed_bytes_per_s: f64,
+    /// The contact board whose global port is busiest at rest (bytes in or out per step).
+    pub global_busiest_at_rest: Option<GlobalPortLoad>,
+}
+
+/// What one board's global port carries per step for contact, with the tissue at rest:
+/// a node packet to (and from) every partner each step, even an empty one (header, node
+/// header, 28-byte entries, CRC).
+#[derive(Clone, Debug, Serialize)]
+pub struct GlobalPortLoad {
+    pub board: [usize; 3],
+    pub bytes_in_per_step: usize,
+    pub bytes_out_per_step: usize,
+    /// The larger direction at the profile's global rate (s).
+    pub time_per_step_s: f64,
+}
+
+/// Bytes of contact-node packets carrying `n` node entries.
+fn node_packet_bytes(n: usize) -> usize {
+    use link_proto::payload::{NODES_HEADER_LEN, NODES_PER_PACKET_MAX, NODE_ENTRY_LEN};
+    let packets = n.div_ceil(NODES_PER_PACKET_MAX).max(1);
+    packets * (link_proto::PACKET_HEADER_LEN + NODES_HEADER_LEN + link_proto::CRC_LEN)
+        + n * NODE_ENTRY_LEN
 }
 
 /// The contact traffic at rest: the runtime's box test on the reference positions.
@@ -101,6 +125,7 @@ fn contact_report(
     plan: &Plan,
     dt: f64,
     rate: f64,
+    profile: &BoardProfile,
 ) -> Result<Option<ContactCompileReport>> {
     let Some((run, boards)) = contact_tables(problem, plan, dt)? else {
         return Ok(None);
@@ -140,6 +165,7 @@ fn contact_report(
         )
     };
     let (mut channels, mut vectors) = (0, 0);
+    let (mut bytes_in, mut bytes_out) = (vec![0; boards.len()], vec![0; boards.len()]);
     for (i, &bi) in board_index.iter().enumerate() {
         for (j, other) in boxes.iter().enumerate() {
             if i == j {
@@ -151,11 +177,24 @@ fn contact_report(
             }
             channels += 1;
             let r = grow(other);
-            vectors += pair_nodes(bi)
+            let sent = pair_nodes(bi)
                 .filter(|n| (0..3).all(|k| r.0[k] <= n.reference[k] && n.reference[k] <= r.1[k]))
                 .count();
+            vectors += sent;
+            bytes_out[i] += node_packet_bytes(sent);
+            bytes_in[j] += node_packet_bytes(sent);
         }
     }
+    let global_busiest_at_rest = (0..boards.len())
+        .map(|i| GlobalPortLoad {
+            board: plan.machine.coords(board_index[i]),
+            bytes_in_per_step: bytes_in[i],
+            bytes_out_per_step: bytes_out[i],
+            time_per_step_s: bytes_in[i].max(bytes_out[i]) as f64
+                / profile.global_bytes_per_s as f64,
+        })
+        .filter(|l| l.time_per_step_s > 0.0)
+        .max_by(|a, b| a.time_per_step_s.total_cmp(&b.time_per_step_s));
     Ok(Some(ContactCompileReport {
         contact_nodes: run.nodes.len(),
         contact_faces: run.faces.len(),
@@ -170,6 +209,7 @@ fn contact_report(
         bytes_per_s_at_rest: (vectors * link_proto::payload::NODE_ENTRY_LEN) as f64 * rate,
         seed_vectors_per_step: 300,
         seed_bytes_per_s: 72e6,
+        global_busiest_at_rest,
     }))
 }
 
@@ -227,10 +267,14 @@ pub fn report(
     let frame_bytes_max = links.bytes.iter().copied().max().unwrap_or(0);
     let bytes_total: usize = links.bytes.iter().sum();
     let capacity = capacity_report(problem, plan, profile, dt);
-    let real_time = verdict(&capacity, &links.loads(plan, profile), dt);
+    let contact = contact_report(problem, plan, dt, rate, profile)?;
+    let global = contact
+        .as_ref()
+        .and_then(|c| c.global_busiest_at_rest.as_ref());
+    let real_time = verdict(&capacity, &links.loads(plan, profile), global, dt);
     Ok(CompileReport {
         graphics: graphics_report(problem, plan, dt),
-        contact: contact_report(problem, plan, dt, rate)?,
+        contact,
         scene: scene.to_string(),
         machine: plan.machine.to_string(),
         rounds: plan.rounds,
@@ -259,6 +303,7 @@ pub fn report(
         bandwidth_total_bytes_per_s: bytes_total as f64 * rate,
         bandwidth_per_link_max_bytes_per_s: frame_bytes_max as f64 * rate,
         link_bandwidth_bytes_per_s: profile.link_bytes_per_s,
+        global_bytes_per_s: profile.global_bytes_per_s,
         link_utilisation_max: frame_bytes_max as f64 * rate / profile.link_bytes_per_s as f64,
         link_frame_latency_s: profile.link_latency_ns as f64 * 1e-9,
         real_time,
@@ -336,7 +381,9 @@ pub struct LinkLoad {
 }
 
 /// Whether the board array keeps the scene's step: the busiest board's compute within
-/// `dt / COMPUTE_MARGIN` and every link direction's time per step within `dt`.
+/// `dt / COMPUTE_MARGIN`, every link direction's time per step within `dt`, and, with
+/// contact, every contact board's global port (the node packets with the tissue at rest, a
+/// lower bound: a deformed scene opens more channels) within `dt`.
 #[derive(Clone, Debug, Serialize)]
 pub struct RealTimeVerdict {
     pub keeps_real_time: bool,
@@ -354,6 +401,9 @@ pub struct RealTimeVerdict {
     /// [`LINKS_OVER_LISTED`] listed; `links_over_count` counts them all).
     pub links_over_count: usize,
     pub links_over: Vec<LinkLoad>,
+    /// The busiest global port's contact traffic at rest, if the scene has contact.
+    pub global_busiest: Option<GlobalPortLoad>,
+    pub global_fits: bool,
     /// Why not, one line each (empty when it keeps real time).
     pub reasons: Vec<String>,
 }
@@ -365,7 +415,12 @@ pub const COMPUTE_MARGIN: f64 = 2.0;
 pub const LINKS_OVER_LISTED: usize = 8;
 
 /// The real-time verdict from the compute figure and the links' loads.
-pub fn verdict(capacity: &Capacity, links: &[LinkLoad], dt_s: f64) -> RealTimeVerdict {
+pub fn verdict(
+    capacity: &Capacity,
+    links: &[LinkLoad],
+    global: Option<&GlobalPortLoad>,
+    dt_s: f64,
+) -> RealTimeVerdict {
     let budget = dt_s / COMPUTE_MARGIN;
     let compute_fits = capacity.step_compute_s_max <= budget;
     // Slowest first; equal times keep board and face order.
@@ -407,8 +462,22 @@ pub fn verdict(capacity: &Capacity, links: &[LinkLoad], dt_s: f64) -> RealTimeVe
             over.len() - LINKS_OVER_LISTED
         ));
     }
+    let global_fits = global.is_none_or(|g| g.time_per_step_s <= dt_s);
+    if let Some(g) = global.filter(|_| !global_fits) {
+        let [x, y, z] = g.board;
+        reasons.push(format!(
+            "board ({x},{y},{z})'s global port carries {} bytes in and {} out of contact-node packets per step with the tissue at rest: {:.1} us per step, over dt = {:.1} us ({:.2}x)",
+            g.bytes_in_per_step,
+            g.bytes_out_per_step,
+            g.time_per_step_s * 1e6,
+            dt_s * 1e6,
+            g.time_per_step_s / dt_s
+        ));
+    }
     RealTimeVerdict {
-        keeps_real_time: compute_fits && over.is_empty(),
+        keeps_real_time: compute_fits && over.is_empty() && global_fits,
+        global_busiest: global.cloned(),
+        global_fits,
         dt_s,
         compute_budget_s: budget,
         compute_s_max: capacity.step_compute_s_max,
@@ -616,6 +685,13 @@ pub fn summary(r: &CompileReport) -> String {
             c.contact_nodes, c.contact_faces, c.pairs, c.tools, c.contact_boards, c.check_interval_steps, c.travel_max_m * 1e3, c.box_margin_m * 1e3,
             c.channels_at_rest, c.vectors_per_step_at_rest, c.bytes_per_s_at_rest / 1e6
         );
+        if let Some(g) = &c.global_busiest_at_rest {
+            let [x, y, z] = g.board;
+            s += &format!(
+                "  global ports ({:.1} MB/s into and out of each board): busiest at rest ({x},{y},{z}): {} bytes in, {} out per step, {:.1} us against dt = {:.1} us\n",
+                r.global_bytes_per_s as f64 / 1e6, g.bytes_in_per_step, g.bytes_out_per_step, g.time_per_step_s * 1e6, r.dt_s * 1e6
+            );
+        }
     }
     s += &real_time_lines(r);
     s += "  seed's reference case: 2000 elements on 4x4x4 boards at dt = 100 us: 5600 force vectors per step, 1.35 GB/s in all\n";
@@ -651,9 +727,10 @@ fn real_time_lines(r: &CompileReport) -> String {
     }
     if v.keeps_real_time {
         s += &format!(
-            "  verdict: keeps real time (busiest board's compute {:.1} us within dt / {COMPUTE_MARGIN} = {:.1} us, every link within dt)\n",
+            "  verdict: keeps real time (busiest board's compute {:.1} us within dt / {COMPUTE_MARGIN} = {:.1} us, every link within dt{})\n",
             v.compute_s_max * 1e6,
-            v.compute_budget_s * 1e6
+            v.compute_budget_s * 1e6,
+            if v.global_busiest.is_some() { ", every global port's contact traffic at rest within dt" } else { "" }
         );
     } else {
         s += "  verdict: does NOT keep real time:\n";
