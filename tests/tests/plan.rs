@@ -451,3 +451,77 @@ fn pruning_never_removes_what_tools_contacts_loads_or_prescribed_motions_touch()
         }
     }
 }
+
+/// A contact pair that never touches costs every step and changes nothing: the built-in
+/// scene plus a pair between the left tube and the vagina (tens of millimetres apart, the
+/// probe on the other side) runs to the same tool-force bits as without it (checked here,
+/// so the pair is truly inert), and `pe plan` drops it with its two surfaces, and the
+/// written scene is within the budget of the scene without the pair by this test's own
+/// measure.
+#[test]
+fn a_contact_pair_that_never_touches_is_dropped() {
+    use host_tools::scene::{ContactPairSpec, RegionRef, SurfaceSpec};
+    let out = temp_dir("plan-pair");
+    let base = builtin_scene("coarse").expect("builtin");
+    let mut scene = base.clone();
+    for (name, region) in [("left_tube", "left_oviduct"), ("vagina", "vagina")] {
+        scene.surface.push(SurfaceSpec {
+            name: name.into(),
+            region: Some(RegionRef::Name(region.into())),
+            box_: None,
+            sphere: None,
+            set: None,
+        });
+    }
+    scene.contact_pair.push(ContactPairSpec {
+        surfaces: ["left_tube".into(), "vagina".into()],
+        depth: None,
+    });
+    let with = Problem::from_scene(&scene, Path::new(".")).expect("with the pair");
+    let without = Problem::from_scene(&base, Path::new(".")).expect("without");
+    let (cw, co) = (
+        with.contact.as_ref().expect("contact"),
+        without.contact.as_ref().expect("contact"),
+    );
+    assert_eq!(cw.pairs.len(), co.pairs.len() + 1);
+    assert!(
+        cw.node_globals.len() > co.node_globals.len() + 50,
+        "the pair adds contact nodes"
+    );
+    let a = solver::run(&with, "with", &mut ()).expect("run");
+    let b = solver::run(&without, "without", &mut ()).expect("run");
+    assert_eq!(a.tool_force.len(), b.tool_force.len());
+    let peak = b.tool_force.iter().map(|f| norm(*f)).fold(0.0, f64::max);
+    assert!(peak > 1e-3, "the probe pressed: {peak:e} N");
+    assert_eq!(a.tool_force, b.tool_force, "the extra pair never acts");
+
+    let r = plan::run(
+        &scene,
+        Path::new("."),
+        "builtin:coarse+pair",
+        &options(0.02),
+        &out,
+    )
+    .expect("plan");
+    let dropped = r
+        .rows
+        .iter()
+        .find(|row| row.choice.contains("\"left_tube\"-\"vagina\""))
+        .expect("the pair was tried");
+    assert!(dropped.accepted, "{dropped:?}");
+    assert!(r.within_budget);
+    let written = Scene::from_file(&out.join("scene.toml")).expect("parses");
+    assert!(written
+        .contact_pair
+        .iter()
+        .all(|p| !p.surfaces.contains(&"vagina".to_string())));
+    assert!(written
+        .surface
+        .iter()
+        .all(|s| s.name != "left_tube" && s.name != "vagina"));
+    assert_eq!(written.tool.len(), 1, "the probe stays");
+    let (_, u_err, f_err) = check_plan(&base, Path::new("."), &out, &r);
+    assert!(u_err <= 0.02, "displacement error {u_err:e}");
+    let f_err = f_err.expect("the scene has a tool");
+    assert!(f_err <= 0.02, "tool force error {f_err:e}");
+}

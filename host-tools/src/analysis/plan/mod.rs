@@ -17,7 +17,9 @@
 //! The search is greedy, every step measured against the reference with everything
 //! accepted before it, and a choice is accepted only when both errors stay within the
 //! budget:
-//! 1. resolution: a coarser built-in level (the coarsest that passes);
+//! 1. resolution: a coarser built-in level (the coarsest that passes), then the model
+//!    without each contact pair in turn (with the surfaces nothing else names): a pair that
+//!    never touches costs every step for nothing;
 //! 2. pruning: the elements whose motion and stored energy in the current model's run stay
 //!    below a fraction of the largest (tried from 10% down to 0.01%; the first that passes
 //!    is bisected towards the one before it), see [`prune`];
@@ -853,6 +855,9 @@ fn search(s: &mut Search<'_>, held: &mut Held, scene: &Scene, watch: &[String]) 
             }
         }
     }
+    // 1b. Contact pairs the scene's quantities do not need (a pair that never touches, or
+    // whose force the budget can do without), before the pilot run pruning reads.
+    drop_pairs(s, held)?;
     // 2. Pruning: the first fraction that passes, then bisected (geometric mean) towards
     // the last that failed.
     if let Model::Full { scene: sc } = held.model.clone() {
@@ -984,6 +989,56 @@ fn search(s: &mut Search<'_>, held: &mut Held, scene: &Scene, watch: &[String]) 
         }
     }
     Ok(())
+}
+
+/// Tries the held model without each of its contact pairs (and the surfaces nothing else
+/// names), one at a time, keeping each removal the budget allows.
+fn drop_pairs(s: &mut Search<'_>, held: &mut Held) -> Result<()> {
+    let Model::Full { scene } = &held.model else {
+        return Ok(());
+    };
+    let mut i = 0;
+    let mut sc = (**scene).clone();
+    while i < sc.contact_pair.len() {
+        let mut without = sc.clone();
+        let [a, b] = without.contact_pair.remove(i).surfaces;
+        drop_unused_surfaces(&mut without);
+        let p = Problem::from_scene(&without, s.dir)?;
+        let choice = format!("without the contact pair {a:?}-{b:?}");
+        match s.try_model(&choice, &p, &held.view.clone())? {
+            Some(t) => {
+                *held = Held {
+                    model: Model::Full {
+                        scene: Box::new(without.clone()),
+                    },
+                    problem: p,
+                    trace: t,
+                    view: held.view.clone(),
+                };
+                sc = without;
+            }
+            None => i += 1,
+        }
+    }
+    Ok(())
+}
+
+/// Removes the `[[surface]]`s no tool or contact pair names (their nodes would still be
+/// contact nodes, paid for on every board that holds them), and `[contact]` with the last.
+fn drop_unused_surfaces(sc: &mut Scene) {
+    let used = |name: &str| {
+        sc.tool.iter().any(|t| t.surface == name)
+            || sc
+                .contact_pair
+                .iter()
+                .any(|p| p.surfaces.iter().any(|s| s == name))
+    };
+    let keep: Vec<bool> = sc.surface.iter().map(|s| used(&s.name)).collect();
+    let mut k = keep.iter();
+    sc.surface.retain(|_| k.next().copied().unwrap_or(true));
+    if sc.surface.is_empty() {
+        sc.contact = None;
+    }
 }
 
 /// `pe plan`: plans, writes `out/`, prints the summary.
