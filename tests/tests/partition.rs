@@ -149,3 +149,92 @@ fn partition_is_deterministic() {
     assert!(a.iter().any(|&x| x != a[0]), "more than one board used");
     assert_eq!(a, b);
 }
+
+/// Balancing cost: each element weighs its kernel's measured instructions (parallelepiped
+/// or general, `measured_cost` for the scene's precision) plus, for each of its corners on
+/// a contact surface, the contact cost over the elements around that corner; computed here
+/// from the mesh, `is_box` and the contact node list. On the built-in medium scene (both
+/// kernels and contact, so the weights differ by over 2x) on 4x4x4 and the built-in coarse
+/// scene on 2x3x2, the cost partition keeps every board within `BALANCE_MAX` of the mean
+/// cost (the element partition does not: the contact nodes crowd a few boards), every
+/// board non-empty, and its exchange count is the independent one.
+#[test]
+fn balancing_cost_keeps_every_boards_cost_within_the_bound() {
+    use host_tools::compile::{plan_balanced, Balance};
+    use pe_firmware::profile::measured_cost;
+    for (name, p, m) in [
+        (
+            "builtin medium 4x4x4",
+            builtin_problem("medium", 10),
+            "4x4x4",
+        ),
+        (
+            "builtin coarse 2x3x2",
+            builtin_problem("coarse", 10),
+            "2x3x2",
+        ),
+    ] {
+        let machine = Machine::parse(m).expect("machine");
+        let cost = measured_cost(p.solver.precision, p.solver.integration);
+        let mut valence = vec![0usize; p.mesh.nodes.len()];
+        for c in &p.mesh.cells {
+            for &n in c {
+                valence[n as usize] += 1;
+            }
+        }
+        let contact = &p.contact.as_ref().expect("contact").node_globals;
+        let w: Vec<f64> = p
+            .mesh
+            .cells
+            .iter()
+            .enumerate()
+            .map(|(e, c)| {
+                let k = if host_tools::problem::elements::is_box(&p, e) {
+                    cost.box_per_element_step
+                } else {
+                    cost.per_element_step
+                } as f64;
+                k + c
+                    .iter()
+                    .filter(|n| contact.contains(n))
+                    .map(|&n| cost.per_contact_node as f64 / valence[n as usize] as f64)
+                    .sum::<f64>()
+            })
+            .collect();
+        let (lo, hi) = w
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(a, b), &x| (a.min(x), b.max(x)));
+        assert!(hi > 2.0 * lo, "{name}: weights {lo}..{hi} differ");
+        let load = |board: &[u32]| {
+            assert_eq!(board.len(), w.len());
+            let mut l = vec![0.0; machine.count()];
+            for (&b, &x) in board.iter().zip(&w) {
+                l[b as usize] += x;
+            }
+            let mean = l.iter().sum::<f64>() / l.len() as f64;
+            l.iter().copied().fold(0.0, f64::max) / mean
+        };
+        let by_cost = plan_balanced(&p, machine, Balance::Cost).expect("plans");
+        let by_elements = plan_balanced(&p, machine, Balance::Elements).expect("plans");
+        assert_eq!(by_cost.balance, Balance::Cost);
+        balance(machine, &by_cost.element_board); // every board non-empty
+        let (c, e) = (
+            load(&by_cost.element_board),
+            load(&by_elements.element_board),
+        );
+        println!("{name}: cost imbalance {c:.3} balancing cost, {e:.3} balancing elements");
+        // Rounding the weights to whole instructions moves the bound by under 1e-3.
+        assert!(c <= BALANCE_MAX + 1e-3, "{name}: cost imbalance {c}");
+        assert!(
+            e > c,
+            "{name}: balancing cost balances cost better ({c} vs {e})"
+        );
+        let images = compile_images(&p, &by_cost).expect("images");
+        let rep = report(name, &p, &by_cost, &images, &PE_BOARD).expect("report");
+        assert_eq!(
+            rep.force_vectors_per_step,
+            independent_vectors(&p, machine, &by_cost.element_board),
+            "{name}"
+        );
+    }
+}

@@ -290,3 +290,56 @@ fn contact_traffic_on_the_global_ports_is_in_the_verdict() {
     assert!(r.real_time.keeps_real_time, "{:?}", r.real_time.reasons);
     assert!(summary(&r).contains("every global port's contact traffic at rest within dt"));
 }
+
+/// `pe compile` partitions twice when the elements' costs differ (balancing elements, and
+/// balancing kernel and contact cost) and keeps the schedule whose verdict's worst time
+/// ratio is smaller. The ratio is checked here from the verdict's own figures (compute over
+/// its budget, the busiest link's and global port's time over the step); the kept one is
+/// no worse than the other, which the report names; with equal costs (the seed box, one
+/// kernel, no contact) only the element balance is tried.
+#[test]
+fn pe_compile_keeps_the_balance_with_the_smaller_worst_ratio() {
+    use host_tools::compile::{compile_to_dir, Balance};
+    let p = system_tests::builtin_problem("coarse", 10);
+    let dir = system_tests::temp_dir("balance-choice");
+    let machine = Machine::parse("2x2x2").expect("machine");
+    let r = compile_to_dir("coarse", "builtin", &p, machine, &PE_BOARD, &dir).expect("compiles");
+    let v = &r.real_time;
+    let budget = r.dt_s / 2.0;
+    let mut expect = v.compute_s_max / budget;
+    if let Some(l) = &v.link_busiest {
+        expect = expect.max(l.time_per_step_s / r.dt_s);
+    }
+    if let Some(g) = &v.global_busiest {
+        expect = expect.max(g.time_per_step_s / r.dt_s);
+    }
+    assert!(expect > 0.0);
+    assert!(
+        (v.worst_ratio - expect).abs() <= 1e-12 * expect,
+        "{} vs {expect}",
+        v.worst_ratio
+    );
+    let other = r.balance_other.as_ref().expect("both balances tried");
+    assert_ne!(other.balance, r.balance);
+    assert!(
+        v.worst_ratio <= other.worst_ratio,
+        "{} vs {}",
+        v.worst_ratio,
+        other.worst_ratio
+    );
+    assert!(summary(&r).contains(&format!("chosen over balancing {}", other.balance.name())));
+
+    let seed = repo_scene("seed-box.toml");
+    let dir = system_tests::temp_dir("balance-seed");
+    let r = compile_to_dir(
+        "seed",
+        "seed-box",
+        &seed,
+        Machine::parse("4x4x4").expect("m"),
+        &PE_BOARD,
+        &dir,
+    )
+    .expect("compiles");
+    assert_eq!(r.balance, Balance::Elements);
+    assert!(r.balance_other.is_none());
+}

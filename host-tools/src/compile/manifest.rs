@@ -10,7 +10,8 @@ use serde::Serialize;
 
 use super::partition::Machine;
 use super::{
-    check_fit, compile_images, image_file_name, plan, report, write_images, CompileReport,
+    check_fit, compile_images, image_file_name, plan_for_real_time, report, write_images,
+    CompileReport,
 };
 use crate::problem::Problem;
 
@@ -52,7 +53,7 @@ pub fn compile_to_dir(
     profile: &BoardProfile,
     dir: &Path,
 ) -> Result<CompileReport> {
-    let plan = plan(problem, machine)?;
+    let (plan, balance_other) = plan_for_real_time(problem, machine, profile)?;
     let images = compile_images(problem, &plan)?;
     check_fit(&images, profile)?;
     write_images(dir, &images)?;
@@ -87,7 +88,8 @@ pub fn compile_to_dir(
     let p = dir.join("manifest.json");
     std::fs::write(&p, serde_json::to_string_pretty(&manifest)?)
         .with_context(|| format!("writing {}", p.display()))?;
-    let rep = report(scene, problem, &plan, &images, profile)?;
+    let mut rep = report(scene, problem, &plan, &images, profile)?;
+    rep.balance_other = balance_other;
     let p = dir.join("report.json");
     std::fs::write(&p, serde_json::to_string_pretty(&rep)?)
         .with_context(|| format!("writing {}", p.display()))?;

@@ -43,9 +43,10 @@ pub use inspect::inspect;
 pub use manifest::{
     check_image_set, compile_to_dir, read_manifest, ImageFile, Manifest, ManifestBoard,
 };
-pub use plan::{line_rounds, plan, BoardPlan, Plan, RoundPlan, FACE_NAMES};
+pub use plan::{line_rounds, plan, plan_balanced, Balance, BoardPlan, Plan, RoundPlan, FACE_NAMES};
 pub use report::{
-    link_time_s, report, summary, verdict, BoardSummary, Capacity, CompileReport,
-    ContactCompileReport, GraphicsReport, LinkLoad, RealTimeVerdict, COMPUTE_MARGIN,
+    link_time_s, plan_for_real_time, real_time_of, report, summary, verdict, BalanceTried,
+    BoardSummary, Capacity, CompileReport, ContactCompileReport, GraphicsReport, LinkLoad,
+    RealTimeVerdict, COMPUTE_MARGIN,
 };
 pub use tables::ImageTables;

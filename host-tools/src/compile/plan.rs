@@ -4,7 +4,9 @@
 use anyhow::{bail, Result};
 use pe_firmware::image::{Combine, STAGE_NOT_OWNED};
 
-use super::partition::{node_board_range, node_elements, partition, Machine};
+use super::partition::{
+    cost_weights, node_board_range, node_elements, partition_weighted, Machine,
+};
 use crate::problem::Problem;
 
 /// Faces in image order.
@@ -48,6 +50,26 @@ pub struct Plan {
     pub node_owner: Vec<u32>,
     pub rounds: [usize; 3],
     pub boards: Vec<BoardPlan>,
+    /// What the partition balances.
+    pub balance: Balance,
+}
+
+/// What the partition keeps within [`super::partition::BALANCE_MAX`] of the mean: the
+/// elements per board, or their cost ([`cost_weights`]: kernels and contact nodes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Balance {
+    Elements,
+    Cost,
+}
+
+impl Balance {
+    pub fn name(self) -> &'static str {
+        match self {
+            Balance::Elements => "elements",
+            Balance::Cost => "cost",
+        }
+    }
 }
 
 /// One transfer of a node's value along an axis line: in `round`, from line position
@@ -115,10 +137,21 @@ pub fn box_vectors(span: [usize; 3]) -> usize {
         .sum()
 }
 
-/// The whole machine's schedule for `problem` on `machine`.
+/// The whole machine's schedule for `problem` on `machine`, the partition balancing the
+/// elements per board.
 pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
+    plan_balanced(problem, machine, Balance::Elements)
+}
+
+/// The whole machine's schedule for `problem` on `machine`, the partition balancing
+/// `balance`.
+pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> Result<Plan> {
     let mesh = &problem.mesh;
-    let element_board = partition(mesh, machine)?;
+    let weight = match balance {
+        Balance::Elements => vec![1; mesh.cells.len()],
+        Balance::Cost => cost_weights(problem),
+    };
+    let element_board = partition_weighted(mesh, machine, &weight)?;
     let (node_box, node_owner, rounds) = node_boxes(problem, machine, &element_board)?;
     let mut boards: Vec<BoardPlan> = (0..machine.count())
         .map(|b| BoardPlan {
@@ -158,6 +191,7 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
         node_owner,
         rounds,
         boards,
+        balance,
     })
 }
 

@@ -8,7 +8,8 @@ use serde::Serialize;
 
 use super::image::BoardImage;
 use super::image::{contact_tables, graphics_params, image_file_name};
-use super::plan::{Plan, FACE_NAMES};
+use super::partition::Machine;
+use super::plan::{plan_balanced, Balance, Plan, FACE_NAMES};
 use crate::problem::elements::is_box;
 use crate::problem::Problem;
 
@@ -53,6 +54,10 @@ pub struct CompileReport {
     pub link_frame_latency_s: f64,
     /// Whether the array keeps the scene's step: compute and every link.
     pub real_time: RealTimeVerdict,
+    /// What the partition balances, and the other balance's worst time ratio when
+    /// [`plan_for_real_time`] compared both.
+    pub balance: Balance,
+    pub balance_other: Option<BalanceTried>,
     pub image_bytes_max: usize,
     pub ram_bytes_max: u64,
     /// Board compute capacity from the firmware's measured instruction counts
@@ -272,6 +277,7 @@ pub fn report(
         .as_ref()
         .and_then(|c| c.global_busiest_at_rest.as_ref());
     let real_time = verdict(&capacity, &links.loads(plan, profile), global, dt);
+    let balance = plan.balance;
     Ok(CompileReport {
         graphics: graphics_report(problem, plan, dt),
         contact,
@@ -307,6 +313,8 @@ pub fn report(
         link_utilisation_max: frame_bytes_max as f64 * rate / profile.link_bytes_per_s as f64,
         link_frame_latency_s: profile.link_latency_ns as f64 * 1e-9,
         real_time,
+        balance,
+        balance_other: None,
         image_bytes_max: images.iter().map(|i| i.bytes.len()).max().unwrap_or(0),
         ram_bytes_max: images.iter().map(|i| i.ram_bytes).max().unwrap_or(0),
         capacity,
@@ -404,8 +412,69 @@ pub struct RealTimeVerdict {
     /// The busiest global port's contact traffic at rest, if the scene has contact.
     pub global_busiest: Option<GlobalPortLoad>,
     pub global_fits: bool,
+    /// The largest of compute over its budget, the busiest link's and the busiest global
+    /// port's time over the step (at most 1 when it keeps real time).
+    pub worst_ratio: f64,
     /// Why not, one line each (empty when it keeps real time).
     pub reasons: Vec<String>,
+}
+
+/// The verdict of `plan` on `profile` without images (what [`report`] says of it).
+pub fn real_time_of(
+    problem: &Problem,
+    plan: &Plan,
+    profile: &BoardProfile,
+) -> Result<RealTimeVerdict> {
+    let dt = problem.time_step.dt_s;
+    let links = LinkTraffic::of(plan, problem.solver.precision);
+    let capacity = capacity_report(problem, plan, profile, dt);
+    let contact = contact_report(problem, plan, dt, 1.0 / dt, profile)?;
+    let global = contact
+        .as_ref()
+        .and_then(|c| c.global_busiest_at_rest.as_ref());
+    Ok(verdict(&capacity, &links.loads(plan, profile), global, dt))
+}
+
+/// A balance the compiler tried and the verdict's worst time ratio with it.
+#[derive(Clone, Debug, Serialize)]
+pub struct BalanceTried {
+    pub balance: Balance,
+    pub worst_ratio: f64,
+}
+
+/// The schedule `pe compile` uses: the partition balancing elements and the one balancing
+/// cost (when the elements' costs differ), the one whose verdict's worst time ratio
+/// ([`RealTimeVerdict::worst_ratio`]) is smaller (elements on a tie); with the other's.
+pub fn plan_for_real_time(
+    problem: &Problem,
+    machine: Machine,
+    profile: &BoardProfile,
+) -> Result<(Plan, Option<BalanceTried>)> {
+    let by_elements = plan_balanced(problem, machine, Balance::Elements)?;
+    let w = super::partition::cost_weights(problem);
+    if w.iter().all(|&x| Some(&x) == w.first()) {
+        return Ok((by_elements, None));
+    }
+    let by_cost = plan_balanced(problem, machine, Balance::Cost)?;
+    let re = real_time_of(problem, &by_elements, profile)?.worst_ratio;
+    let rc = real_time_of(problem, &by_cost, profile)?.worst_ratio;
+    Ok(if rc < re {
+        (
+            by_cost,
+            Some(BalanceTried {
+                balance: Balance::Elements,
+                worst_ratio: re,
+            }),
+        )
+    } else {
+        (
+            by_elements,
+            Some(BalanceTried {
+                balance: Balance::Cost,
+                worst_ratio: rc,
+            }),
+        )
+    })
 }
 
 /// Compute may take at most the step over this (room for the exchange, interrupts, jitter).
@@ -474,7 +543,17 @@ pub fn verdict(
             g.time_per_step_s / dt_s
         ));
     }
+    let worst_ratio = [
+        capacity.step_compute_s_max / budget,
+        link_busiest
+            .as_ref()
+            .map_or(0.0, |l| l.time_per_step_s / dt_s),
+        global.map_or(0.0, |g| g.time_per_step_s / dt_s),
+    ]
+    .into_iter()
+    .fold(0.0, f64::max);
     RealTimeVerdict {
+        worst_ratio,
         keeps_real_time: compute_fits && over.is_empty() && global_fits,
         global_busiest: global.cloned(),
         global_fits,
@@ -654,9 +733,22 @@ pub fn summary(r: &CompileReport) -> String {
     );
     s += "  (a force vector: one node's partial or summed force that one board sends to a neighbour over one link in one exchange round; every round and both directions counted)\n";
     s += &format!(
-        "  partition: slabs refined by simulated annealing (seed {}) within {:.2} x the mean elements per board\n",
+        "  partition: slabs refined by simulated annealing (seed {}) within {:.2} x the mean {} per board{}\n",
         crate::compile::partition::refine::ANNEAL_SEED,
-        crate::compile::partition::BALANCE_MAX
+        crate::compile::partition::BALANCE_MAX,
+        match r.balance {
+            Balance::Elements => "elements",
+            Balance::Cost => "cost (kernel and contact instructions)",
+        },
+        match &r.balance_other {
+            Some(o) => format!(
+                "; chosen over balancing {}: worst time ratio {:.2} against {:.2}",
+                o.balance.name(),
+                r.real_time.worst_ratio,
+                o.worst_ratio
+            ),
+            None => String::new(),
+        }
     );
     s += &format!("  bytes per step: {} in all, {} on the busiest link; at dt = {:.3e} s ({:.0} steps/s): {:.3} GB/s in all, {:.1} MB/s on the busiest link ({:.0}% of its {:.3} MB/s)\n",
         r.bytes_per_step_total, r.bytes_per_step_per_link_max, r.dt_s, r.steps_per_s, r.bandwidth_total_bytes_per_s / 1e9,

@@ -302,9 +302,11 @@ fn array_figures(
     machine: Machine,
     profile: &pe_firmware::profile::BoardProfile,
 ) -> Result<ArrayFigures> {
-    let plan = crate::compile::plan(p, machine)?;
+    // The schedule `pe compile` would make (the better of the two balances).
+    let (plan, other) = crate::compile::plan_for_real_time(p, machine, profile)?;
     let images = crate::compile::compile_images(p, &plan)?;
-    let r = crate::compile::report("plan", p, &plan, &images, profile)?;
+    let mut r = crate::compile::report("plan", p, &plan, &images, profile)?;
+    r.balance_other = other;
     let boards = plan
         .boards
         .iter()

@@ -94,8 +94,11 @@ struct State<'a> {
     coords: Vec<[usize; 3]>,
     board: Vec<u32>,
     count: Vec<usize>,
-    /// Elements a board may hold at most.
-    cap: usize,
+    /// Each element's weight, each board's load (the sum of its elements' weights) and the
+    /// most a board may carry.
+    weight: &'a [u64],
+    load: Vec<u64>,
+    cap: u64,
     node_cost: Vec<i64>,
     /// Walk marks of [`State::reaches_all`] (the walk's number, per element).
     visited: Vec<u64>,
@@ -136,6 +139,9 @@ impl State<'_> {
         let from = self.board[e as usize];
         self.count[from as usize] -= 1;
         self.count[to as usize] += 1;
+        let w = self.weight[e as usize];
+        self.load[from as usize] -= w;
+        self.load[to as usize] += w;
         self.board[e as usize] = to;
         for &n in &self.adj.cells[e as usize] {
             self.node_cost[n as usize] = self.cost_with(n, None);
@@ -218,7 +224,12 @@ impl State<'_> {
 
     fn allowed(&mut self, e: u32, to: u32) -> bool {
         let from = self.board[e as usize] as usize;
-        self.count[to as usize] < self.cap && self.count[from] > 1 && self.removable(e)
+        self.fits(e, to) && self.count[from] > 1 && self.removable(e)
+    }
+
+    /// Board `to` can take element `e` within the cap.
+    fn fits(&self, e: u32, to: u32) -> bool {
+        self.load[to as usize] + self.weight[e as usize] <= self.cap
     }
 
     fn total(&self) -> i64 {
@@ -267,7 +278,7 @@ fn anneal(s: &mut State, tries: usize) {
         }
         let to = s.board[faces[rng.below(faces.len())] as usize];
         let from = s.board[e as usize];
-        if to == from || s.count[to as usize] >= s.cap || s.count[from as usize] <= 1 {
+        if to == from || !s.fits(e, to) || s.count[from as usize] <= 1 {
             continue;
         }
         let d = s.delta(e, to);
@@ -332,19 +343,30 @@ fn pass(s: &mut State) -> i64 {
     -best
 }
 
-/// Refines `board` (element → board) in place; `cap` is the most elements a board may hold
-/// (the initial partition must respect it). Returns the objective before and after.
-pub fn refine(adj: &Adjacency, machine: Machine, board: &mut Vec<u32>, cap: usize) -> (i64, i64) {
+/// Refines `board` (element → board) in place; `weight` is each element's weight and `cap`
+/// the most a board's elements may weigh together (the initial partition must respect
+/// it). Returns the objective before and after.
+pub fn refine(
+    adj: &Adjacency,
+    machine: Machine,
+    board: &mut Vec<u32>,
+    weight: &[u64],
+    cap: u64,
+) -> (i64, i64) {
     let coords = (0..machine.count()).map(|b| machine.coords(b)).collect();
     let mut count = vec![0; machine.count()];
-    for &b in board.iter() {
+    let mut load = vec![0; machine.count()];
+    for (&b, &w) in board.iter().zip(weight) {
         count[b as usize] += 1;
+        load[b as usize] += w;
     }
     let mut s = State {
         adj,
         coords,
         board: std::mem::take(board),
         count,
+        weight,
+        load,
         cap,
         node_cost: Vec::new(),
         visited: vec![0; adj.cells.len()],
