@@ -267,16 +267,15 @@ pub fn report(
     let epb: Vec<usize> = plan.boards.iter().map(|b| b.elements.len()).collect();
     let npb: Vec<usize> = plan.boards.iter().map(|b| b.nodes.len()).collect();
     let mean = epb.iter().sum::<usize>() as f64 / epb.len() as f64;
-    let links = LinkTraffic::of(plan, problem.solver.precision);
     let rate = 1.0 / dt;
+    let Figures {
+        links,
+        capacity,
+        contact,
+        real_time,
+    } = figures(problem, plan, profile)?;
     let frame_bytes_max = links.bytes.iter().copied().max().unwrap_or(0);
     let bytes_total: usize = links.bytes.iter().sum();
-    let capacity = capacity_report(problem, plan, profile, dt);
-    let contact = contact_report(problem, plan, dt, rate, profile)?;
-    let global = contact
-        .as_ref()
-        .and_then(|c| c.global_busiest_at_rest.as_ref());
-    let real_time = verdict(&capacity, &links.loads(plan, profile), global, dt);
     let balance = plan.balance;
     Ok(CompileReport {
         graphics: graphics_report(problem, plan, dt),
@@ -419,12 +418,16 @@ pub struct RealTimeVerdict {
     pub reasons: Vec<String>,
 }
 
-/// The verdict of `plan` on `profile` without images (what [`report`] says of it).
-pub fn real_time_of(
-    problem: &Problem,
-    plan: &Plan,
-    profile: &BoardProfile,
-) -> Result<RealTimeVerdict> {
+/// What the verdict is made of, and the verdict: one home for [`report`] and
+/// [`real_time_of`].
+struct Figures {
+    links: LinkTraffic,
+    capacity: Capacity,
+    contact: Option<ContactCompileReport>,
+    real_time: RealTimeVerdict,
+}
+
+fn figures(problem: &Problem, plan: &Plan, profile: &BoardProfile) -> Result<Figures> {
     let dt = problem.time_step.dt_s;
     let links = LinkTraffic::of(plan, problem.solver.precision);
     let capacity = capacity_report(problem, plan, profile, dt);
@@ -432,7 +435,22 @@ pub fn real_time_of(
     let global = contact
         .as_ref()
         .and_then(|c| c.global_busiest_at_rest.as_ref());
-    Ok(verdict(&capacity, &links.loads(plan, profile), global, dt))
+    let real_time = verdict(&capacity, &links.loads(plan, profile), global, dt);
+    Ok(Figures {
+        links,
+        capacity,
+        contact,
+        real_time,
+    })
+}
+
+/// The verdict of `plan` on `profile` without images (what [`report`] says of it).
+pub fn real_time_of(
+    problem: &Problem,
+    plan: &Plan,
+    profile: &BoardProfile,
+) -> Result<RealTimeVerdict> {
+    Ok(figures(problem, plan, profile)?.real_time)
 }
 
 /// A balance the compiler tried and the verdict's worst time ratio with it.
@@ -451,8 +469,7 @@ pub fn plan_for_real_time(
     profile: &BoardProfile,
 ) -> Result<(Plan, Option<BalanceTried>)> {
     let by_elements = plan_balanced(problem, machine, Balance::Elements)?;
-    let w = super::partition::cost_weights(problem);
-    if w.iter().all(|&x| Some(&x) == w.first()) {
+    if super::partition::equal_weights(&super::partition::cost_weights(problem)) {
         return Ok((by_elements, None));
     }
     let by_cost = plan_balanced(problem, machine, Balance::Cost)?;

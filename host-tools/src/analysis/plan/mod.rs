@@ -1007,17 +1007,17 @@ fn drop_pairs(s: &mut Search<'_>, held: &mut Held) -> Result<()> {
         drop_unused_surfaces(&mut without);
         let p = Problem::from_scene(&without, s.dir)?;
         let choice = format!("without the contact pair {a:?}-{b:?}");
-        match s.try_model(&choice, &p, &held.view.clone())? {
+        match s.try_model(&choice, &p, &held.view)? {
             Some(t) => {
+                sc = without.clone();
                 *held = Held {
                     model: Model::Full {
-                        scene: Box::new(without.clone()),
+                        scene: Box::new(without),
                     },
                     problem: p,
                     trace: t,
                     view: held.view.clone(),
                 };
-                sc = without;
             }
             None => i += 1,
         }

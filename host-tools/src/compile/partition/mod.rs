@@ -183,6 +183,11 @@ pub fn partition_weighted(mesh: &Mesh, machine: Machine, weight: &[u64]) -> Resu
     Ok(board)
 }
 
+/// Every element weighs the same: the partition is by count.
+pub fn equal_weights(weight: &[u64]) -> bool {
+    weight.iter().all(|w| Some(w) == weight.first())
+}
+
 /// The most a board may weigh: [`BALANCE_MAX`] times the mean (at least the mean rounded
 /// up, in whole elements when they weigh the same), or the slab start's heaviest board if
 /// whole elements could not split more evenly.
@@ -194,7 +199,7 @@ pub fn load_cap(machine: Machine, board: &[u32], weight: &[u64]) -> u64 {
     }
     let start = load.iter().copied().max().unwrap_or(0);
     let w0 = weight.first().copied().unwrap_or(1);
-    let cap = if weight.iter().all(|&w| w == w0) {
+    let cap = if equal_weights(weight) {
         let mean = weight.len() as f64 / machine.count() as f64;
         ((BALANCE_MAX * mean).floor() as u64).max(mean.ceil() as u64) * w0
     } else {
@@ -226,7 +231,7 @@ pub fn slabs_weighted(mesh: &Mesh, machine: Machine, weight: &[u64]) -> Result<V
         v
     };
     let mut board = vec![0u32; n];
-    let uniform = weight.iter().all(|&w| Some(&w) == weight.first());
+    let uniform = equal_weights(weight);
     // Each run keeps enough elements for the boards it is split into.
     let split = |items: &[usize], parts: usize, min_len: usize| {
         if uniform {
