@@ -4,7 +4,8 @@
 # ../shared/tools/insncount), for reduced and full integration in f64 and f32, on the
 # built-in coarse scene (1x1x1) after STEPS steps, when the probe presses the tube (the
 # deformed state: an undeformed one is refused), and for reduced integration on a regular
-# box (the parallelepiped kernel). Prints the table and the real-time
+# box (the cuboid kernel) and on the same box turned by 30 degrees about x (the
+# parallelepiped kernel). Prints the table and the real-time
 # capacity it implies at
 # the PE board's clock, taking ONE INSTRUCTION PER CYCLE (QEMU counts instructions, not
 # Cortex-M7 cycles: dual issue makes the core faster, FPU latencies and flash/RAM wait
@@ -37,28 +38,33 @@ gcc -O2 -shared -fPIC -fvisibility=hidden -o "$OUT/libinsncount.so" "$PLUGIN_SRC
 cargo build --release -q -p host-tools --bin pe
 PE=$TARGET_DIR/release/pe
 
-# The regular mesh: the seed's box (scenes/seed-box.toml) at 10x5x5 cells, every cell a
-# parallelepiped (the cheap kernel); one board holds it.
+# The regular mesh: the seed's box (scenes/seed-box.toml) at 10x5x5 cells, every cell an
+# axis-aligned cuboid (the cheapest kernel); one board holds it.
 sed 's/cells = \[20, 10, 10\]/cells = [10, 5, 5]/' scenes/seed-box.toml >"$OUT/regular-box.toml"
 grep -q 'cells = \[10, 5, 5\]' "$OUT/regular-box.toml"
+# The turned mesh: the same box turned by 30 degrees about x (still clamped at x = 0,
+# sagging under the same gravity), every cell a parallelepiped that is not axis-aligned
+# (the parallelepiped kernel), written as legacy VTK.
+python3 scripts/turned-box.py "$OUT/turned-box.vtk"
+sed 's|^generate = .*$|file = "turned-box.vtk"|' "$OUT/regular-box.toml" >"$OUT/turned-box.toml"
+grep -q '^file = "turned-box.vtk"' "$OUT/turned-box.toml"
 
-printf "%-12s %-8s %8s %6s %6s %10s %12s %10s %12s %12s %12s\n" variant scene elements boxes nodes \
-    "kernel/gen" "elem-step/gen" "kernel/box" "elem-step/box" "step/elem" "update/node"
-echo "variant,scene,elements,boxes,nodes,contact_nodes,kernel_general,element_step_general,kernel_box,element_step_box,step_per_element,per_node_update" >"$OUT/board-cost.csv"
-for SCENE in builtin regular; do
+printf "%-12s %-8s %8s %6s %7s %6s %10s %12s %10s %12s %10s %12s %12s %12s\n" variant scene elements boxes cuboids nodes \
+    "kernel/gen" "elem-step/gen" "kernel/box" "elem-step/box" "kernel/cub" "elem-step/cub" "step/elem" "update/node"
+echo "variant,scene,elements,boxes,cuboids,nodes,contact_nodes,kernel_general,element_step_general,kernel_box,element_step_box,kernel_cuboid,element_step_cuboid,step_per_element,per_node_update" >"$OUT/board-cost.csv"
+for SCENE in builtin regular turned; do
   for PREC in f64 f32; do
     for INTEG in reduced full; do
-        [ "$SCENE" = regular ] && [ "$INTEG" = full ] && continue
+        [ "$SCENE" != builtin ] && [ "$INTEG" = full ] && continue
         V=$PREC-$INTEG
         FEATURES=qemu
         [ "$PREC" = f32 ] && FEATURES=$FEATURES,f32
         [ "$INTEG" = full ] && FEATURES=$FEATURES,full
         D=$OUT/$SCENE-$V
-        if [ "$SCENE" = builtin ]; then
-            SRC=(--builtin --level coarse)
-        else
-            SRC=("$OUT/regular-box.toml")
-        fi
+        case $SCENE in
+            builtin) SRC=(--builtin --level coarse) ;;
+            *) SRC=("$OUT/$SCENE-box.toml") ;;
+        esac
         "$PE" compile "${SRC[@]}" --boards 1x1x1 --profile qemu-mps2-an500 \
             --precision "$PREC" --integration "$INTEG" --steps "$STEPS" -o "$D" >/dev/null
         cargo build --release -q --target thumbv7em-none-eabihf \
@@ -77,40 +83,42 @@ PY
             -plugin "$OUT/libinsncount.so,mark=$MARK" -d plugin -D "$D/insn.log" \
             -kernel "$ELF" -device loader,file="$D/board-0-0-0.sched",addr=0x00200000 \
             >"$D/bench.txt"
-        # bench,VARIANT,ELEMENTS,BOXES,NODES,CONTACT_NODES,SAMPLES,BOX_SAMPLES,MAX_ABS_U;
-        # marks 0..11 (see pe-firmware/board/src/bin/bench.rs)
-        awk -F, '/^bench,/ { print $3, $4, $5, $6, $7, $8, $9 }' "$D/bench.txt" >"$D/meta"
-        read -r NE NB NN NC K KB UMAX <"$D/meta"
+        # bench,VARIANT,ELEMENTS,BOXES,CUBOIDS,NODES,CONTACT_NODES,SAMPLES,BOX_SAMPLES,
+        # CUBOID_SAMPLES,MAX_ABS_U; marks 0..15 (see pe-firmware/board/src/bin/bench.rs)
+        awk -F, '/^bench,/ { print $3, $4, $5, $6, $7, $8, $9, $10, $11 }' "$D/bench.txt" >"$D/meta"
+        read -r NE NB NQ NN NC K KB KQ UMAX <"$D/meta"
         if ! awk -v u="${UMAX:-0}" 'BEGIN { exit !(u + 0 > 1e-6) }'; then
             echo "board-cost: $SCENE $V measured on an undeformed state (max |u| = ${UMAX:-?} m): raise STEPS" >&2
             exit 1
         fi
-        awk -v v="$V" -v sc="$SCENE" -v ne="$NE" -v nb="$NB" -v nn="$NN" -v nc="$NC" -v k="$K" -v kb="$KB" '
+        awk -v v="$V" -v sc="$SCENE" -v ne="$NE" -v nb="$NB" -v nq="$NQ" -v nn="$NN" -v nc="$NC" -v k="$K" -v kb="$KB" -v kq="$KQ" '
             /insncount: mark/ { d[$3] = substr($7, 1, length($7) - 1) + 0 }
             END {
                 o = d[1]
                 kern = k ? (d[3] - o) / k : 0; elem = k ? (d[5] - o) / k : 0
                 kbox = kb ? (d[9] - o) / kb : 0; ebox = kb ? (d[11] - o) / kb : 0
-                step = (d[7] - o) / (ne + nb)
-                upd = (d[7] - o - ne * elem - nb * ebox) / nn
-                printf "%-12s %-8s %8d %6d %6d %10.0f %12.0f %10.0f %12.0f %12.0f %12.0f\n", v, sc, ne + nb, nb, nn, kern, elem, kbox, ebox, step, upd
-                printf "%s,%s,%d,%d,%d,%d,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f\n", v, sc, ne + nb, nb, nn, nc, kern, elem, kbox, ebox, step, upd >>csv
+                kcub = kq ? (d[13] - o) / kq : 0; ecub = kq ? (d[15] - o) / kq : 0
+                step = (d[7] - o) / (ne + nb + nq)
+                upd = (d[7] - o - ne * elem - nb * ebox - nq * ecub) / nn
+                printf "%-12s %-8s %8d %6d %7d %6d %10.0f %12.0f %10.0f %12.0f %10.0f %12.0f %12.0f %12.0f\n", v, sc, ne + nb + nq, nb, nq, nn, kern, elem, kbox, ebox, kcub, ecub, step, upd
+                printf "%s,%s,%d,%d,%d,%d,%d,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f\n", v, sc, ne + nb + nq, nb, nq, nn, nc, kern, elem, kbox, ebox, kcub, ecub, step, upd >>csv
             }' csv="$OUT/board-cost.csv" "$D/insn.log" | tee -a "$OUT/table.txt"
     done
   done
 done
 echo
-echo "kernel: one element's internal forces, general kernel (gen) or parallelepiped (box);"
-echo "elem-step: plus gathering displacements and scattering forces; step/elem: a whole"
-echo "runtime step divided by the elements (includes the node updates of the scene);"
-echo "update/node: the rest per node. builtin: the built-in coarse anatomy (every cell"
-echo "distorted: general kernel); regular: a 10x5x5 box (every cell a parallelepiped)."
+echo "kernel: one element's internal forces, general kernel (gen), parallelepiped (box) or"
+echo "axis-aligned cuboid (cub); elem-step: plus gathering displacements and scattering forces;"
+echo "step/elem: a whole runtime step divided by the elements (includes the node updates of the"
+echo "scene); update/node: the rest per node. builtin: the built-in coarse anatomy (every cell"
+echo "distorted: general kernel); regular: a 10x5x5 box (every cell a cuboid); turned: the same"
+echo "box turned by 30 degrees about x (every cell a parallelepiped)."
 echo
 awk '
     BEGIN { clock = 480e6; rate = 1e4; cycles = clock / rate
             seed = 300e6 / rate / 700
             printf "Capacity at 10 kHz on the PE board (480 MHz, one instruction per cycle: %d cycles per step):\n", cycles }
-    { per = $10; epb = cycles / per; boards = 2000 / epb; if (boards > int(boards)) boards = int(boards) + 1
+    { per = $13; epb = cycles / per; boards = 2000 / epb; if (boards > int(boards)) boards = int(boards) + 1
       printf "  %-12s %-8s %6.0f instructions per element-step (whole step) -> %5.1f elements per board; 2000 elements need %4d boards\n", $1, $2, per, epb, boards }
     END { printf "Seed: 700 flops per element-step on 300 MFLOPS processors -> %.1f elements per processor at 10 kHz; 2000 elements need %d processors\n", seed, int(2000 / seed) + 1 }
 ' "$OUT/table.txt"

@@ -24,8 +24,16 @@ ORIGIN=0x00200000   # ORIGIN(IMAGE) of memory-qemu.x (pe image's manifest says t
 
 sed 's/cells = \[20, 10, 10\]/cells = [10, 5, 5]/' scenes/seed-box.toml >"$OUT/box.toml"
 grep -q 'cells = \[10, 5, 5\]' "$OUT/box.toml"
-for SCENE in builtin box; do
-  if [ "$SCENE" = builtin ]; then SRC=(--builtin --level coarse); else SRC=("$OUT/box.toml"); fi
+# The same box turned by 30 degrees about x: every cell a parallelepiped (the box above is
+# all cuboids, the built-in all general cells), so each kernel is checked.
+python3 scripts/turned-box.py "$OUT/turned-box.vtk"
+sed 's|^generate = .*$|file = "turned-box.vtk"|' "$OUT/box.toml" >"$OUT/turned.toml"
+grep -q '^file = "turned-box.vtk"' "$OUT/turned.toml"
+for SCENE in builtin box turned; do
+  case $SCENE in
+    builtin) SRC=(--builtin --level coarse) ;;
+    *) SRC=("$OUT/$SCENE.toml") ;;
+  esac
   for PREC in f64 f32; do
     D=$OUT/$SCENE-$PREC
     echo "qemu-check: $SCENE scene, 1x1x1, $PREC reduced, $STEPS steps"

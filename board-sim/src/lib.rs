@@ -839,9 +839,11 @@ fn run_worker<T: WireReal + 'static, E: ElementRecord<T> + 'static>(
         let board = BoardElements {
             general,
             boxes: rt.boxes(),
+            cuboids: rt.cuboids(),
             laws,
             general_ends: counts.batch_ends,
             box_ends: counts.box_batch_ends,
+            cuboid_ends: counts.cuboid_batch_ends,
         };
         let k = if ctx.batched {
             BoardBatches::build(&board, Isa::detect())

@@ -22,6 +22,8 @@ pub struct SimTiming {
     pub cycles_per_element_full: f64,
     /// A parallelepiped (reduced integration's cheap kernel).
     pub cycles_per_box_element: f64,
+    /// An axis-aligned cuboid (reduced integration's cheapest kernel).
+    pub cycles_per_cuboid_element: f64,
     pub cycles_per_node_update: f64,
     /// Extra per contact-surface node.
     pub cycles_per_contact_node: f64,
@@ -50,6 +52,7 @@ impl SimTiming {
             cycles_per_element_reduced: reduced.per_element_step as f64,
             cycles_per_element_full: full.per_element_step as f64,
             cycles_per_box_element: reduced.box_per_element_step as f64,
+            cycles_per_cuboid_element: reduced.cuboid_per_element_step as f64,
             cycles_per_node_update: reduced.per_node_update.max(full.per_node_update) as f64,
             cycles_per_contact_node: reduced.per_contact_node.max(full.per_contact_node) as f64,
             link_bytes_per_s: p.link_bytes_per_s as f64,
@@ -129,7 +132,8 @@ pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::R
                     let k = k as usize;
                     let size = |e: [u32; 4]| if k == 0 { e[0] } else { e[k] - e[k - 1] } as f64;
                     let c = (size(im.header.counts.batch_ends) * cpe
-                        + size(im.header.counts.box_batch_ends) * t.cycles_per_box_element)
+                        + size(im.header.counts.box_batch_ends) * t.cycles_per_box_element
+                        + size(im.header.counts.cuboid_batch_ends) * t.cycles_per_cuboid_element)
                         / t.clock_hz;
                     now[b] += c;
                     compute[b] += c;

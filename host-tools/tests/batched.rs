@@ -1,6 +1,6 @@
 //! The batched element loop (`solver::batched`) against the scalar loop it replaces
 //! (`Elements::internal_forces`, the firmware's kernels one element at a time): the same
-//! bits, in f64 and f32, reduced (general and parallelepiped kernels) and full
+//! bits, in f64 and f32, reduced (general, parallelepiped and cuboid kernels) and full
 //! integration, on distorted cells, with element counts that are not a multiple of the
 //! lane count, laws of several kinds side by side, one element alone, and an inverted
 //! element (the same error, naming the same element, and the same forces up to it).
@@ -85,14 +85,23 @@ struct Case<T> {
     u: Vec<[T; 3]>,
 }
 
-/// `general` distorted cells and `boxes` parallelepipeds (reduced), or all of them full.
+/// `general` distorted cells and `boxes` undistorted ones (reduced), or all of them full:
+/// the first `boxes / 2` of these turned by 30° about x (parallelepipeds), the others
+/// axis-aligned (cuboids).
 fn case<T: Real>(general: usize, boxes: usize, full: bool, seed: u64) -> Case<T> {
     let mut rng = Rng(seed);
     let (mut nodes, mut cells) = row(general, 0.15, &mut rng);
-    let (bn, bc) = row(boxes, 0.0, &mut rng);
-    let off = nodes.len() as u32;
-    nodes.extend(bn.iter().map(|x| [x[0], x[1] + 0.05, x[2]]));
-    cells.extend(bc.iter().map(|c| c.map(|n| n + off)));
+    let turned = boxes / 2;
+    let (s, c) = (0.5f64, 0.75f64.sqrt());
+    for (n, y, turn) in [(turned, 0.05, true), (boxes - turned, 0.1, false)] {
+        let (bn, bc) = row(n, 0.0, &mut rng);
+        let off = nodes.len() as u32;
+        nodes.extend(bn.iter().map(|x| match turn {
+            true => [x[0], c * x[1] - s * x[2] + y, s * x[1] + c * x[2]],
+            false => [x[0], x[1] + y, x[2]],
+        }));
+        cells.extend(bc.iter().map(|c| c.map(|n| n + off)));
+    }
     let laws64 = laws();
     let refs: Vec<ReferenceHex> = cells
         .iter()
@@ -111,15 +120,23 @@ fn case<T: Real>(general: usize, boxes: usize, full: bool, seed: u64) -> Case<T>
         let g: Vec<_> = (0..general)
             .map(|e| refs[e].reduced(cells[e], material(e), k(e), 0.1))
             .collect();
-        let b: Vec<_> = (general..general + boxes)
+        let b: Vec<_> = (general..general + turned)
             .map(|e| {
                 assert!(refs[e].is_parallelepiped(), "cell {e} is a parallelepiped");
+                assert!(!refs[e].is_cuboid(), "cell {e} is turned");
                 refs[e].parallelepiped(cells[e], material(e), k(e), 0.1)
+            })
+            .collect();
+        let q: Vec<_> = (general + turned..general + boxes)
+            .map(|e| {
+                assert!(refs[e].is_cuboid(), "cell {e} is a cuboid");
+                refs[e].cuboid(cells[e], material(e), k(e), 0.1)
             })
             .collect();
         Elements::Reduced {
             general: g,
             boxes: b,
+            cuboids: q,
             cells: (0..(general + boxes) as u32).collect(),
         }
     };
@@ -308,7 +325,7 @@ fn board_both<T: Real>(
     (Result<(), PhysicsError>, Vec<[T; 3]>),
 ) {
     use host_tools::solver::batched::board::{BoardBatches, BoardElements};
-    use pe_firmware::physics::{HexBox, HexElement};
+    use pe_firmware::physics::{HexBox, HexCuboid, HexElement};
     use pe_firmware::runtime::{batch_range, BatchForces, BatchSlices, ScalarBatches};
     fn run<T: Real, E: HexElement<T>>(
         k: &impl BatchForces<T, E>,
@@ -317,9 +334,10 @@ fn board_both<T: Real>(
     ) -> (Result<(), PhysicsError>, Vec<[T; 3]>) {
         let mut f = vec![[T::ZERO; 3]; c.u.len()];
         for b in 0..4 {
-            let (g, x) = (
+            let (g, x, q) = (
                 batch_range(board.general_ends, b),
                 batch_range(board.box_ends, b),
+                batch_range(board.cuboid_ends, b),
             );
             let slices = BatchSlices {
                 index: b,
@@ -327,6 +345,8 @@ fn board_both<T: Real>(
                 general: &board.general[g],
                 first_box: (board.general.len() + x.start) as u32,
                 boxes: &board.boxes[x],
+                first_cuboid: (board.general.len() + board.boxes.len() + q.start) as u32,
+                cuboids: &board.cuboids[q],
             };
             let r = k.batch_forces(slices, board.laws, &c.u, &mut f);
             if r.is_err() {
@@ -338,6 +358,7 @@ fn board_both<T: Real>(
     fn both_of<T: Real + 'static, E: HexElement<T> + Copy + 'static>(
         general: &[E],
         boxes: &[HexBox<T>],
+        cuboids: &[HexCuboid<T>],
         c: &Case<T>,
         isa: Isa,
         cuts: [f64; 4],
@@ -349,9 +370,11 @@ fn board_both<T: Real>(
         let board = BoardElements {
             general,
             boxes,
+            cuboids,
             laws: &c.laws,
             general_ends: ends(general.len()),
             box_ends: ends(boxes.len()),
+            cuboid_ends: ends(cuboids.len()),
         };
         let packed = BoardBatches::build(&board, isa).expect("packs");
         assert!(
@@ -362,13 +385,18 @@ fn board_both<T: Real>(
         (run(&ScalarBatches, &board, c), run(&packed, &board, c))
     }
     match &c.elements {
-        Elements::Reduced { general, boxes, .. } => both_of(general, boxes, c, isa, cuts),
-        Elements::Full(v) => both_of::<T, _>(v, &[], c, isa, cuts),
+        Elements::Reduced {
+            general,
+            boxes,
+            cuboids,
+            ..
+        } => both_of(general, boxes, cuboids, c, isa, cuts),
+        Elements::Full(v) => both_of::<T, _>(v, &[], &[], c, isa, cuts),
     }
 }
 
 /// board-sim's boards run their batches on the lanes with the bits of the firmware's scalar
-/// loop: f64 and f32, reduced (general and parallelepiped kernels, laws of three kinds) and
+/// loop: f64 and f32, reduced (general, parallelepiped and cuboid kernels, laws of three kinds) and
 /// full, batches cut unevenly (an empty one, odd counts), from forces far from trivial.
 #[test]
 fn a_boards_batches_on_lanes_give_the_scalar_loops_bits() {

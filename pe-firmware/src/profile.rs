@@ -204,12 +204,14 @@ pub fn profile(name: &str) -> Option<BoardProfile> {
     PROFILES.iter().copied().find(|p| p.name == name)
 }
 
+use crate::physics::Kernel;
+
 /// Executed instructions of the board firmware per element and per node in one step,
 /// measured under QEMU (mps2-an500, Cortex-M7 with FPU, `-C target-cpu=cortex-m7`) with an
 /// exact instruction counter by `scripts/board-cost.sh`: the general kernel and the node
 /// update on the built-in coarse scene (351 elements, all distorted, 731 nodes, 1x1x1) after
-/// 900 steps, the probe pressing the tube; the parallelepiped kernel on a 10x5x5 box sagging
-/// under gravity. The node update includes the step's contact, graphics and external-force
+/// 900 steps, the probe pressing the tube; the cuboid kernel on a 10x5x5 box sagging under
+/// gravity, the parallelepiped kernel on the same box turned by 30° about x. The node update includes the step's contact, graphics and external-force
 /// work. Instructions, not cycles: capacity figures take one instruction per cycle.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FirmwareCost {
@@ -224,6 +226,10 @@ pub struct FirmwareCost {
     /// integration, which has no such kernel).
     pub box_kernel_per_element: u32,
     pub box_per_element_step: u32,
+    /// The same for an axis-aligned cuboid ([`crate::physics::HexCuboid`]; 0 for full
+    /// integration).
+    pub cuboid_kernel_per_element: u32,
+    pub cuboid_per_element_step: u32,
     /// Per node and step: external forces, central-difference update, checks (a node
     /// without contact: measured on the regular box).
     pub per_node_update: u32,
@@ -236,41 +242,54 @@ pub struct FirmwareCost {
 }
 
 impl FirmwareCost {
-    /// Instructions of one step of a board holding `general` and `boxes` elements of each
-    /// kernel, `nodes` nodes of which `contact_nodes` on a contact surface (no exchange).
+    /// Instructions per element-step (kernel, gather, scatter) of kernel `k`.
+    pub fn element_step(&self, k: Kernel) -> u32 {
+        match k {
+            Kernel::General => self.per_element_step,
+            Kernel::Parallelepiped => self.box_per_element_step,
+            Kernel::Cuboid => self.cuboid_per_element_step,
+        }
+    }
+
+    /// Instructions of one step of a board holding `per_kernel[k]` elements of each kernel
+    /// ([`Kernel`] order), `nodes` nodes of which `contact_nodes` on a contact surface (no
+    /// exchange).
     pub fn step_instructions(
         &self,
-        general: usize,
-        boxes: usize,
+        per_kernel: [usize; 3],
         nodes: usize,
         contact_nodes: usize,
     ) -> f64 {
-        general as f64 * self.per_element_step as f64
-            + boxes as f64 * self.box_per_element_step as f64
+        Kernel::ALL
+            .iter()
+            .map(|&k| per_kernel[k as usize] as f64 * self.element_step(k) as f64)
+            .sum::<f64>()
             + nodes as f64 * self.per_node_update as f64
             + contact_nodes as f64 * self.per_contact_node as f64
     }
 
-    /// Per element of a mix with a fraction `box_fraction` of parallelepipeds.
-    pub fn per_element_of_mix(&self, box_fraction: f64) -> f64 {
-        (1.0 - box_fraction) * self.per_element_step as f64
-            + box_fraction * self.box_per_element_step as f64
+    /// Per element of a mix with fractions `mix[k]` of each kernel ([`Kernel`] order).
+    pub fn per_element_of_mix(&self, mix: [f64; 3]) -> f64 {
+        Kernel::ALL
+            .iter()
+            .map(|&k| mix[k as usize] * self.element_step(k) as f64)
+            .sum()
     }
 
     /// Elements one board of `profile` computes at `rate_hz` steps per second, with
-    /// `nodes_per_element` nodes (`contact_per_element` contact nodes) per element and a
-    /// fraction `box_fraction` of parallelepipeds, taking one instruction per cycle.
+    /// `nodes_per_element` nodes (`contact_per_element` contact nodes) per element and
+    /// fractions `mix` of each kernel, taking one instruction per cycle.
     pub fn elements_per_board(
         &self,
         profile: &BoardProfile,
         rate_hz: f64,
         nodes_per_element: f64,
         contact_per_element: f64,
-        box_fraction: f64,
+        mix: [f64; 3],
     ) -> f64 {
         profile.clock_hz as f64
             / rate_hz
-            / (self.per_element_of_mix(box_fraction)
+            / (self.per_element_of_mix(mix)
                 + nodes_per_element * self.per_node_update as f64
                 + contact_per_element * self.per_contact_node as f64)
     }
@@ -288,6 +307,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             per_element_step: 1122,
             box_kernel_per_element: 610,
             box_per_element_step: 700,
+            cuboid_kernel_per_element: 552,
+            cuboid_per_element_step: 643,
             per_node_update: 100,
             per_contact_node: 1218,
             step_per_element: 1727,
@@ -299,6 +320,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             per_element_step: 4563,
             box_kernel_per_element: 0,
             box_per_element_step: 0,
+            cuboid_kernel_per_element: 0,
+            cuboid_per_element_step: 0,
             per_node_update: 100,
             per_contact_node: 1090,
             step_per_element: 5124,
@@ -310,6 +333,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             per_element_step: 883,
             box_kernel_per_element: 458,
             box_per_element_step: 568,
+            cuboid_kernel_per_element: 406,
+            cuboid_per_element_step: 518,
             per_node_update: 105,
             per_contact_node: 1250,
             step_per_element: 1508,
@@ -321,6 +346,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             per_element_step: 3333,
             box_kernel_per_element: 0,
             box_per_element_step: 0,
+            cuboid_kernel_per_element: 0,
+            cuboid_per_element_step: 0,
             per_node_update: 105,
             per_contact_node: 1282,
             step_per_element: 3969,

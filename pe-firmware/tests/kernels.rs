@@ -1,8 +1,8 @@
 //! The element kernels against each other and against an independent computation: the
 //! general reduced kernel (corner transforms, `q = c − H γ`) against the textbook formula
 //! (`f_a = V₀ F S B_a + k Σ_α Γ_aα Σ_b Γ_bα u_b` with `Γ` stored per node), the
-//! parallelepiped kernel against the general one on parallelepipeds, and the forces
-//! against the energy's gradient.
+//! parallelepiped kernel against the general one on parallelepipeds, the cuboid kernel
+//! against both on axis-aligned boxes, and the forces against the energy's gradient.
 
 #![allow(clippy::needless_range_loop)] // index loops follow the formulas
 
@@ -321,4 +321,134 @@ fn fused_accumulation_adds_exactly_the_kernel_forces() {
     check(boxed.internal_forces(&law, &ue).unwrap(), &|f| {
         boxed.accumulate(&law, &u, f)
     });
+}
+
+/// An axis-aligned box of random edge lengths (2 to 12 mm) at a random place far from the
+/// origin (coordinates with round-off).
+fn cuboid(rng: &mut Lcg) -> [[f64; 3]; 8] {
+    let o: [f64; 3] = core::array::from_fn(|_| 0.1 * rng.next());
+    let h: [f64; 3] = core::array::from_fn(|_| 0.007 + 0.005 * rng.next());
+    NODE_XI.map(|v| core::array::from_fn(|i| o[i] + (v[i] + 1.0) / 2.0 * h[i]))
+}
+
+/// Cuboids are the axis-aligned parallelepipeds: a cube, random boxes and a generated grid
+/// cell are; the random sheared parallelepipeds, a box turned by 1e-6 rad about z (an
+/// off-diagonal gradient term 1e-6 of the diagonal, far above the 1e-13 tolerance) and a
+/// box with one node moved by 1e-9 of its size are not.
+#[test]
+fn cuboids_are_recognised() {
+    let mut rng = Lcg(0x5eed_0010);
+    let cube = NODE_XI.map(|v| v.map(|c| 0.005 * (c + 1.0)));
+    assert!(ReferenceHex::new(&cube).unwrap().is_cuboid());
+    for _ in 0..20 {
+        let x = cuboid(&mut rng);
+        assert!(ReferenceHex::new(&x).unwrap().is_cuboid());
+        let (s, c) = (1e-6f64.sin(), 1e-6f64.cos());
+        let turned = x.map(|p| [c * p[0] - s * p[1], s * p[0] + c * p[1], p[2]]);
+        let r = ReferenceHex::new(&turned).unwrap();
+        assert!(r.is_parallelepiped() && !r.is_cuboid());
+        let mut y = x;
+        y[6][1] += 1e-9 * 0.01;
+        assert!(!ReferenceHex::new(&y).unwrap().is_cuboid());
+        let p = parallelepiped(&mut rng, 0.01);
+        assert!(!ReferenceHex::new(&p).unwrap().is_cuboid());
+    }
+    let (h, o) = (0.2 / 20.0, [0.13, -0.07, 0.05]);
+    let grid = NODE_XI.map(|v| core::array::from_fn(|i| o[i] + (7.0 + (v[i] + 1.0) / 2.0) * h));
+    assert!(ReferenceHex::new(&grid).unwrap().is_cuboid());
+}
+
+/// On cuboids the cuboid kernel gives the parallelepiped kernel's forces: bit for bit
+/// where the gradient basis is exactly diagonal (a cube at the origin: the dropped terms
+/// are products with zero, which add nothing to a finite sum), in f64 and f32, and to
+/// round-off on random boxes far from the origin, whose basis has off-diagonal round-off
+/// (1e-13 of the largest force in f64, as the parallelepiped kernel against the general
+/// one; 3e-5 in f32); so the general kernel's forces to 1e-13 in f64. The energies agree
+/// to 1e-13.
+#[test]
+fn cuboid_kernel_gives_the_box_kernels_forces_on_cuboids() {
+    let mut rng = Lcg(0x5eed_0011);
+    let mut checked = 0;
+    let cube = NODE_XI.map(|v| v.map(|c| 0.004 * (c + 1.0)));
+    let cells: Vec<[[f64; 3]; 8]> = core::iter::once(cube)
+        .chain((0..10).map(|_| cuboid(&mut rng)))
+        .collect();
+    for (k, x) in cells.iter().enumerate() {
+        let r = ReferenceHex::new(x).unwrap();
+        assert!(r.is_cuboid());
+        let b = r.gradient_basis();
+        let exact = (0..3).all(|j| (0..3).all(|i| i == j || b[j][i] == 0.0));
+        assert!(k > 0 || exact, "the cube's basis is exactly diagonal");
+        for law in laws() {
+            let g = law.hourglass_modulus();
+            let general = r.reduced::<f64>(NODES, 0, g, KAPPA_HG);
+            let boxed = r.parallelepiped::<f64>(NODES, 0, g, KAPPA_HG);
+            let cub = r.cuboid::<f64>(NODES, 0, g, KAPPA_HG);
+            let boxed32 = r.parallelepiped::<f32>(NODES, 0, g, KAPPA_HG);
+            let cub32 = r.cuboid::<f32>(NODES, 0, g, KAPPA_HG);
+            let law32 = law.cast::<f32>();
+            for strain in [1e-4, 0.3] {
+                let u = displacements(&mut rng, x, strain);
+                let a = boxed.internal_forces(&law, &u).unwrap();
+                let q = cub.internal_forces(&law, &u).unwrap();
+                let largest = q.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+                assert!(largest > 1e-9, "forces far from zero: {largest:e}");
+                assert_eq!(a.len(), q.len());
+                let u32_ = u.map(|v| v.map(|c| c as f32));
+                let a32 = boxed32.internal_forces(&law32, &u32_).unwrap();
+                let q32 = cub32.internal_forces(&law32, &u32_).unwrap();
+                assert!(q32.iter().flatten().any(|v| v.abs() > 1e-9));
+                let up = |f: [[f32; 3]; 8]| f.map(|v| v.map(|c| c as f64));
+                if exact {
+                    for (p, (fa, fq)) in a.iter().zip(&q).enumerate() {
+                        for i in 0..3 {
+                            assert_eq!(fa[i].to_bits(), fq[i].to_bits(), "f64 node {p} {i}");
+                            let (b32, c32) = (a32[p][i], q32[p][i]);
+                            assert_eq!(b32.to_bits(), c32.to_bits(), "f32 node {p} {i}");
+                        }
+                    }
+                }
+                let d = rel_diff(&a, &q);
+                assert!(d < 1e-13, "f64 against the parallelepiped kernel: {d:e}");
+                let d = rel_diff(&general.internal_forces(&law, &u).unwrap(), &q);
+                assert!(d < 1e-13, "f64 against the general kernel: {d:e}");
+                let d32 = rel_diff(&up(a32), &up(q32));
+                assert!(d32 < 3e-5, "f32 against the parallelepiped kernel: {d32:e}");
+                let (ea, eq) = (
+                    boxed.energy(&law, &u).unwrap(),
+                    cub.energy(&law, &u).unwrap(),
+                );
+                assert!(ea.abs() > 0.0 && (ea - eq).abs() <= 1e-13 * ea.abs());
+                checked += 1;
+            }
+        }
+    }
+    assert_eq!(checked, 11 * 3 * 2);
+}
+
+/// The cuboid kernel's forces are the gradient of its energy (central differences, as for
+/// the parallelepiped kernel: 1e-6 of the largest force).
+#[test]
+fn cuboid_kernel_forces_are_the_energy_gradient() {
+    let mut rng = Lcg(0x5eed_0012);
+    let x = cuboid(&mut rng);
+    let r = ReferenceHex::new(&x).unwrap();
+    for law in laws() {
+        let e = r.cuboid::<f64>(NODES, 0, law.hourglass_modulus(), KAPPA_HG);
+        let u = displacements(&mut rng, &x, 0.2);
+        let f = e.internal_forces(&law, &u).unwrap();
+        let step = 1e-7 * 0.01;
+        let mut fd = [[0.0; 3]; 8];
+        for a in 0..8 {
+            for i in 0..3 {
+                let (mut up, mut dn) = (u, u);
+                up[a][i] += step;
+                dn[a][i] -= step;
+                fd[a][i] =
+                    (e.energy(&law, &up).unwrap() - e.energy(&law, &dn).unwrap()) / (2.0 * step);
+            }
+        }
+        let d = rel_diff(&fd, &f);
+        assert!(d < 1e-6, "law {law:?}: {d:e}");
+    }
 }

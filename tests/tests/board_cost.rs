@@ -20,14 +20,14 @@ fn measured_cost_table_matches_the_firmware() {
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
-        Some("variant,scene,elements,boxes,nodes,contact_nodes,kernel_general,element_step_general,kernel_box,element_step_box,step_per_element,per_node_update"),
+        Some("variant,scene,elements,boxes,cuboids,nodes,contact_nodes,kernel_general,element_step_general,kernel_box,element_step_box,kernel_cuboid,element_step_cuboid,step_per_element,per_node_update"),
         "{path}: header"
     );
     let mut rows = Vec::new();
     let mut parsed = Vec::new();
     for line in lines {
         let f: Vec<&str> = line.split(',').collect();
-        assert_eq!(f.len(), 12, "{path}: {line}");
+        assert_eq!(f.len(), 15, "{path}: {line}");
         let (precision, integration) = match f[0] {
             "f64-reduced" => (Precision::F64, Integration::Reduced),
             "f64-full" => (Precision::F64, Integration::Full),
@@ -39,45 +39,67 @@ fn measured_cost_table_matches_the_firmware() {
             .iter()
             .map(|v| v.parse().expect("a number"))
             .collect();
-        // n: elements, boxes, nodes, contact nodes, kernel/gen, step/gen, kernel/box,
-        // step/box, step per element, update per node.
-        assert!(n[0] > 100.0 && n[2] > 100.0, "{path}: a real scene: {line}");
+        // n: elements, boxes, cuboids, nodes, contact nodes, kernel/gen, step/gen,
+        // kernel/box, step/box, kernel/cuboid, step/cuboid, step per element, update per
+        // node.
+        assert_eq!(n.len(), 13, "{path}: {line}");
+        assert!(n[0] > 100.0 && n[3] > 100.0, "{path}: a real scene: {line}");
         parsed.push((precision, integration, f[1].to_string(), n));
         rows.push(format!("{}-{}", f[1], f[0]));
     }
     let mut stale = Vec::new();
     for (precision, integration, scene, n) in &parsed {
         let table = measured_cost(*precision, *integration);
-        // The regular box: parallelepipeds and plain nodes (no contact); the built-in
-        // anatomy: the general kernel (every cell distorted), and what its contact nodes
-        // cost above plain nodes (its per-node figure less the box's, over its contact
-        // nodes).
+        // The regular box: cuboids and plain nodes (no contact); the turned box:
+        // parallelepipeds; the built-in anatomy: the general kernel (every cell
+        // distorted), and what its contact nodes cost above plain nodes (its per-node
+        // figure less the box's, over its contact nodes).
         let checks = match scene.as_str() {
             "regular" => {
+                assert_eq!(n[2], n[0], "{path}: every cell of the box is a cuboid");
+                assert_eq!(n[4], 0.0, "{path}: the box has no contact");
+                vec![
+                    (
+                        "cuboid_kernel_per_element",
+                        n[9],
+                        table.cuboid_kernel_per_element,
+                    ),
+                    (
+                        "cuboid_per_element_step",
+                        n[10],
+                        table.cuboid_per_element_step,
+                    ),
+                    ("per_node_update", n[12], table.per_node_update),
+                ]
+            }
+            "turned" => {
                 assert_eq!(
                     n[1], n[0],
-                    "{path}: every cell of the box is a parallelepiped"
+                    "{path}: every cell of the turned box is a parallelepiped"
                 );
-                assert_eq!(n[3], 0.0, "{path}: the box has no contact");
+                assert_eq!(n[4], 0.0, "{path}: the box has no contact");
                 vec![
-                    ("box_kernel_per_element", n[6], table.box_kernel_per_element),
-                    ("box_per_element_step", n[7], table.box_per_element_step),
-                    ("per_node_update", n[9], table.per_node_update),
+                    ("box_kernel_per_element", n[7], table.box_kernel_per_element),
+                    ("box_per_element_step", n[8], table.box_per_element_step),
                 ]
             }
             "builtin" => {
-                assert_eq!(n[1], 0.0, "{path}: the built-in has no parallelepipeds");
-                assert!(n[3] > 10.0, "{path}: the built-in has contact nodes");
+                assert_eq!(
+                    n[1] + n[2],
+                    0.0,
+                    "{path}: the built-in has no parallelepipeds or cuboids"
+                );
+                assert!(n[4] > 10.0, "{path}: the built-in has contact nodes");
                 let plain = parsed
                     .iter()
                     .find(|r| r.0 == *precision && r.2 == "regular")
-                    .map(|r| r.3[9])
+                    .map(|r| r.3[12])
                     .expect("the regular box of the same precision");
-                let contact = (n[9] - plain) * n[2] / n[3];
+                let contact = (n[12] - plain) * n[3] / n[4];
                 vec![
-                    ("kernel_per_element", n[4], table.kernel_per_element),
-                    ("per_element_step", n[5], table.per_element_step),
-                    ("step_per_element", n[8], table.step_per_element),
+                    ("kernel_per_element", n[5], table.kernel_per_element),
+                    ("per_element_step", n[6], table.per_element_step),
+                    ("step_per_element", n[11], table.step_per_element),
                     ("per_contact_node", contact, table.per_contact_node),
                     ("per_node_update", plain, table.per_node_update),
                 ]
@@ -105,7 +127,9 @@ fn measured_cost_table_matches_the_firmware() {
             "builtin-f64-full",
             "builtin-f64-reduced",
             "regular-f32-reduced",
-            "regular-f64-reduced"
+            "regular-f64-reduced",
+            "turned-f32-reduced",
+            "turned-f64-reduced"
         ],
         "{path}: every variant"
     );

@@ -153,7 +153,7 @@ fn partition_is_deterministic() {
 /// Balancing cost: each element weighs its kernel's measured instructions (parallelepiped
 /// or general, `measured_cost` for the scene's precision) plus, for each of its corners on
 /// a contact surface, the contact cost over the elements around that corner; computed here
-/// from the mesh, `is_box` and the contact node list. On the built-in medium scene (both
+/// from the mesh, the cells' geometry and the contact node list. On the built-in medium scene (both
 /// kernels and contact, so the weights differ by over 2x) on 4x4x4 and the built-in coarse
 /// scene on 2x3x2, the cost partition keeps every board within `BALANCE_MAX` of the mean
 /// cost (the element partition does not: the contact nodes crowd a few boards), every
@@ -189,10 +189,13 @@ fn balancing_cost_keeps_every_boards_cost_within_the_bound() {
             .iter()
             .enumerate()
             .map(|(e, c)| {
-                let k = if host_tools::problem::elements::is_box(&p, e) {
-                    cost.box_per_element_step
-                } else {
+                let r = &p.reference[e];
+                let k = if !r.is_parallelepiped() {
                     cost.per_element_step
+                } else if r.is_cuboid() {
+                    cost.cuboid_per_element_step
+                } else {
+                    cost.box_per_element_step
                 } as f64;
                 k + c
                     .iter()

@@ -141,15 +141,19 @@ fn verdict_matches_an_independent_computation() {
             .boards
             .iter()
             .map(|b| {
-                // Each element at its kernel's cost (parallelepipeds are cheaper).
+                // Each element at its kernel's cost (parallelepipeds and cuboids are
+                // cheaper), from the cell's geometry.
                 let elements: f64 = b
                     .elements
                     .iter()
                     .map(|&e| {
-                        if host_tools::problem::elements::is_box(&p, e as usize) {
-                            cost.box_per_element_step as f64
-                        } else {
+                        let r = &p.reference[e as usize];
+                        if !r.is_parallelepiped() {
                             cost.per_element_step as f64
+                        } else if r.is_cuboid() {
+                            cost.cuboid_per_element_step as f64
+                        } else {
+                            cost.box_per_element_step as f64
                         }
                     })
                     .sum();

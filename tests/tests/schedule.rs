@@ -404,29 +404,31 @@ density = 1000.0
 }
 
 /// Kernel choice per element, recorded in the images: the built-in anatomy (swept,
-/// curved cells) runs every element on the general kernel, the seed's box on the
-/// parallelepiped kernel. Checked against an independent test of each cell (the trilinear
-/// map's bilinear and trilinear terms, |Σ_a h_aα X_a|, relative to the cell's edge
-/// vectors: 1e-13 for a grid's round-off, far above it for a curved cell), and every
-/// element in exactly one kernel table of one board.
+/// curved cells) runs every element on the general kernel, the seed's box on the cuboid
+/// kernel. Checked against an independent test of each cell (the trilinear map's bilinear
+/// and trilinear terms, |Σ_a h_aα X_a|, relative to the cell's edge vectors: 1e-13 for a
+/// grid's round-off, far above it for a curved cell; an affine cell is a cuboid when each
+/// edge vector `Σ_a ξ_aj X_a` lies along axis j to 1e-13), and every element in exactly
+/// one kernel table of one board.
 #[test]
 fn each_cell_gets_the_kernel_its_shape_allows() {
     let xi = pe_firmware::physics::hex::NODE_XI;
-    let affine = |p: &Problem, e: usize| {
+    // (affine, axis-aligned) of cell e.
+    let shape = |p: &Problem, e: usize| {
         let x = p.mesh.cells[e].map(|n| p.mesh.nodes[n as usize]);
-        let moment = |signs: &dyn Fn(usize) -> f64| -> f64 {
-            (0..3)
-                .map(|i| (0..8).map(|a| signs(a) * x[a][i]).sum::<f64>().powi(2))
-                .sum::<f64>()
-                .sqrt()
+        let vector = |signs: &dyn Fn(usize) -> f64| -> [f64; 3] {
+            core::array::from_fn(|i| (0..8).map(|a| signs(a) * x[a][i]).sum::<f64>())
         };
-        let size: f64 = (0..3).map(|j| moment(&|a| xi[a][j])).sum();
+        let norm = |v: [f64; 3]| v.iter().map(|c| c * c).sum::<f64>().sqrt();
+        let edges: [[f64; 3]; 3] = core::array::from_fn(|j| vector(&|a| xi[a][j]));
+        let size: f64 = edges.iter().map(|&v| norm(v)).sum();
         let bent = [(0, 1), (1, 2), (2, 0)]
             .iter()
-            .map(|&(j, k)| moment(&|a| xi[a][j] * xi[a][k]))
-            .chain([moment(&|a| xi[a][0] * xi[a][1] * xi[a][2])])
+            .map(|&(j, k)| norm(vector(&|a| xi[a][j] * xi[a][k])))
+            .chain([norm(vector(&|a| xi[a][0] * xi[a][1] * xi[a][2]))])
             .fold(0.0, f64::max);
-        bent <= 1e-13 * size
+        let aligned = (0..3).all(|j| (0..3).all(|i| i == j || edges[j][i].abs() <= 1e-13 * size));
+        (bent <= 1e-13 * size, aligned)
     };
     let cases = [
         (builtin_problem("coarse", 10), "builtin"),
@@ -434,22 +436,31 @@ fn each_cell_gets_the_kernel_its_shape_allows() {
     ];
     for (p, name) in &cases {
         let n = p.mesh.cells.len();
-        let expected_boxes = (0..n).filter(|&e| affine(p, e)).count();
+        let kinds: Vec<(bool, bool)> = (0..n).map(|e| shape(p, e)).collect();
+        let expected_cuboids = kinds.iter().filter(|&&(a, x)| a && x).count();
+        let expected_boxes = kinds.iter().filter(|&&(a, x)| a && !x).count();
         let images =
             compile_images(p, &plan(p, Machine::parse("2x2x1").unwrap()).unwrap()).unwrap();
         assert_eq!(images.len(), 4);
         let boxes: u32 = images.iter().map(|im| im.header.counts.boxes).sum();
+        let cuboids: u32 = images.iter().map(|im| im.header.counts.cuboids).sum();
         let general: u32 = images.iter().map(|im| im.header.counts.elements).sum();
-        assert_eq!((boxes + general) as usize, n, "{name}: every element once");
+        assert_eq!(
+            (boxes + cuboids + general) as usize,
+            n,
+            "{name}: every element once"
+        );
         assert_eq!(boxes as usize, expected_boxes, "{name}: parallelepipeds");
+        assert_eq!(cuboids as usize, expected_cuboids, "{name}: cuboids");
         for im in &images {
             let c = im.header.counts;
             assert_eq!(c.batch_ends[3], c.elements);
             assert_eq!(c.box_batch_ends[3], c.boxes);
+            assert_eq!(c.cuboid_batch_ends[3], c.cuboids);
         }
         match *name {
-            "builtin" => assert_eq!(boxes, 0, "the anatomy's cells are all distorted"),
-            _ => assert_eq!(boxes as usize, n, "a generated grid is all parallelepipeds"),
+            "builtin" => assert_eq!(boxes + cuboids, 0, "the anatomy's cells are all distorted"),
+            _ => assert_eq!(cuboids as usize, n, "a generated grid is all cuboids"),
         }
     }
 }

@@ -72,6 +72,7 @@ fn decode_typed<T: ImageReal, E: ElementRecord<T>>(
             .iter()
             .map(|e| *e.nodes())
             .chain(t.boxes.iter().map(|e| e.connectivity.nodes))
+            .chain(t.cuboids.iter().map(|e| e.connectivity.nodes))
             .collect(),
         nodes: t
             .nodes

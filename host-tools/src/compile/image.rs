@@ -13,7 +13,7 @@ use pe_firmware::runtime::Capacities;
 use super::plan::{BoardPlan, Plan};
 use super::tables::ImageTables;
 use crate::problem::contact::ContactRun;
-use crate::problem::elements::is_box;
+use crate::problem::elements::{kernel_of, Kernel};
 use crate::problem::{NodeKind, Problem};
 
 /// A compiled image with its figures.
@@ -111,9 +111,11 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
     };
     let mut t = ImageTables::<T, E>::zeroed(&Counts::default()).map_err(|e| anyhow!("{e}"))?;
     t.laws = problem.laws.iter().map(|l| l.cast::<T>()).collect();
-    // Per batch: the general elements, then the parallelepipeds (each in plan order).
+    // Per batch: the general elements, then the parallelepipeds, then the cuboids (each in
+    // plan order).
     let local_nodes = |e: u32| problem.mesh.cells[e as usize].map(|n| local.map[&n] as u32);
-    let (mut batch_ends, mut box_batch_ends) = ([0u32; 4], [0u32; 4]);
+    let (mut batch_ends, mut box_batch_ends, mut cuboid_batch_ends) =
+        ([0u32; 4], [0u32; 4], [0u32; 4]);
     let mut start = 0;
     for (k, &end) in bp.batch_ends.iter().enumerate() {
         for &e in &bp.elements[start..end] {
@@ -121,20 +123,24 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
                 &problem.reference[e as usize],
                 problem.cell_material[e as usize],
             );
-            if is_box(problem, e as usize) {
-                let modulus = problem.laws[m as usize].hourglass_modulus();
-                t.boxes.push(r.parallelepiped::<T>(
-                    local_nodes(e),
-                    m,
-                    modulus,
-                    problem.solver.hourglass,
-                ));
-            } else {
-                t.elements.push(element(r, local_nodes(e), m));
+            let (modulus, hg) = (
+                problem.laws[m as usize].hourglass_modulus(),
+                problem.solver.hourglass,
+            );
+            match kernel_of(problem, e as usize) {
+                Kernel::Parallelepiped => {
+                    t.boxes
+                        .push(r.parallelepiped::<T>(local_nodes(e), m, modulus, hg))
+                }
+                Kernel::Cuboid => t
+                    .cuboids
+                    .push(r.cuboid::<T>(local_nodes(e), m, modulus, hg)),
+                Kernel::General => t.elements.push(element(r, local_nodes(e), m)),
             }
         }
         batch_ends[k] = t.elements.len() as u32;
         box_batch_ends[k] = t.boxes.len() as u32;
+        cuboid_batch_ends[k] = t.cuboids.len() as u32;
         start = end;
     }
     t.nodes = node_records(problem, bp, shared.dt_s);
@@ -160,6 +166,7 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
         counts: t.counts(
             batch_ends,
             box_batch_ends,
+            cuboid_batch_ends,
             core::array::from_fn(|f| bp.exchange[f].len() as u16),
             plan.rounds.map(|r| r as u8),
             external_counts,

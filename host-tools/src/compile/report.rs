@@ -10,7 +10,7 @@ use super::image::BoardImage;
 use super::image::{contact_tables, graphics_params, image_file_name};
 use super::partition::Machine;
 use super::plan::{plan_balanced, Balance, Plan, FACE_NAMES};
-use crate::problem::elements::is_box;
+use crate::problem::elements::kernel_of;
 use crate::problem::Problem;
 
 /// Figures of a compiled schedule (`DIR/report.json`).
@@ -222,11 +222,13 @@ fn contact_report(
 #[derive(Clone, Debug, Serialize)]
 pub struct Capacity {
     pub clock_hz: u64,
-    /// Per element-step of the general kernel and of the parallelepiped kernel.
+    /// Per element-step of the general kernel, of the parallelepiped kernel and of the
+    /// cuboid kernel.
     pub instructions_per_element_step: u32,
     pub instructions_per_box_element_step: u32,
-    /// Elements of the scene that take the parallelepiped kernel.
-    pub parallelepipeds: usize,
+    pub instructions_per_cuboid_element_step: u32,
+    /// Elements of the scene that take each kernel (general, parallelepiped, cuboid).
+    pub elements_per_kernel: [usize; 3],
     pub instructions_per_node_update: u32,
     pub instructions_per_contact_node: u32,
     /// Instructions of one step on the busiest board (no exchange), and that board.
@@ -592,11 +594,12 @@ pub fn verdict(
 fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f64) -> Capacity {
     let cost =
         pe_firmware::profile::measured_cost(problem.solver.precision, problem.solver.integration);
-    let boxes = |b: &super::plan::BoardPlan| {
-        b.elements
-            .iter()
-            .filter(|&&e| is_box(problem, e as usize))
-            .count()
+    let per_kernel = |elements: &mut dyn Iterator<Item = usize>| {
+        let mut n = [0usize; 3];
+        for e in elements {
+            n[kernel_of(problem, e) as usize] += 1;
+        }
+        n
     };
     let on_contact: std::collections::HashSet<u32> = problem
         .contact
@@ -609,9 +612,9 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
         .boards
         .iter()
         .map(|b| {
-            let nb = boxes(b);
+            let kinds = per_kernel(&mut b.elements.iter().map(|&e| e as usize));
             (
-                cost.step_instructions(b.elements.len() - nb, nb, b.nodes.len(), contact_nodes(b)),
+                cost.step_instructions(kinds, b.nodes.len(), contact_nodes(b)),
                 b.coords,
             )
         })
@@ -624,26 +627,22 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
         .unwrap_or(2.0);
     let cpe = on_contact.len() as f64 / problem.mesh.cells.len().max(1) as f64;
     let n = problem.mesh.cells.len();
-    let box_fraction = (0..n).filter(|&e| is_box(problem, e)).count() as f64 / n.max(1) as f64;
-    let at_10k = cost.elements_per_board(profile, 1e4, npe, cpe, box_fraction);
+    let elements_per_kernel = per_kernel(&mut (0..n));
+    let mix = elements_per_kernel.map(|k| k as f64 / n.max(1) as f64);
+    let at_10k = cost.elements_per_board(profile, 1e4, npe, cpe, mix);
     Capacity {
         clock_hz: profile.clock_hz,
         instructions_per_element_step: cost.per_element_step,
         instructions_per_box_element_step: cost.box_per_element_step,
-        parallelepipeds: (box_fraction * n as f64).round() as usize,
+        instructions_per_cuboid_element_step: cost.cuboid_per_element_step,
+        elements_per_kernel,
         instructions_per_node_update: cost.per_node_update,
         instructions_per_contact_node: cost.per_contact_node,
         step_instructions_max: busiest,
         busiest_board,
         step_compute_s_max: busiest / profile.clock_hz as f64,
         compute_keeps_real_time: busiest / profile.clock_hz as f64 <= dt,
-        elements_per_board_at_scene_rate: cost.elements_per_board(
-            profile,
-            1.0 / dt,
-            npe,
-            cpe,
-            box_fraction,
-        ),
+        elements_per_board_at_scene_rate: cost.elements_per_board(profile, 1.0 / dt, npe, cpe, mix),
         elements_per_board_at_10_khz: at_10k,
         boards_needed_at_10_khz: (n as f64 / at_10k).ceil() as usize,
     }
@@ -776,9 +775,9 @@ pub fn summary(r: &CompileReport) -> String {
     );
     let c = &r.capacity;
     s += &format!(
-        "  element kernels: {} parallelepipeds, {} general\n  board compute ({} profile, {:.0} MHz, measured {} instructions per element-step (general), {} (parallelepiped), {} per node update and {} more per contact node, one instruction per cycle assumed): busiest board {:.1} us per step against dt = {:.1} us ({}); {:.1} elements per board at this scene's rate, {:.1} at 10 kHz, so {} boards for this scene at 10 kHz\n",
-        c.parallelepipeds, r.elements - c.parallelepipeds,
-        r.profile, c.clock_hz as f64 / 1e6, c.instructions_per_element_step, c.instructions_per_box_element_step, c.instructions_per_node_update, c.instructions_per_contact_node,
+        "  element kernels: {} cuboids, {} parallelepipeds, {} general\n  board compute ({} profile, {:.0} MHz, measured {} instructions per element-step (general), {} (parallelepiped), {} (cuboid), {} per node update and {} more per contact node, one instruction per cycle assumed): busiest board {:.1} us per step against dt = {:.1} us ({}); {:.1} elements per board at this scene's rate, {:.1} at 10 kHz, so {} boards for this scene at 10 kHz\n",
+        c.elements_per_kernel[2], c.elements_per_kernel[1], c.elements_per_kernel[0],
+        r.profile, c.clock_hz as f64 / 1e6, c.instructions_per_element_step, c.instructions_per_box_element_step, c.instructions_per_cuboid_element_step, c.instructions_per_node_update, c.instructions_per_contact_node,
         c.step_compute_s_max * 1e6, r.dt_s * 1e6,
         if c.compute_keeps_real_time { "within dt" } else { "over dt" },
         c.elements_per_board_at_scene_rate, c.elements_per_board_at_10_khz, c.boards_needed_at_10_khz

@@ -2,7 +2,7 @@
 //! decoder reads back into, both through the firmware's codec ([`ImageParts`]).
 
 use pe_firmware::image::*;
-use pe_firmware::physics::{HexBox, MaterialLaw};
+use pe_firmware::physics::{HexBox, HexCuboid, MaterialLaw};
 
 /// One vector per image section.
 #[derive(Clone, Debug)]
@@ -10,6 +10,7 @@ pub struct ImageTables<T, E> {
     pub laws: Vec<MaterialLaw<T>>,
     pub elements: Vec<E>,
     pub boxes: Vec<HexBox<T>>,
+    pub cuboids: Vec<HexCuboid<T>>,
     pub nodes: Vec<NodeRecord<T>>,
     pub lists: Vec<ExchangeList>,
     pub sends: Vec<u16>,
@@ -41,6 +42,7 @@ impl<T: ImageReal, E: ElementRecord<T>> ImageTables<T, E> {
             laws: zeros(c.materials as usize)?,
             elements: zeros(c.elements as usize)?,
             boxes: zeros(c.boxes as usize)?,
+            cuboids: zeros(c.cuboids as usize)?,
             nodes: zeros(c.nodes as usize)?,
             lists: zeros(c.exchange_lists())?,
             sends: zeros(c.sends as usize)?,
@@ -65,6 +67,7 @@ impl<T: ImageReal, E: ElementRecord<T>> ImageTables<T, E> {
         &self,
         batch_ends: [u32; 4],
         box_batch_ends: [u32; 4],
+        cuboid_batch_ends: [u32; 4],
         exchange: [u16; 6],
         rounds: [u8; 3],
         external: [u16; STAGES],
@@ -75,6 +78,8 @@ impl<T: ImageReal, E: ElementRecord<T>> ImageTables<T, E> {
             batch_ends,
             boxes: self.boxes.len() as u32,
             box_batch_ends,
+            cuboids: self.cuboids.len() as u32,
+            cuboid_batch_ends,
             nodes: self.nodes.len() as u32,
             exchange,
             rounds,
@@ -98,6 +103,7 @@ impl<T: ImageReal, E: ElementRecord<T>> ImageTables<T, E> {
             laws: &mut self.laws,
             elements: &mut self.elements,
             boxes: &mut self.boxes,
+            cuboids: &mut self.cuboids,
             nodes: &mut self.nodes,
             lists: &mut self.lists,
             sends: &mut self.sends,

@@ -1,13 +1,18 @@
 //! The problem's hexahedra as the physics kernels take them, in scalar type `T`: full
 //! integration, or reduced with one kernel per element kind, chosen from the reference
-//! geometry: the parallelepiped kernel ([`HexBox`]) for cells that are parallelepipeds to
-//! round-off, the general one ([`HexReduced`]) for the others. The serial solver runs the
-//! general elements, then the parallelepipeds, each in mesh order: the order a one-board
-//! machine runs them in (see `compile::image`), so the two compute the same bits.
+//! geometry ([`kernel_of`]): the cuboid kernel ([`HexCuboid`]) for cells that are
+//! axis-aligned rectangular cuboids to round-off, the parallelepiped kernel ([`HexBox`]) for
+//! the other parallelepipeds, the general one ([`HexReduced`]) for the rest. The serial
+//! solver runs the general elements, then the parallelepipeds, then the cuboids, each in
+//! mesh order: the order a one-board machine runs them in (see `compile::image`), so the
+//! two compute the same bits.
 
 use pe_firmware::image::Integration;
 use pe_firmware::physics::explicit::{accumulate_internal_forces, stored_energy};
-use pe_firmware::physics::{HexBox, HexFull, HexReduced, MaterialLaw, PhysicsError, Real};
+pub use pe_firmware::physics::Kernel;
+use pe_firmware::physics::{
+    HexBox, HexCuboid, HexFull, HexReduced, MaterialLaw, PhysicsError, Real,
+};
 
 use crate::problem::Problem;
 
@@ -16,15 +21,24 @@ pub enum Elements<T> {
     Reduced {
         general: Vec<HexReduced<T>>,
         boxes: Vec<HexBox<T>>,
-        /// Mesh cell of each element, the general ones first, then the parallelepipeds.
+        cuboids: Vec<HexCuboid<T>>,
+        /// Mesh cell of each element, the general ones first, then the parallelepipeds,
+        /// then the cuboids.
         cells: Vec<u32>,
     },
     Full(Vec<HexFull<T>>),
 }
 
-/// Whether mesh cell `e` of `p` takes the parallelepiped kernel (reduced integration only).
-pub fn is_box(p: &Problem, e: usize) -> bool {
-    p.solver.integration == Integration::Reduced && p.reference[e].is_parallelepiped()
+/// The kernel mesh cell `e` of `p` takes.
+pub fn kernel_of(p: &Problem, e: usize) -> Kernel {
+    let r = &p.reference[e];
+    if p.solver.integration != Integration::Reduced || !r.is_parallelepiped() {
+        Kernel::General
+    } else if r.is_cuboid() {
+        Kernel::Cuboid
+    } else {
+        Kernel::Parallelepiped
+    }
 }
 
 impl<T: Real> Elements<T> {
@@ -33,23 +47,23 @@ impl<T: Real> Elements<T> {
         if p.solver.integration == Integration::Full {
             return Elements::Full(cells.map(|((c, r), m)| r.full(*c, *m)).collect());
         }
-        let (mut general, mut boxes) = (Vec::new(), Vec::new());
-        let (mut general_cells, mut box_cells) = (Vec::new(), Vec::new());
+        let (mut general, mut boxes, mut cuboids) = (Vec::new(), Vec::new(), Vec::new());
+        let mut kind_cells = [Vec::new(), Vec::new(), Vec::new()];
         for (e, ((c, r), m)) in cells.enumerate() {
-            let modulus = p.laws[*m as usize].hourglass_modulus();
-            if is_box(p, e) {
-                boxes.push(r.parallelepiped(*c, *m, modulus, p.solver.hourglass));
-                box_cells.push(e as u32);
-            } else {
-                general.push(r.reduced(*c, *m, modulus, p.solver.hourglass));
-                general_cells.push(e as u32);
+            let (modulus, hg) = (p.laws[*m as usize].hourglass_modulus(), p.solver.hourglass);
+            let kind = kernel_of(p, e);
+            match kind {
+                Kernel::General => general.push(r.reduced(*c, *m, modulus, hg)),
+                Kernel::Parallelepiped => boxes.push(r.parallelepiped(*c, *m, modulus, hg)),
+                Kernel::Cuboid => cuboids.push(r.cuboid(*c, *m, modulus, hg)),
             }
+            kind_cells[kind as usize].push(e as u32);
         }
-        general_cells.extend(box_cells);
         Elements::Reduced {
             general,
             boxes,
-            cells: general_cells,
+            cuboids,
+            cells: kind_cells.concat(),
         }
     }
 
@@ -64,11 +78,16 @@ impl<T: Real> Elements<T> {
         self.len() == 0
     }
 
-    /// Elements of the parallelepiped kernel.
-    pub fn boxes(&self) -> usize {
+    /// Elements of each kernel ([`Kernel`] order).
+    pub fn per_kernel(&self) -> [usize; 3] {
         match self {
-            Elements::Reduced { boxes, .. } => boxes.len(),
-            Elements::Full(_) => 0,
+            Elements::Reduced {
+                general,
+                boxes,
+                cuboids,
+                ..
+            } => [general.len(), boxes.len(), cuboids.len()],
+            Elements::Full(v) => [v.len(), 0, 0],
         }
     }
 
@@ -97,11 +116,18 @@ impl<T: Real> Elements<T> {
         f: &mut [[T; 3]],
     ) -> Result<(), PhysicsError> {
         match self {
-            Elements::Reduced { general, boxes, .. } => {
+            Elements::Reduced {
+                general,
+                boxes,
+                cuboids,
+                ..
+            } => {
+                let first_cuboid = (general.len() + boxes.len()) as u32;
                 accumulate_internal_forces(general, 0, laws, u, f)
                     .and_then(|()| {
                         accumulate_internal_forces(boxes, general.len() as u32, laws, u, f)
                     })
+                    .and_then(|()| accumulate_internal_forces(cuboids, first_cuboid, laws, u, f))
                     .map_err(|e| self.in_mesh(e))
             }
             Elements::Full(v) => accumulate_internal_forces(v, 0, laws, u, f),
@@ -114,17 +140,28 @@ impl<T: Real> Elements<T> {
         u: &[[T; 3]],
     ) -> Result<f64, PhysicsError> {
         match self {
-            Elements::Reduced { general, boxes, .. } => Ok(stored_energy(general, laws, u)
-                .map_err(|e| self.in_mesh(e))?
-                + stored_energy(boxes, laws, u).map_err(|e| match e {
-                    PhysicsError::InvertedElement { element, jacobian } => {
-                        self.in_mesh(PhysicsError::InvertedElement {
-                            element: element + general.len() as u32,
-                            jacobian,
-                        })
+            Elements::Reduced {
+                general,
+                boxes,
+                cuboids,
+                ..
+            } => {
+                let shifted = |first: usize| {
+                    move |e| match e {
+                        PhysicsError::InvertedElement { element, jacobian } => {
+                            self.in_mesh(PhysicsError::InvertedElement {
+                                element: element + first as u32,
+                                jacobian,
+                            })
+                        }
+                        e => e,
                     }
-                    e => e,
-                })?),
+                };
+                Ok(stored_energy(general, laws, u).map_err(shifted(0))?
+                    + stored_energy(boxes, laws, u).map_err(shifted(general.len()))?
+                    + stored_energy(cuboids, laws, u)
+                        .map_err(shifted(general.len() + boxes.len()))?)
+            }
             Elements::Full(v) => stored_energy(v, laws, u),
         }
     }
@@ -141,12 +178,14 @@ impl<T: Real> Elements<T> {
             Elements::Reduced {
                 general,
                 boxes,
+                cuboids,
                 cells,
             } => {
                 let per = general
                     .chunks(1)
                     .map(|e| stored_energy(e, laws, u))
-                    .chain(boxes.chunks(1).map(|e| stored_energy(e, laws, u)));
+                    .chain(boxes.chunks(1).map(|e| stored_energy(e, laws, u)))
+                    .chain(cuboids.chunks(1).map(|e| stored_energy(e, laws, u)));
                 for (k, w) in per.enumerate() {
                     out[cells[k] as usize] = w.map_err(|e| self.in_mesh(e))?;
                 }

@@ -22,8 +22,8 @@ pub struct RunReport {
     pub dt_critical_s: f64,
     pub simulated_s: f64,
     pub elements: usize,
-    /// Elements that take the parallelepiped kernel (reduced integration), as a fraction.
-    pub box_fraction: f64,
+    /// Fraction of the elements that take each kernel (general, parallelepiped, cuboid).
+    pub kernel_mix: [f64; 3],
     pub nodes: usize,
     /// Nodes on a contact surface.
     pub contact_nodes: usize,
@@ -248,7 +248,10 @@ pub fn run_typed<T: Real>(
         dt_critical_s: dt_crit,
         simulated_s: model.time_s(),
         elements,
-        box_fraction: model.elements.boxes() as f64 / elements.max(1) as f64,
+        kernel_mix: model
+            .elements
+            .per_kernel()
+            .map(|n| n as f64 / elements.max(1) as f64),
         nodes: problem.mesh.nodes.len(),
         contact_nodes: problem.contact.as_ref().map_or(0, |c| c.node_globals.len()),
         wall_s,

@@ -4,7 +4,7 @@
 //! are written once. [`validate`] checks every index a loaded image holds.
 //!
 //! Sections (counts from the header's [`Counts`]): materials × [`MaterialLaw<T>`], elements
-//! × `E` (batch order x, y, z, inner), parallelepipeds × [`HexBox<T>`] (batch order), nodes × [`NodeRecord<T>`], exchange lists ×
+//! × `E` (batch order x, y, z, inner), parallelepipeds × [`HexBox<T>`] (batch order), cuboids × [`HexCuboid<T>`] (batch order), nodes × [`NodeRecord<T>`], exchange lists ×
 //! [`ExchangeList`] (axis, round, face), sends × `u16` (local nodes), receives ×
 //! [`RecvEntry`], path points × [`PathPoint`], loads × [`LoadRecord`] (in external-record
 //! order), external forces × [`ExternalRecord<T>`] (stage order), contact nodes ×
@@ -19,7 +19,7 @@
 use serde::{de::DeserializeOwned, Serialize};
 
 use super::*;
-use crate::physics::{HexBox, HexElement, HexFull, HexReduced, MaterialLaw, Real};
+use crate::physics::{HexBox, HexCuboid, HexElement, HexFull, HexReduced, MaterialLaw, Real};
 
 /// A scalar an image can hold.
 pub trait ImageReal: Real + Serialize + DeserializeOwned {
@@ -54,6 +54,7 @@ pub struct ImageParts<'a, T, E> {
     pub laws: &'a mut [MaterialLaw<T>],
     pub elements: &'a mut [E],
     pub boxes: &'a mut [HexBox<T>],
+    pub cuboids: &'a mut [HexCuboid<T>],
     pub nodes: &'a mut [NodeRecord<T>],
     pub lists: &'a mut [ExchangeList],
     pub sends: &'a mut [u16],
@@ -107,6 +108,7 @@ pub fn transcode<T: ImageReal, E: ElementRecord<T>, C: Codec>(
     section(codec, "materials", c.materials as usize, p.laws)?;
     section(codec, "elements", c.elements as usize, p.elements)?;
     section(codec, "parallelepipeds", c.boxes as usize, p.boxes)?;
+    section(codec, "cuboids", c.cuboids as usize, p.cuboids)?;
     section(codec, "nodes", c.nodes as usize, p.nodes)?;
     section(codec, "exchange lists", c.exchange_lists(), p.lists)?;
     section(codec, "exchange sends", c.sends as usize, p.sends)?;
@@ -161,24 +163,28 @@ pub fn validate<T: ImageReal, E: ElementRecord<T>>(
         c.nodes as usize,
         c.contact_nodes as usize,
     );
-    let nb = c.boxes as usize;
+    let (nb, nq) = (c.boxes as usize, c.cuboids as usize);
     let ordered =
         |b: [u32; 4], n: usize| b[0] <= b[1] && b[1] <= b[2] && b[2] <= b[3] && b[3] as usize == n;
-    if !ordered(c.batch_ends, ne) || !ordered(c.box_batch_ends, nb) {
+    if !ordered(c.batch_ends, ne)
+        || !ordered(c.box_batch_ends, nb)
+        || !ordered(c.cuboid_batch_ends, nq)
+    {
         return Err(ImageError::Malformed {
             record: "batch ends",
         });
     }
-    if nb > 0 && E::INTEGRATION != Integration::Reduced {
+    if nb + nq > 0 && E::INTEGRATION != Integration::Reduced {
         return Err(ImageError::Malformed {
-            record: "parallelepipeds in a fully integrated image",
+            record: "parallelepipeds or cuboids in a fully integrated image",
         });
     }
-    // Elements are numbered general first, then parallelepipeds.
+    // Elements are numbered general first, then parallelepipeds, then cuboids.
     let all = p.elements[..ne]
         .iter()
         .map(|e| e.connectivity())
-        .chain(p.boxes[..nb].iter().map(|e| e.connectivity()));
+        .chain(p.boxes[..nb].iter().map(|e| e.connectivity()))
+        .chain(p.cuboids[..nq].iter().map(|e| e.connectivity()));
     for (k, e) in all.enumerate() {
         index_ok(
             "node of element",

@@ -32,7 +32,7 @@ pub use crate::physics::contact::{ContactFace, ContactNode, ContactPair, Tool};
 /// First four bytes of every schedule image.
 pub const MAGIC: [u8; 4] = *b"PESI";
 /// Format version; bumped whenever a record type changes.
-pub const FORMAT_VERSION: u16 = 5;
+pub const FORMAT_VERSION: u16 = 6;
 
 /// The id of the compilation an image belongs to: a 64-bit hash the compiler computes over
 /// every image of the set (with this field zero) and the scene's mesh (see `pe compile`).
@@ -121,6 +121,11 @@ pub struct Counts {
     /// general elements, then its parallelepipeds.
     pub boxes: u32,
     pub box_batch_ends: [u32; 4],
+    /// Axis-aligned cuboids ([`crate::physics::HexCuboid`], reduced integration only): the
+    /// cheapest kernel's elements and their batch ends. A batch runs its general elements,
+    /// then its parallelepipeds, then its cuboids.
+    pub cuboids: u32,
+    pub cuboid_batch_ends: [u32; 4],
     pub nodes: u32,
     /// Distinct nodes exchanged across each face (+x, −x, +y, −y, +z, −z).
     pub exchange: [u16; 6],
@@ -163,6 +168,7 @@ impl Counts {
             u64::from(self.materials),
             u64::from(self.elements),
             u64::from(self.boxes),
+            u64::from(self.cuboids),
             u64::from(self.nodes),
             self.exchange_lists() as u64,
             u64::from(self.sends),

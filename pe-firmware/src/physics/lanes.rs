@@ -19,7 +19,7 @@
 use core::cmp::Ordering;
 use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 
-use super::hex::{GaussPoint, HexBox, HexFull, HexReduced};
+use super::hex::{GaussPoint, HexBox, HexCuboid, HexFull, HexReduced};
 use super::material::{LameParameters, MaterialLaw};
 use super::real::{array, Real};
 
@@ -225,6 +225,13 @@ fn lanes_3<S: Real, L: LaneReal<S, N>, X, const N: usize, const M: usize>(
     core::array::from_fn(|k| core::array::from_fn(|i| lanes(items, |x| f(x)[k][i])))
 }
 
+fn lanes_1<S: Real, L: LaneReal<S, N>, X, const N: usize>(
+    items: &[&X; N],
+    f: impl Fn(&X) -> &[S; 3],
+) -> [L; 3] {
+    core::array::from_fn(|i| lanes(items, |x| f(x)[i]))
+}
+
 impl<S: Real, L: LaneReal<S, N>, const N: usize> Pack<S, L, N> for MaterialLaw<S> {
     type Packed = MaterialLaw<L>;
     fn pack(items: [&Self; N]) -> Option<Self::Packed> {
@@ -305,6 +312,20 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> Pack<S, L, N> for HexBox<S> {
             connectivity: first.connectivity,
             basis: lanes_3(&items, |e| &e.basis),
             basis_volume: lanes_3(&items, |e| &e.basis_volume),
+            volume: lanes(&items, |e| e.volume),
+            hourglass_stiffness: lanes(&items, |e| e.hourglass_stiffness),
+        })
+    }
+}
+
+impl<S: Real, L: LaneReal<S, N>, const N: usize> Pack<S, L, N> for HexCuboid<S> {
+    type Packed = HexCuboid<L>;
+    fn pack(items: [&Self; N]) -> Option<Self::Packed> {
+        let first = items.first()?;
+        Some(HexCuboid {
+            connectivity: first.connectivity,
+            scale: lanes_1(&items, |e| &e.scale),
+            scale_volume: lanes_1(&items, |e| &e.scale_volume),
             volume: lanes(&items, |e| e.volume),
             hourglass_stiffness: lanes(&items, |e| e.hourglass_stiffness),
         })

@@ -10,8 +10,8 @@ pub mod tensor;
 
 pub use explicit::{accumulate_internal_forces, CentralDifference, PhysicsError};
 pub use hex::{
-    Connectivity, GaussPoint, GeometryError, HexBox, HexElement, HexFull, HexReduced, LaneKernel,
-    ReferenceHex,
+    Connectivity, GaussPoint, GeometryError, HexBox, HexCuboid, HexElement, HexFull, HexReduced,
+    Kernel, LaneKernel, ReferenceHex,
 };
 pub use lanes::{LaneReal, Lanes, Pack};
 pub use material::{LameParameters, MaterialLaw, Volumetric};

@@ -28,7 +28,8 @@ use link_proto::{Face, Links, Values};
 use crate::image::*;
 use crate::physics::explicit::{accumulate_internal_forces, update_node, NodeMove};
 use crate::physics::{
-    CentralDifference, HexBox, HexElement, HexFull, HexReduced, MaterialLaw, PhysicsError, Real,
+    CentralDifference, HexBox, HexCuboid, HexElement, HexFull, HexReduced, MaterialLaw,
+    PhysicsError, Real,
 };
 
 pub use contact::{ContactState, BOARDS_MAX, PAIRS_MAX, TOOLS_MAX};
@@ -65,7 +66,8 @@ pub trait Environment {
 
 /// One batch of the step program's elements, as [`BatchForces`] sees it: the batch's
 /// general elements (numbered from `first_general` in errors), then its parallelepipeds
-/// (numbered from `first_box`, after all the general ones).
+/// (numbered from `first_box`, after all the general ones), then its cuboids (numbered
+/// from `first_cuboid`, after all the parallelepipeds).
 pub struct BatchSlices<'s, T, E> {
     /// The batch's index (0 to 3: x, y, z, inner).
     pub index: usize,
@@ -73,10 +75,12 @@ pub struct BatchSlices<'s, T, E> {
     pub first_general: u32,
     pub boxes: &'s [HexBox<T>],
     pub first_box: u32,
+    pub cuboids: &'s [HexCuboid<T>],
+    pub first_cuboid: u32,
 }
 
 /// Batch `b`'s range (`b` < 4) in a kernel list cut at `ends` (the image counts'
-/// `batch_ends` or `box_batch_ends`).
+/// `batch_ends`, `box_batch_ends` or `cuboid_batch_ends`).
 #[inline(always)]
 pub fn batch_range(ends: [u32; 4], b: usize) -> core::ops::Range<usize> {
     let start = if b == 0 { 0 } else { ends[b - 1] as usize };
@@ -86,7 +90,7 @@ pub fn batch_range(ends: [u32; 4], b: usize) -> core::ops::Range<usize> {
 /// Who computes a batch's internal forces: the board's scalar element loop
 /// ([`ScalarBatches`], what the firmware runs) or, on the host, a batched kernel over the
 /// same elements (board-sim). An implementation adds into `f` the bits of
-/// [`accumulate_internal_forces`] over the general elements and then the parallelepipeds,
+/// [`accumulate_internal_forces`] over the general elements, the parallelepipeds and the cuboids,
 /// and fails with its error on the same element.
 pub trait BatchForces<T, E> {
     fn batch_forces(
@@ -112,6 +116,7 @@ impl<T: Real, E: HexElement<T>> BatchForces<T, E> for ScalarBatches {
     ) -> Result<(), PhysicsError> {
         accumulate_internal_forces(b.general, b.first_general, laws, u, f)
             .and_then(|()| accumulate_internal_forces(b.boxes, b.first_box, laws, u, f))
+            .and_then(|()| accumulate_internal_forces(b.cuboids, b.first_cuboid, laws, u, f))
     }
 }
 
@@ -204,6 +209,11 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         &self.st.boxes[..self.header.counts.boxes as usize]
     }
 
+    /// The loaded cuboids (batch order).
+    pub fn cuboids(&self) -> &[HexCuboid<T>] {
+        &self.st.cuboids[..self.header.counts.cuboids as usize]
+    }
+
     /// Global-network traffic of this board.
     pub fn global_stats(&self) -> GlobalStats {
         self.port.stats
@@ -239,9 +249,10 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
     /// general ones in faults), by `kernel`.
     fn batch(&mut self, b: usize, kernel: &impl BatchForces<T, E>) -> Result<(), Fault> {
         let c = self.header.counts;
-        let (general, boxes) = (
+        let (general, boxes, cuboids) = (
             batch_range(c.batch_ends, b),
             batch_range(c.box_batch_ends, b),
+            batch_range(c.cuboid_batch_ends, b),
         );
         let st = &mut self.st;
         let n = c.nodes as usize;
@@ -251,6 +262,8 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
             first_general: general.start as u32,
             boxes: &st.boxes[boxes.clone()],
             first_box: c.elements + boxes.start as u32,
+            cuboids: &st.cuboids[cuboids.clone()],
+            first_cuboid: c.elements + c.boxes + cuboids.start as u32,
         };
         kernel
             .batch_forces(slices, st.laws, &st.u[..n], &mut st.force[..n])

@@ -15,7 +15,7 @@ use crate::image::{
 };
 use crate::image::{ElementRecord, Integration};
 use crate::physics::contact::Candidate;
-use crate::physics::{HexBox, MaterialLaw};
+use crate::physics::{HexBox, HexCuboid, MaterialLaw};
 use crate::profile::BoardProfile;
 
 /// The link buffers a board keeps in a static beside its storage (the firmware's
@@ -33,6 +33,8 @@ pub struct Capacities {
     pub elements: usize,
     /// Parallelepipeds ([`HexBox`]; none with full integration).
     pub boxes: usize,
+    /// Axis-aligned cuboids ([`HexCuboid`]; none with full integration).
+    pub cuboids: usize,
     pub nodes: usize,
     /// Send entries and receive entries (each) over all rounds and faces.
     pub exchange: usize,
@@ -59,6 +61,7 @@ impl Capacities {
             materials: c.materials as usize,
             elements: c.elements as usize,
             boxes: c.boxes as usize,
+            cuboids: c.cuboids as usize,
             nodes: c.nodes as usize,
             exchange: c.sends.max(c.recvs) as usize,
             path_points: c.path_points as usize,
@@ -77,8 +80,8 @@ impl Capacities {
     }
 
     /// What a board of profile `p` holds for scalar `T` and element `E`: the profile's
-    /// table (its nodes, at most the frames' limit), as many parallelepipeds as nodes with
-    /// reduced integration (a board's block of cells has fewer cells than nodes), and as
+    /// table (its nodes, at most the frames' limit), as many parallelepipeds and as many
+    /// cuboids as nodes with reduced integration (a board's block of cells has fewer cells than nodes), and as
     /// many general elements as the RAM allows after the reserve (stack, the runtime), the
     /// link buffers ([`LinkBuffers`], unless the profile gives them a region of their own)
     /// and the rest of the storage.
@@ -94,6 +97,10 @@ impl Capacities {
             materials: p.materials_max as usize,
             elements: 0,
             boxes: match E::INTEGRATION {
+                Integration::Reduced => nodes,
+                Integration::Full => 0,
+            },
+            cuboids: match E::INTEGRATION {
                 Integration::Reduced => nodes,
                 Integration::Full => 0,
             },
@@ -123,6 +130,7 @@ impl Capacities {
         self.materials * size_of::<MaterialLaw<T>>()
             + self.elements * size_of::<E>()
             + self.boxes * size_of::<HexBox<T>>()
+            + self.cuboids * size_of::<HexCuboid<T>>()
             + self.nodes * (size_of::<NodeRecord<T>>() + 3 * size_of::<[T; 3]>())
             + self.exchange * (size_of::<u16>() + size_of::<RecvEntry>())
             + self.path_points * size_of::<PathPoint>()
@@ -149,6 +157,7 @@ impl Capacities {
             ("materials", c.materials as usize, self.materials),
             ("elements", c.elements as usize, self.elements),
             ("parallelepipeds", c.boxes as usize, self.boxes),
+            ("cuboids", c.cuboids as usize, self.cuboids),
             ("nodes", c.nodes as usize, self.nodes),
             ("exchange sends", c.sends as usize, self.exchange),
             ("exchange receives", c.recvs as usize, self.exchange),
@@ -177,6 +186,7 @@ pub struct Storage<'a, T, E> {
     pub laws: &'a mut [MaterialLaw<T>],
     pub elements: &'a mut [E],
     pub boxes: &'a mut [HexBox<T>],
+    pub cuboids: &'a mut [HexCuboid<T>],
     pub nodes: &'a mut [NodeRecord<T>],
     pub u: &'a mut [[T; 3]],
     /// The last step's increment `u − u⁻` of each node (the central difference's state
@@ -223,6 +233,7 @@ impl<'a, T, E> Storage<'a, T, E> {
             laws: self.laws,
             elements: self.elements,
             boxes: self.boxes,
+            cuboids: self.cuboids,
             nodes: self.nodes,
             lists: small.lists,
             sends: self.sends,
@@ -274,7 +285,7 @@ impl Shelf for Heapless {
 }
 
 /// The owner of a board's arrays. Capacities: `NM` materials, `NE` elements, `NB`
-/// parallelepipeds, `NN` nodes,
+/// parallelepipeds and `NB` cuboids, `NN` nodes,
 /// `NX` exchange entries, `NP` path points, `NL` loads, `NC` contact nodes, `NF` contact
 /// faces, `NK` candidates, `NS` contact sends (a growable [`Shelf`] ignores them).
 pub struct StorageBuf<
@@ -296,6 +307,7 @@ pub struct StorageBuf<
     laws: S::Of<MaterialLaw<T>, NM>,
     elements: S::Of<E, NE>,
     boxes: S::Of<HexBox<T>, NB>,
+    cuboids: S::Of<HexCuboid<T>, NB>,
     nodes: S::Of<NodeRecord<T>, NN>,
     u: S::Of<[T; 3], NN>,
     du: S::Of<[T; 3], NN>,
@@ -343,6 +355,7 @@ impl<
             laws: S::empty(),
             elements: S::empty(),
             boxes: S::empty(),
+            cuboids: S::empty(),
             nodes: S::empty(),
             u: S::empty(),
             du: S::empty(),
@@ -380,6 +393,7 @@ impl<
         put::<S, _, NM>(&mut self.laws, caps.materials)?;
         put::<S, _, NE>(&mut self.elements, caps.elements)?;
         put::<S, _, NB>(&mut self.boxes, caps.boxes)?;
+        put::<S, _, NB>(&mut self.cuboids, caps.cuboids)?;
         put::<S, _, NN>(&mut self.nodes, caps.nodes)?;
         put::<S, _, NN>(&mut self.u, caps.nodes)?;
         put::<S, _, NN>(&mut self.du, caps.nodes)?;
@@ -405,6 +419,7 @@ impl<
             laws: &mut self.laws,
             elements: &mut self.elements,
             boxes: &mut self.boxes,
+            cuboids: &mut self.cuboids,
             nodes: &mut self.nodes,
             u: &mut self.u,
             du: &mut self.du,

@@ -316,7 +316,7 @@ fn run_one(base: &Scene, dir: &Path, levels: &Levels, c: &Config, name: &str) ->
         real_time_factor: r.real_time_factor,
         board_instructions_per_element_step: {
             let c = pe_firmware::profile::measured_cost(c.precision, c.integration);
-            let step_s = c.per_element_of_mix(r.box_fraction) * r.elements as f64
+            let step_s = c.per_element_of_mix(r.kernel_mix) * r.elements as f64
                 + c.per_node_update as f64 * r.nodes as f64
                 + c.per_contact_node as f64 * r.contact_nodes as f64;
             let step_s = step_s / pe_firmware::profile::PE_BOARD.clock_hz as f64;

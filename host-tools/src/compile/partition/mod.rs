@@ -22,7 +22,7 @@
 use anyhow::{bail, Result};
 
 use crate::mesh::Mesh;
-use crate::problem::elements::is_box;
+use crate::problem::elements::kernel_of;
 use crate::problem::Problem;
 
 pub mod refine;
@@ -145,11 +145,7 @@ pub fn cost_weights(problem: &Problem) -> Vec<u64> {
         .iter()
         .enumerate()
         .map(|(e, cell)| {
-            let kernel = if is_box(problem, e) {
-                cost.box_per_element_step
-            } else {
-                cost.per_element_step
-            };
+            let kernel = cost.element_step(kernel_of(problem, e));
             let contact: f64 = cell
                 .iter()
                 .filter(|&&n| on_contact[n as usize])

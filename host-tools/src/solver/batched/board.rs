@@ -9,8 +9,8 @@ use std::any::Any;
 use std::ops::Range;
 
 use pe_firmware::physics::{
-    HexBox, HexElement, HexFull, HexReduced, LaneKernel, LaneReal, Lanes, MaterialLaw, Pack,
-    PhysicsError, Real,
+    HexBox, HexCuboid, HexElement, HexFull, HexReduced, LaneKernel, LaneReal, Lanes, MaterialLaw,
+    Pack, PhysicsError, Real,
 };
 use pe_firmware::runtime::{batch_range, BatchForces, BatchSlices, ScalarBatches};
 
@@ -30,8 +30,9 @@ pub struct BoardBatches<T, E> {
 struct Packed<K, L, const N: usize> {
     general: PerBatch<K, L, N>,
     boxes: PerBatch<HexBox<L>, L, N>,
-    /// Elements of each batch the packs hold (general, parallelepipeds).
-    counts: Vec<(usize, usize)>,
+    cuboids: PerBatch<HexCuboid<L>, L, N>,
+    /// Elements of each batch the packs hold (general, parallelepipeds, cuboids).
+    counts: Vec<(usize, usize, usize)>,
     isa: Isa,
 }
 
@@ -41,6 +42,7 @@ where
     E: HexElement<S>,
     K: LaneKernel<S, L, N>,
     HexBox<L>: LaneKernel<S, L, N>,
+    HexCuboid<L>: LaneKernel<S, L, N>,
     L: LaneReal<S, N>,
 {
     fn batch_forces(
@@ -51,17 +53,22 @@ where
         f: &mut [[S; 3]],
     ) -> Result<(), PhysicsError> {
         let i = b.index;
-        let (Some(g), Some(x), Some(&counts)) =
-            (self.general.get(i), self.boxes.get(i), self.counts.get(i))
-        else {
+        let (Some(g), Some(x), Some(c), Some(&counts)) = (
+            self.general.get(i),
+            self.boxes.get(i),
+            self.cuboids.get(i),
+            self.counts.get(i),
+        ) else {
             return ScalarBatches.batch_forces(b, laws, u, f);
         };
-        if counts != (b.general.len(), b.boxes.len()) {
+        if counts != (b.general.len(), b.boxes.len(), b.cuboids.len()) {
             // Not the batch these packs were made from: the scalar loop.
             return ScalarBatches.batch_forces(b, laws, u, f);
         }
-        run(g, b.general, b.first_general as usize, laws, u, f, self.isa)
-            .and_then(|()| run(x, b.boxes, b.first_box as usize, laws, u, f, self.isa))
+        let isa = self.isa;
+        run(g, b.general, b.first_general as usize, laws, u, f, isa)
+            .and_then(|()| run(x, b.boxes, b.first_box as usize, laws, u, f, isa))
+            .and_then(|()| run(c, b.cuboids, b.first_cuboid as usize, laws, u, f, isa))
     }
 }
 
@@ -80,19 +87,22 @@ fn offset_error(e: PhysicsError, offset: u32) -> PhysicsError {
 }
 
 /// The board's batches: `ends` are the step program's batch ends (`batch_ends`,
-/// `box_batch_ends` of the image's counts) into `general` and `boxes`.
+/// `box_batch_ends`, `cuboid_batch_ends` of the image's counts) into `general`, `boxes`
+/// and `cuboids`.
 pub struct BoardElements<'s, T, E> {
     pub general: &'s [E],
     pub boxes: &'s [HexBox<T>],
+    pub cuboids: &'s [HexCuboid<T>],
     pub laws: &'s [MaterialLaw<T>],
     pub general_ends: [u32; 4],
     pub box_ends: [u32; 4],
+    pub cuboid_ends: [u32; 4],
 }
 
 impl<T: Real, E> BoardElements<'_, T, E> {
-    /// The element ranges of every batch (general, parallelepipeds), checked against the
-    /// lists.
-    fn ranges(&self) -> Option<Vec<(Range<usize>, Range<usize>)>> {
+    /// The element ranges of every batch (general, parallelepipeds, cuboids), checked
+    /// against the lists.
+    fn ranges(&self) -> Option<Vec<[Range<usize>; 3]>> {
         let cut = |ends: [u32; 4], len: usize| -> Option<Vec<Range<usize>>> {
             let rs: Vec<Range<usize>> = (0..4).map(|b| batch_range(ends, b)).collect();
             rs.iter()
@@ -101,7 +111,14 @@ impl<T: Real, E> BoardElements<'_, T, E> {
         };
         let g = cut(self.general_ends, self.general.len())?;
         let b = cut(self.box_ends, self.boxes.len())?;
-        Some(g.into_iter().zip(b).collect())
+        let c = cut(self.cuboid_ends, self.cuboids.len())?;
+        Some(
+            g.into_iter()
+                .zip(b)
+                .zip(c)
+                .map(|((g, b), c)| [g, b, c])
+                .collect(),
+        )
     }
 }
 
@@ -118,15 +135,19 @@ where
     ES::Packed: LaneKernel<S, L, N> + Send + Sync + 'static,
     HexBox<S>: Pack<S, L, N, Packed = HexBox<L>>,
     HexBox<L>: LaneKernel<S, L, N> + Send + Sync,
+    HexCuboid<S>: Pack<S, L, N, Packed = HexCuboid<L>>,
+    HexCuboid<L>: LaneKernel<S, L, N> + Send + Sync,
     MaterialLaw<S>: Pack<S, L, N, Packed = MaterialLaw<L>>,
     MaterialLaw<L>: Send + Sync,
     L: LaneReal<S, N> + Send + Sync + 'static,
 {
     let general = board.general.to_vec();
     let boxes = board.boxes.to_vec();
+    let cuboids = board.cuboids.to_vec();
     let laws = board.laws.to_vec();
     let general = (&general as &dyn Any).downcast_ref::<Vec<ES>>()?;
     let boxes = (&boxes as &dyn Any).downcast_ref::<Vec<HexBox<S>>>()?;
+    let cuboids = (&cuboids as &dyn Any).downcast_ref::<Vec<HexCuboid<S>>>()?;
     let laws = (&laws as &dyn Any).downcast_ref::<Vec<MaterialLaw<S>>>()?;
     let Some(ranges) = board.ranges() else {
         return Some(Err(PhysicsError::BadIndex { element: 0 }));
@@ -134,22 +155,26 @@ where
     let mut p = Packed::<ES::Packed, L, N> {
         general: Vec::new(),
         boxes: Vec::new(),
+        cuboids: Vec::new(),
         counts: Vec::new(),
         isa,
     };
-    let general_count = general.len() as u32;
-    for (g, b) in ranges {
+    let (general_count, box_count) = (general.len() as u32, boxes.len() as u32);
+    for [g, b, c] in ranges {
         let packs = pack::<ES, S, L, N>(&general[g.clone()], laws)
             .map_err(|e| offset_error(e, g.start as u32));
         let box_packs = pack::<HexBox<S>, S, L, N>(&boxes[b.clone()], laws)
             .map_err(|e| offset_error(e, general_count + b.start as u32));
-        match (packs, box_packs) {
-            (Ok(x), Ok(y)) => {
+        let cuboid_packs = pack::<HexCuboid<S>, S, L, N>(&cuboids[c.clone()], laws)
+            .map_err(|e| offset_error(e, general_count + box_count + c.start as u32));
+        match (packs, box_packs, cuboid_packs) {
+            (Ok(x), Ok(y), Ok(z)) => {
                 p.general.push(x);
                 p.boxes.push(y);
-                p.counts.push((g.len(), b.len()));
+                p.cuboids.push(z);
+                p.counts.push((g.len(), b.len(), c.len()));
             }
-            (Err(e), _) | (_, Err(e)) => return Some(Err(e)),
+            (Err(e), _, _) | (_, Err(e), _) | (_, _, Err(e)) => return Some(Err(e)),
         }
     }
     let b: Box<dyn BatchForces<S, ES> + Send + Sync> = Box::new(p);
@@ -166,7 +191,7 @@ where
 
 impl<T: Real + 'static, E: HexElement<T> + Copy + 'static> BoardBatches<T, E> {
     /// Packs `board`'s batches for `isa` ([`Isa::detect`] for the best): 4 lanes in f64,
-    /// 8 in f32, reduced (general and parallelepiped kernels) or full integration; any
+    /// 8 in f32, reduced (general, parallelepiped and cuboid kernels) or full integration; any
     /// other scalar or element type runs the scalar loop.
     pub fn build(board: &BoardElements<'_, T, E>, isa: Isa) -> Result<Self, PhysicsError> {
         type Red<S> = HexReduced<S>;

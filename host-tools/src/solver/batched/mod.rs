@@ -23,8 +23,8 @@ use std::ops::Range;
 use multiversion::multiversion;
 use pe_firmware::physics::explicit::accumulate_internal_forces;
 use pe_firmware::physics::{
-    HexBox, HexElement, HexFull, HexReduced, LaneKernel, LaneReal, Lanes, MaterialLaw, Pack,
-    PhysicsError, Real,
+    HexBox, HexCuboid, HexElement, HexFull, HexReduced, LaneKernel, LaneReal, Lanes, MaterialLaw,
+    Pack, PhysicsError, Real,
 };
 
 use crate::problem::elements::Elements;
@@ -101,6 +101,7 @@ enum Packs<L, const N: usize> {
     Reduced {
         general: Vec<Batch<HexReduced<L>, L, N>>,
         boxes: Vec<Batch<HexBox<L>, L, N>>,
+        cuboids: Vec<Batch<HexCuboid<L>, L, N>>,
     },
     Full(Vec<Batch<HexFull<L>, L, N>>),
 }
@@ -111,9 +112,15 @@ impl<L, const N: usize> Packs<L, N> {
         L: LaneReal<S, N>,
     {
         Ok(match elements {
-            Elements::Reduced { general, boxes, .. } => Packs::Reduced {
+            Elements::Reduced {
+                general,
+                boxes,
+                cuboids,
+                ..
+            } => Packs::Reduced {
                 general: pack(general, laws)?,
                 boxes: pack(boxes, laws)?,
+                cuboids: pack(cuboids, laws)?,
             },
             Elements::Full(v) => Packs::Full(pack(v, laws)?),
         })
@@ -161,9 +168,9 @@ pub trait ElementLoop<T: Real>: Send + Sync {
 /// order; these are added after all blocks finished, block by block. So every node sums
 /// its elements' forces from zero in kernel order, as one thread does.
 pub struct Plan {
-    /// Per block, the pack index ranges of each kernel list (general, parallelepipeds;
-    /// full integration uses the first).
-    blocks: Vec<[Range<usize>; 2]>,
+    /// Per block, the pack index ranges of each kernel list (general, parallelepipeds,
+    /// cuboids; full integration uses the first).
+    blocks: Vec<[Range<usize>; 3]>,
     /// Owning block of each node (`u16::MAX`: no element).
     owner: Vec<u16>,
     /// Per block, the nodes of its forces kept aside, in the order it produces them.
@@ -333,14 +340,20 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
         let isa = self.isa;
         let r = match (&self.packs, elements) {
             (
-                Packs::Reduced { general, boxes },
+                Packs::Reduced {
+                    general,
+                    boxes,
+                    cuboids,
+                },
                 Elements::Reduced {
                     general: g,
                     boxes: b,
+                    cuboids: c,
                     ..
                 },
             ) => run(general, g, 0, laws, u, f, isa)
-                .and_then(|()| run(boxes, b, g.len(), laws, u, f, isa)),
+                .and_then(|()| run(boxes, b, g.len(), laws, u, f, isa))
+                .and_then(|()| run(cuboids, c, g.len() + b.len(), laws, u, f, isa)),
             (Packs::Full(p), Elements::Full(v)) => run(p, v, 0, laws, u, f, isa),
             _ => return elements.internal_forces(laws, u, f),
         };
@@ -350,20 +363,24 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
         self.isa.describe_lanes::<S, N>()
     }
     fn plan(&self, parts: usize, node_count: usize) -> Option<Plan> {
-        let lists: [Vec<([[u32; 8]; N], usize)>; 2] = match &self.packs {
-            Packs::Reduced { general, boxes } => [listed(general), listed(boxes)],
-            Packs::Full(p) => [listed(p), Vec::new()],
+        let lists: [Vec<([[u32; 8]; N], usize)>; 3] = match &self.packs {
+            Packs::Reduced {
+                general,
+                boxes,
+                cuboids,
+            } => [listed(general), listed(boxes), listed(cuboids)],
+            Packs::Full(p) => [listed(p), Vec::new(), Vec::new()],
         };
         // Packs in kernel order as (list, index), cut into `parts` runs of about equal
         // element counts.
-        let order: Vec<(usize, usize)> = (0..2)
+        let order: Vec<(usize, usize)> = (0..3)
             .flat_map(|k| (0..lists[k].len()).map(move |i| (k, i)))
             .collect();
         let parts = parts
             .clamp(1, order.len().max(1))
             .min(u16::MAX as usize - 1);
         let elements: usize = order.iter().map(|&(k, i)| lists[k][i].1).sum();
-        let mut blocks = vec![[0..0, 0..0]; parts];
+        let mut blocks = vec![[0..0, 0..0, 0..0]; parts];
         let mut owner = vec![u16::MAX; node_count];
         let mut aside = vec![Vec::new(); parts];
         let (mut done, mut block) = (0, 0);
@@ -429,11 +446,17 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
                         }
                     };
                     match &self.packs {
-                        Packs::Reduced { general, boxes } => {
+                        Packs::Reduced {
+                            general,
+                            boxes,
+                            cuboids,
+                        } => {
                             let g = general.get(ranges[0].clone()).unwrap_or(&[]);
                             let x = boxes.get(ranges[1].clone()).unwrap_or(&[]);
+                            let c = cuboids.get(ranges[2].clone()).unwrap_or(&[]);
                             run_with(g, u, &mut scatter, isa).is_none()
                                 && run_with(x, u, &mut scatter, isa).is_none()
+                                && run_with(c, u, &mut scatter, isa).is_none()
                         }
                         Packs::Full(p) => {
                             let p = p.get(ranges[0].clone()).unwrap_or(&[]);

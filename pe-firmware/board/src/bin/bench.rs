@@ -10,10 +10,11 @@
 //!   displacements and scattering forces: the per-element part of a step);
 //! * marks 6→7: one whole step of the runtime (gather, kernel, scatter, external forces,
 //!   update; no exchange on a 1x1x1 machine);
-//! * marks 8→9 and 10→11: as 2→3 and 4→5, for the parallelepipeds (the cheap kernel).
+//! * marks 8→9 and 10→11: as 2→3 and 4→5, for the parallelepipeds;
+//! * marks 12→13 and 14→15: the same for the axis-aligned cuboids (the cheapest kernel).
 //!
 //! Marks 2→5 are on the general-kernel elements. Then prints
-//! `bench,VARIANT,ELEMENTS,PARALLELEPIPEDS,NODES,CONTACT_NODES,SAMPLES,BOX_SAMPLES,MAX_ABS_U_M` via
+//! `bench,VARIANT,ELEMENTS,PARALLELEPIPEDS,CUBOIDS,NODES,CONTACT_NODES,SAMPLES,BOX_SAMPLES,CUBOID_SAMPLES,MAX_ABS_U_M` via
 //! semihosting and exits. Inputs pass
 //! through `black_box` so nothing is folded at build time. No SysTick: nothing but the
 //! measured code runs between marks.
@@ -74,6 +75,7 @@ fn main() -> ! {
     let (elements, loaded_laws) = rt.elements();
     let ne = elements.len();
     let nb = rt.boxes().len();
+    let nq = rt.cuboids().len();
     let mut laws: Laws = heapless::Vec::new();
     if laws.extend_from_slice(loaded_laws).is_err() {
         fail("too many materials");
@@ -90,6 +92,7 @@ fn main() -> ! {
     }
     // The plugin numbers marks in call order: these come last.
     let measured_boxes = kernel_and_loop(rt.boxes(), &laws, rt.displacements(), (8, 10));
+    let measured_cuboids = kernel_and_loop(rt.cuboids(), &laws, rt.displacements(), (12, 14));
 
     // The largest displacement component, so a measurement on an undeformed state (where
     // the material law's functions take their cheapest paths) is seen and refused.
@@ -99,14 +102,16 @@ fn main() -> ! {
         .flatten()
         .fold(0.0f64, |m, v| m.max(v.to_f64().abs()));
     pe_board::log_info!(
-        "bench,{},{},{},{},{},{},{},{}",
+        "bench,{},{},{},{},{},{},{},{},{},{}",
         VARIANT,
         ne,
         nb,
+        nq,
         rt.header.counts.nodes,
         rt.header.counts.contact_nodes,
         measured,
         measured_boxes,
+        measured_cuboids,
         u_max
     );
     report::exit(true)
@@ -180,6 +185,12 @@ impl Connected for Element {
 }
 
 impl Connected for pe_firmware::physics::HexBox<Scalar> {
+    fn renumber(&mut self, nodes: [u32; 8]) {
+        self.connectivity.nodes = nodes;
+    }
+}
+
+impl Connected for pe_firmware::physics::HexCuboid<Scalar> {
     fn renumber(&mut self, nodes: [u32; 8]) {
         self.connectivity.nodes = nodes;
     }
