@@ -152,8 +152,9 @@ pub struct ReferenceHex {
     pub characteristic_length: f64,
     /// Smallest corner Jacobian scaled by the corner's edge lengths (1 for a cube).
     pub min_scaled_jacobian: f64,
-    /// See [`Self::is_parallelepiped`].
+    /// See [`Self::is_parallelepiped`] and [`Self::is_cuboid`].
     parallelepiped: bool,
+    cuboid: bool,
 }
 
 /// Relative size of the hourglass geometry under which a cell is a parallelepiped: the
@@ -283,6 +284,13 @@ impl ReferenceHex {
             let d2 = tensor::sub(&x[face[3]], &x[face[1]]);
             area_max = area_max.max(0.5 * tensor::norm(&tensor::cross(&d1, &d2)));
         }
+        let parallelepiped = gamma_max <= PARALLELEPIPED_TOLERANCE * size;
+        let b = basis_of(&corner_moments(&mean_gradients));
+        let diag = (0..3).map(|j| libm::fabs(b[j][j])).fold(0.0, f64::max);
+        let off = (0..3)
+            .flat_map(|j| (0..3).filter(move |&i| i != j).map(move |i| (j, i)))
+            .map(|(j, i)| libm::fabs(b[j][i]))
+            .fold(0.0, f64::max);
         Ok(ReferenceHex {
             volume,
             mean_gradients,
@@ -292,7 +300,8 @@ impl ReferenceHex {
             gauss_volumes,
             characteristic_length: volume / area_max,
             min_scaled_jacobian,
-            parallelepiped: gamma_max <= PARALLELEPIPED_TOLERANCE * size,
+            parallelepiped,
+            cuboid: parallelepiped && off <= PARALLELEPIPED_TOLERANCE * diag,
         })
     }
 
@@ -318,13 +327,7 @@ impl ReferenceHex {
     /// off-diagonal `|b_ji| ≤` [`PARALLELEPIPED_TOLERANCE`] `· max_j |b_jj|`. Such a cell
     /// takes the [`HexCuboid`] kernel (generated boxes, voxel meshes).
     pub fn is_cuboid(&self) -> bool {
-        let b = self.gradient_basis();
-        let diag = (0..3).map(|j| libm::fabs(b[j][j])).fold(0.0, f64::max);
-        let off = (0..3)
-            .flat_map(|j| (0..3).filter(move |&i| i != j).map(move |i| (j, i)))
-            .map(|(j, i)| libm::fabs(b[j][i]))
-            .fold(0.0, f64::max);
-        self.parallelepiped && off <= PARALLELEPIPED_TOLERANCE * diag
+        self.cuboid
     }
 
     /// The gradients' corner moments `β_k = (1/8) Σ_a (Π_{j∈k} ξ_aj) B_a` for the masks
@@ -337,8 +340,7 @@ impl ReferenceHex {
     /// The gradient basis `b_j = β_{ξ,η,ζ}` (rows, 1/m): on a parallelepiped
     /// `B_a = Σ_j ξ_aj b_j` exactly (the other moments vanish).
     pub fn gradient_basis(&self) -> Mat3<f64> {
-        let beta = self.gradient_moments();
-        [beta[0], beta[1], beta[3]]
+        basis_of(&self.gradient_moments())
     }
 
     /// One-point element with hourglass stiffness `k = κ_hg G V Σ|B_a|² / 8` (the general
@@ -412,6 +414,11 @@ impl ReferenceHex {
             }),
         }
     }
+}
+
+/// The gradient basis `b_j = β_{ξ,η,ζ}` among the corner moments `β_k` (masks 1..=7).
+fn basis_of(beta: &[[f64; 3]; 7]) -> Mat3<f64> {
+    [beta[0], beta[1], beta[3]]
 }
 
 fn cast2<T: Real, const N: usize, const M: usize>(a: &[[f64; N]; M]) -> [[T; N]; M] {
@@ -938,35 +945,47 @@ impl<T: Real> CornerKernel<T> for HexBox<T> {
     }
 }
 
-impl<T: Real> HexElement<T> for HexBox<T> {
-    #[inline(always)]
-    fn connectivity(&self) -> &Connectivity {
-        &self.connectivity
-    }
-    #[inline]
-    fn internal_forces(
-        &self,
-        law: &MaterialLaw<T>,
-        u: &[[T; 3]; 8],
-    ) -> Result<[[T; 3]; 8], NonPositiveJacobian> {
-        local_forces(u, |c| self.kernel(law, c))
-    }
-    fn energy(&self, law: &MaterialLaw<T>, u: &[[T; 3]; 8]) -> Result<T, NonPositiveJacobian> {
-        let (f, hg) = self.deformation(&Local::new(u));
-        let w = law.strain_energy_density(&f)? * self.volume;
-        let qq: T = hg.iter().flatten().fold(T::ZERO, |s, v| s + *v * *v);
-        Ok(w + T::from_f64(0.5) * self.hourglass_stiffness * qq)
-    }
-    #[inline(always)]
-    fn accumulate(
-        &self,
-        law: &MaterialLaw<T>,
-        u: &[[T; 3]],
-        f: &mut [[T; 3]],
-    ) -> Result<(), KernelFault> {
-        global_forces(self.nodes(), u, f, |c| self.kernel(law, c))
-    }
+/// [`HexElement`] of a kernel whose `deformation` gives `F` and the hourglass moments
+/// `c_α` (the parallelepiped and cuboid kernels: the same energy and the same fused loop).
+macro_rules! affine_element {
+    ($kernel:ident) => {
+        impl<T: Real> HexElement<T> for $kernel<T> {
+            #[inline(always)]
+            fn connectivity(&self) -> &Connectivity {
+                &self.connectivity
+            }
+            #[inline]
+            fn internal_forces(
+                &self,
+                law: &MaterialLaw<T>,
+                u: &[[T; 3]; 8],
+            ) -> Result<[[T; 3]; 8], NonPositiveJacobian> {
+                local_forces(u, |c| self.kernel(law, c))
+            }
+            fn energy(
+                &self,
+                law: &MaterialLaw<T>,
+                u: &[[T; 3]; 8],
+            ) -> Result<T, NonPositiveJacobian> {
+                let (f, hg) = self.deformation(&Local::new(u));
+                let w = law.strain_energy_density(&f)? * self.volume;
+                let qq: T = hg.iter().flatten().fold(T::ZERO, |s, v| s + *v * *v);
+                Ok(w + T::from_f64(0.5) * self.hourglass_stiffness * qq)
+            }
+            #[inline(always)]
+            fn accumulate(
+                &self,
+                law: &MaterialLaw<T>,
+                u: &[[T; 3]],
+                f: &mut [[T; 3]],
+            ) -> Result<(), KernelFault> {
+                global_forces(self.nodes(), u, f, |c| self.kernel(law, c))
+            }
+        }
+    };
 }
+
+affine_element!(HexBox);
 
 /// One-point element with hourglass control on a rectangular cuboid aligned with the axes
 /// (the seed's undistorted element), in the corner basis: the [`HexBox`] kernel with a
@@ -1039,35 +1058,7 @@ impl<T: Real> CornerKernel<T> for HexCuboid<T> {
     }
 }
 
-impl<T: Real> HexElement<T> for HexCuboid<T> {
-    #[inline(always)]
-    fn connectivity(&self) -> &Connectivity {
-        &self.connectivity
-    }
-    #[inline]
-    fn internal_forces(
-        &self,
-        law: &MaterialLaw<T>,
-        u: &[[T; 3]; 8],
-    ) -> Result<[[T; 3]; 8], NonPositiveJacobian> {
-        local_forces(u, |c| self.kernel(law, c))
-    }
-    fn energy(&self, law: &MaterialLaw<T>, u: &[[T; 3]; 8]) -> Result<T, NonPositiveJacobian> {
-        let (f, hg) = self.deformation(&Local::new(u));
-        let w = law.strain_energy_density(&f)? * self.volume;
-        let qq: T = hg.iter().flatten().fold(T::ZERO, |s, v| s + *v * *v);
-        Ok(w + T::from_f64(0.5) * self.hourglass_stiffness * qq)
-    }
-    #[inline(always)]
-    fn accumulate(
-        &self,
-        law: &MaterialLaw<T>,
-        u: &[[T; 3]],
-        f: &mut [[T; 3]],
-    ) -> Result<(), KernelFault> {
-        global_forces(self.nodes(), u, f, |c| self.kernel(law, c))
-    }
-}
+affine_element!(HexCuboid);
 
 /// The kernel an element takes, chosen per element at compile time from its reference
 /// geometry (reduced integration; full integration has only [`HexFull`]). The image holds
@@ -1234,50 +1225,27 @@ fn lane_corner_forces<S: Real, L: LaneReal<S, N>, const N: usize>(
     Ok(())
 }
 
-impl<S: Real, L: LaneReal<S, N>, const N: usize> LaneKernel<S, L, N> for HexReduced<L> {
-    const SCATTER_ORDER: [usize; 8] = CORNER;
-    #[inline(always)]
-    fn lane_forces(
-        &self,
-        law: &MaterialLaw<L>,
-        nodes: &[[u32; 8]; N],
-        active: usize,
-        u: &[[S; 3]],
-        scatter: impl FnMut(usize, usize, [S; 3]),
-    ) -> Result<(), KernelFault> {
-        lane_corner_forces(self, law, nodes, active, u, scatter)
-    }
+/// [`LaneKernel`] of the corner-basis kernels: [`lane_corner_forces`].
+macro_rules! corner_lane_kernel {
+    ($($kernel:ident),*) => {$(
+        impl<S: Real, L: LaneReal<S, N>, const N: usize> LaneKernel<S, L, N> for $kernel<L> {
+            const SCATTER_ORDER: [usize; 8] = CORNER;
+            #[inline(always)]
+            fn lane_forces(
+                &self,
+                law: &MaterialLaw<L>,
+                nodes: &[[u32; 8]; N],
+                active: usize,
+                u: &[[S; 3]],
+                scatter: impl FnMut(usize, usize, [S; 3]),
+            ) -> Result<(), KernelFault> {
+                lane_corner_forces(self, law, nodes, active, u, scatter)
+            }
+        }
+    )*};
 }
 
-impl<S: Real, L: LaneReal<S, N>, const N: usize> LaneKernel<S, L, N> for HexBox<L> {
-    const SCATTER_ORDER: [usize; 8] = CORNER;
-    #[inline(always)]
-    fn lane_forces(
-        &self,
-        law: &MaterialLaw<L>,
-        nodes: &[[u32; 8]; N],
-        active: usize,
-        u: &[[S; 3]],
-        scatter: impl FnMut(usize, usize, [S; 3]),
-    ) -> Result<(), KernelFault> {
-        lane_corner_forces(self, law, nodes, active, u, scatter)
-    }
-}
-
-impl<S: Real, L: LaneReal<S, N>, const N: usize> LaneKernel<S, L, N> for HexCuboid<L> {
-    const SCATTER_ORDER: [usize; 8] = CORNER;
-    #[inline(always)]
-    fn lane_forces(
-        &self,
-        law: &MaterialLaw<L>,
-        nodes: &[[u32; 8]; N],
-        active: usize,
-        u: &[[S; 3]],
-        scatter: impl FnMut(usize, usize, [S; 3]),
-    ) -> Result<(), KernelFault> {
-        lane_corner_forces(self, law, nodes, active, u, scatter)
-    }
-}
+corner_lane_kernel!(HexReduced, HexBox, HexCuboid);
 
 impl<S: Real, L: LaneReal<S, N>, const N: usize> LaneKernel<S, L, N> for HexFull<L> {
     const SCATTER_ORDER: [usize; 8] = [0, 1, 2, 3, 4, 5, 6, 7];
