@@ -35,8 +35,7 @@ OUT=${OUT:-$TARGET_DIR/board-cost}
 PLUGIN_SRC=${PLUGIN_SRC:-$ROOT/../shared/tools/insncount/insncount.c}
 rm -rf "$OUT" && mkdir -p "$OUT"
 gcc -O2 -shared -fPIC -fvisibility=hidden -o "$OUT/libinsncount.so" "$PLUGIN_SRC"
-cargo build --release -q -p host-tools --bin pe
-PE=$TARGET_DIR/release/pe
+source scripts/host-bins.sh
 
 # The regular mesh: the seed's box (scenes/seed-box.toml) at 10x5x5 cells, every cell an
 # axis-aligned cuboid (the cheapest kernel); one board holds it.

@@ -18,16 +18,16 @@ RUNS=${RUNS:-1000}
 SEED=${SEED:-1}
 STEPS=${STEPS:-100}
 RECOVERY=${RECOVERY:-on}
-TARGET=${CARGO_TARGET_DIR:-target}
-OUT=${OUT:-$TARGET/fault-campaign}
-cargo build --release -p host-tools -p board-sim --bins
-"$TARGET/release/pe" compile scenes/seed-box.toml --boards 2x2x2 -o "$OUT/images" >/dev/null
+TARGET_DIR=${CARGO_TARGET_DIR:-$(pwd)/target}
+OUT=${OUT:-$TARGET_DIR/fault-campaign}
+source scripts/host-bins.sh
+"$PE" compile scenes/seed-box.toml --boards 2x2x2 -o "$OUT/images" >/dev/null
 mkdir -p "$OUT"
 sed 's/^youngs_modulus = .*/youngs_modulus = 4.5e3/' scenes/seed-box.toml > "$OUT/seed-box-stiffer.toml"
 grep -q '^youngs_modulus = 4.5e3' "$OUT/seed-box-stiffer.toml" || { echo "fault-campaign.sh: no youngs_modulus line in scenes/seed-box.toml to change" >&2; exit 1; }
-"$TARGET/release/pe" compile "$OUT/seed-box-stiffer.toml" --boards 2x2x2 -o "$OUT/images-other" >/dev/null
+"$PE" compile "$OUT/seed-box-stiffer.toml" --boards 2x2x2 -o "$OUT/images-other" >/dev/null
 FLAGS=()
 if [ "$RECOVERY" = off ]; then
     FLAGS+=(--no-recovery)
 fi
-"$TARGET/release/board-sim" campaign "$OUT/images" --swap-from "$OUT/images-other" --runs "$RUNS" --seed "$SEED" --steps "$STEPS" "${FLAGS[@]}"
+"$SIM" campaign "$OUT/images" --swap-from "$OUT/images-other" --runs "$RUNS" --seed "$SEED" --steps "$STEPS" "${FLAGS[@]}"

@@ -1,6 +1,6 @@
 # Shared by scripts/qemu-check.sh and scripts/qemu-array.sh (sourced, from the repository
 # root, with OUT set): installs qemu-system-arm (apt, only if missing) and the thumbv7em
-# target, builds pe and board-sim, and defines build_firmware.
+# target, builds pe and board-sim (scripts/host-bins.sh), and defines build_firmware.
 export RUST_BACKTRACE=0
 # The schedule comes from the loader here, never linked into the ELF.
 unset PE_SCHEDULE_IMAGE
@@ -12,9 +12,7 @@ fi
 rustup target add thumbv7em-none-eabihf >/dev/null 2>&1 || rustup target add thumbv7em-none-eabihf
 
 TARGET_DIR=${TARGET_DIR:-${CARGO_TARGET_DIR:-$(pwd)/target}}
-cargo build --release -q -p host-tools -p board-sim --bins
-PE=$TARGET_DIR/release/pe
-SIM=$TARGET_DIR/release/board-sim
+source scripts/host-bins.sh
 
 build_firmware() { # FEATURES -> prints the ELF path (a copy per variant, in $OUT)
     cargo build --release -q --target thumbv7em-none-eabihf \
