@@ -812,10 +812,10 @@ pub struct HexReduced<T> {
 }
 
 impl<T: Real> HexReduced<T> {
-    /// `H` and the hourglass displacements `q_α`, one displacement component (row of `H`)
-    /// at a time.
+    /// `F = I + H` and the hourglass displacements `q_α`, one displacement component (row
+    /// of `H`) at a time.
     #[inline(always)]
-    fn strain_and_modes(&self, corners: &impl Corners<T>) -> (Mat3<T>, [[T; 3]; 4]) {
+    fn deformation(&self, corners: &impl Corners<T>) -> (Mat3<T>, [[T; 3]; 4]) {
         let beta = &self.gradient_moments;
         let mut h = [[T::ZERO; 3]; 3];
         let mut hg = [[T::ZERO; 4]; 3];
@@ -846,7 +846,7 @@ impl<T: Real> HexReduced<T> {
                 )
             },
         );
-        (h, q)
+        (plus_identity(h), q)
     }
 }
 
@@ -857,7 +857,7 @@ impl<T: Real> CornerKernel<T> for HexReduced<T> {
         law: &MaterialLaw<T>,
         corners: &mut impl Corners<T>,
     ) -> Result<(), NonPositiveJacobian> {
-        let (h, q) = self.strain_and_modes(corners);
+        let (f, q) = self.deformation(corners);
         let k = self.hourglass_stiffness;
         let big_q: [[T; 3]; 4] = array(
             #[inline(always)]
@@ -869,7 +869,7 @@ impl<T: Real> CornerKernel<T> for HexReduced<T> {
             },
         );
         let big_q = kept_in_memory(big_q);
-        let p = law.first_piola_kirchhoff(&plus_identity(h))?;
+        let p = law.first_piola_kirchhoff(&f)?;
         // V₀ P − Σ_α Q_α ⊗ γ_α
         let pm: Mat3<T> = array(
             #[inline(always)]
@@ -902,36 +902,6 @@ impl<T: Real> CornerKernel<T> for HexReduced<T> {
         );
         add_synthesis(corners, m);
         Ok(())
-    }
-}
-
-impl<T: Real> HexElement<T> for HexReduced<T> {
-    #[inline(always)]
-    fn connectivity(&self) -> &Connectivity {
-        &self.connectivity
-    }
-    #[inline]
-    fn internal_forces(
-        &self,
-        law: &MaterialLaw<T>,
-        u: &[[T; 3]; 8],
-    ) -> Result<[[T; 3]; 8], NonPositiveJacobian> {
-        local_forces(u, |c| self.kernel(law, c))
-    }
-    fn energy(&self, law: &MaterialLaw<T>, u: &[[T; 3]; 8]) -> Result<T, NonPositiveJacobian> {
-        let (h, q) = self.strain_and_modes(&Local::new(u));
-        let w = law.strain_energy_density(&plus_identity(h))? * self.volume;
-        let qq: T = q.iter().flatten().fold(T::ZERO, |s, v| s + *v * *v);
-        Ok(w + T::from_f64(0.5) * self.hourglass_stiffness * qq)
-    }
-    #[inline(always)]
-    fn accumulate(
-        &self,
-        law: &MaterialLaw<T>,
-        u: &[[T; 3]],
-        f: &mut [[T; 3]],
-    ) -> Result<(), KernelFault> {
-        global_forces(self.nodes(), u, f, |c| self.kernel(law, c))
     }
 }
 
@@ -1005,9 +975,10 @@ impl<T: Real> CornerKernel<T> for HexBox<T> {
     }
 }
 
-/// [`HexElement`] of a kernel whose `deformation` gives `F` and the hourglass moments
-/// `c_α` (the parallelepiped and cuboid kernels: the same energy and the same fused loop).
-macro_rules! affine_element {
+/// [`HexElement`] of a corner-basis kernel whose `deformation` gives `F` and the hourglass
+/// displacements (`q_α` of the general kernel, the moments `c_α` of the parallelepiped and
+/// cuboid ones): the same energy and the same fused loop.
+macro_rules! corner_element {
     ($kernel:ident) => {
         impl<T: Real> HexElement<T> for $kernel<T> {
             #[inline(always)]
@@ -1045,7 +1016,8 @@ macro_rules! affine_element {
     };
 }
 
-affine_element!(HexBox);
+corner_element!(HexReduced);
+corner_element!(HexBox);
 
 /// One-point element with hourglass control on a rectangular cuboid aligned with the axes
 /// (the seed's undistorted element), in the corner basis: the [`HexBox`] kernel with a
@@ -1120,7 +1092,7 @@ impl<T: Real> CornerKernel<T> for HexCuboid<T> {
     }
 }
 
-affine_element!(HexCuboid);
+corner_element!(HexCuboid);
 
 /// The kernel an element takes, chosen per element at compile time from its reference
 /// geometry (reduced integration; full integration has only [`HexFull`]). The image holds
