@@ -257,8 +257,18 @@ fn faulty_with(
     }
 }
 
-/// The board across `face` (named as in the reports) of `board` on a 2x2x2 machine.
+/// The board across `face` (named as in the reports) of `board` on a 2x2x2 machine: the
+/// neighbour on a link face, the named board on the global network ("global to (x,y,z)").
 fn across(board: [usize; 3], face: &str) -> Option<[usize; 3]> {
+    if let Some(to) = face.strip_prefix("global to (") {
+        let mut c = to
+            .trim_end_matches(')')
+            .split(',')
+            .map(|v| v.trim().parse().ok());
+        let peer = [c.next()??, c.next()??, c.next()??];
+        return (c.next().is_none() && peer != board && peer.iter().all(|&v| v < 2))
+            .then_some(peer);
+    }
     let f = link_proto::Face::ALL
         .into_iter()
         .find(|f| format!("{f:?}") == face)?;
@@ -298,7 +308,7 @@ fn assert_true_cause(f: &SimFault, kind: &str, workers: usize) {
     assert_eq!(
         Some(d.fault.board.map(|v| v as usize)),
         across(c.board, face),
-        "workers {workers}: detected across the link:\n{f}"
+        "workers {workers}: detected across the link (or by the global network's peer):\n{f}"
     );
     assert!(d.fault.step >= c.step, "workers {workers}: {f}");
     assert!(!f.observed.is_empty());
