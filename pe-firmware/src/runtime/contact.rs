@@ -500,6 +500,7 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             faces,
             at_check,
             force,
+            at_step,
             remote,
             candidates,
             ..
@@ -517,7 +518,14 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             u: &self.st.u[..c.nodes as usize],
             step: self.step,
         };
-        let pos = |k: usize| positions.at(k);
+        // Each position once per step (the same values `Positions::at` gives), not once per
+        // test that needs it: a candidate face reads four.
+        let at_step = &mut at_step[..nc];
+        for (k, x) in at_step.iter_mut().enumerate() {
+            *x = positions.at(k);
+        }
+        let at_step = &*at_step;
+        let pos = |k: usize| at_step.get(k).copied().flatten();
         let own = |k: usize| places.get(k).is_some_and(|p| p.owned);
         if check {
             for (k, x) in at_check.iter_mut().enumerate().take(nc) {

@@ -129,6 +129,7 @@ fn clear_contact<T, E>(st: &mut Storage<'_, T, E>, nc: usize) -> Result<(), Imag
     for (what, len) in [
         ("contact nodes", cs.at_check.len()),
         ("contact nodes", cs.force.len()),
+        ("contact nodes", cs.at_step.len()),
         ("contact nodes", cs.remote.len()),
     ] {
         if nc > len {
@@ -141,6 +142,7 @@ fn clear_contact<T, E>(st: &mut Storage<'_, T, E>, nc: usize) -> Result<(), Imag
     }
     cs.force[..nc].fill([0.0; 3]);
     cs.at_check[..nc].fill([0.0; 3]);
+    cs.at_step[..nc].fill(None);
     cs.remote[..nc].fill([(0, [0.0; 3]); 2]);
     Ok(())
 }

@@ -272,31 +272,36 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
 
     /// Subtracts the external force of the owned nodes of `stage`: their records' gravity,
     /// loads and contact force, added in the serial solver's order. Nodes without a record
-    /// have none (`f − 0 = f`), so they cost nothing here.
+    /// have none (`f − 0 = f`), so they cost nothing here; a record with gravity alone (most
+    /// of them) takes the short path, `f − g`, the same bits as `f − (g + nothing)`. Out of
+    /// line: its loop keeps its values in registers.
+    #[inline(never)]
     fn external(&mut self, stage: u8, t: f64) {
         let Some(&(start, end)) = self.external_stages.get(stage as usize) else {
             return;
         };
         let c = self.header.counts;
-        let st = &mut self.st;
-        let points = &st.path_points[..c.path_points as usize];
-        let loads = &st.loads[..c.loads as usize];
-        let records = st.external.get(start as usize..end as usize).unwrap_or(&[]);
+        let Storage {
+            path_points,
+            loads,
+            external,
+            force,
+            contact,
+            ..
+        } = &mut self.st;
+        let points = &path_points[..c.path_points as usize];
+        let loads = &loads[..c.loads as usize];
+        let records = external.get(start as usize..end as usize).unwrap_or(&[]);
         for x in records {
-            let mut fe = x.gravity;
-            let first = x.first_load as usize;
-            for l in loads.get(first..first + x.loads as usize).unwrap_or(&[]) {
-                let s = l.ramp.map_or(1.0, |p| path_value(points, p, t)[0]);
+            let Some(f) = force.get_mut(x.node as usize) else {
+                continue;
+            };
+            if x.loads == 0 && x.contact.is_none() {
                 for i in 0..3 {
-                    fe[i] += T::from_f64(l.force[i] * s);
+                    f[i] -= x.gravity[i];
                 }
-            }
-            if let Some(f) = x.contact.and_then(|cn| st.contact.force.get(cn as usize)) {
-                for i in 0..3 {
-                    fe[i] += T::from_f64(f[i]);
-                }
-            }
-            if let Some(f) = st.force.get_mut(x.node as usize) {
+            } else {
+                let fe = external_force(x, points, loads, contact.force, t);
                 for i in 0..3 {
                     f[i] -= fe[i];
                 }
@@ -450,30 +455,37 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         for (((rec, u), du), f) in all {
             let total = *f;
             *f = [T::ZERO; 3];
-            let mv = match rec.motion {
-                NodeMotion::Free => NodeMove::Free {
-                    gain: rec.gain,
-                    residual: [-total[0], -total[1], -total[2]],
-                },
+            // One call per motion, so the free node's (the common one's) copy of the
+            // update has no branch on the motion left in it.
+            let r = match rec.motion {
+                NodeMotion::Free => {
+                    let residual = [-total[0], -total[1], -total[2]];
+                    let mv = NodeMove::Free {
+                        gain: rec.gain,
+                        residual,
+                    };
+                    update_node(&cd, u, du, mv, inv_2dt, limit, rec.global)
+                }
                 NodeMotion::Fixed => {
                     if rec.owner {
                         add_reaction(&mut rf, total);
                     }
-                    NodeMove::Held([T::ZERO; 3])
+                    let mv = NodeMove::Held([T::ZERO; 3]);
+                    update_node(&cd, u, du, mv, inv_2dt, limit, rec.global)
                 }
                 NodeMotion::Prescribed(p) => {
                     if rec.owner {
                         add_reaction(&mut rp, total);
                     }
-                    NodeMove::Held(prescribed(points, p, t_next))
+                    let mv = NodeMove::Held(prescribed(points, p, t_next));
+                    update_node(&cd, u, du, mv, inv_2dt, limit, rec.global)
                 }
             };
-            let v2 =
-                update_node(&cd, u, du, mv, inv_2dt, limit, rec.global).map_err(|e| Fault {
-                    board,
-                    step,
-                    kind: FaultKind::Physics(e),
-                })?;
+            let v2 = r.map_err(|e| Fault {
+                board,
+                step,
+                kind: FaultKind::Physics(e),
+            })?;
             ke += rec.half_mass_kg * v2;
         }
         self.reaction_prescribed = rp;
@@ -490,6 +502,32 @@ fn add_reaction<T: Real>(r: &mut [f64; 3], total: [T; 3]) {
     for i in 0..3 {
         r[i] += total[i].to_f64();
     }
+}
+
+/// The external force of a record with loads or a contact node: gravity, then each load
+/// (ramped by its path at `t`), then the contact force, in the serial solver's order.
+#[inline(always)]
+fn external_force<T: Real>(
+    x: &ExternalRecord<T>,
+    points: &[PathPoint],
+    loads: &[LoadRecord],
+    contact_force: &[[f64; 3]],
+    t: f64,
+) -> [T; 3] {
+    let mut fe = x.gravity;
+    let first = x.first_load as usize;
+    for l in loads.get(first..first + x.loads as usize).unwrap_or(&[]) {
+        let s = l.ramp.map_or(1.0, |p| path_value(points, p, t)[0]);
+        for i in 0..3 {
+            fe[i] += T::from_f64(l.force[i] * s);
+        }
+    }
+    if let Some(f) = x.contact.and_then(|cn| contact_force.get(cn as usize)) {
+        for i in 0..3 {
+            fe[i] += T::from_f64(f[i]);
+        }
+    }
+    fe
 }
 
 /// Prescribed path `p` at `t_next`, in the node's precision.

@@ -140,6 +140,7 @@ impl Capacities {
                 * (size_of::<ContactNode>()
                     + size_of::<ContactNodePlace>()
                     + 2 * size_of::<[f64; 3]>()
+                    + size_of::<Option<[f64; 3]>>()
                     + size_of::<RemoteSlot>())
             + self.contact_faces * size_of::<ContactFace>()
             + self.contact_candidates * size_of::<Candidate>()
@@ -216,6 +217,9 @@ pub struct ContactStorage<'a> {
     /// Per contact node: position at the last check, and contact force this step (f64).
     pub at_check: &'a mut [[f64; 3]],
     pub force: &'a mut [[f64; 3]],
+    /// Per contact node: its position this step, computed once per step for the contact
+    /// tests (`None`: a partner's node not received for this step).
+    pub at_step: &'a mut [Option<[f64; 3]>],
     /// Per contact node: what the partners sent, by step parity.
     pub remote: &'a mut [RemoteSlot],
     pub candidates: &'a mut [Candidate],
@@ -322,6 +326,7 @@ pub struct StorageBuf<
     faces: S::Of<ContactFace, NF>,
     at_check: S::Of<[f64; 3], NC>,
     contact_force: S::Of<[f64; 3], NC>,
+    at_step: S::Of<Option<[f64; 3]>, NC>,
     remote: S::Of<RemoteSlot, NC>,
     candidates: S::Of<Candidate, NK>,
     send_list: S::Of<u32, NS>,
@@ -370,6 +375,7 @@ impl<
             faces: S::empty(),
             at_check: S::empty(),
             contact_force: S::empty(),
+            at_step: S::empty(),
             remote: S::empty(),
             candidates: S::empty(),
             send_list: S::empty(),
@@ -408,6 +414,7 @@ impl<
         put::<S, _, NF>(&mut self.faces, caps.contact_faces)?;
         put::<S, _, NC>(&mut self.at_check, caps.contact_nodes)?;
         put::<S, _, NC>(&mut self.contact_force, caps.contact_nodes)?;
+        put::<S, _, NC>(&mut self.at_step, caps.contact_nodes)?;
         put::<S, _, NC>(&mut self.remote, caps.contact_nodes)?;
         put::<S, _, NK>(&mut self.candidates, caps.contact_candidates)?;
         put::<S, _, NS>(&mut self.send_list, caps.contact_sends)?;
@@ -435,6 +442,7 @@ impl<
                 faces: &mut self.faces,
                 at_check: &mut self.at_check,
                 force: &mut self.contact_force,
+                at_step: &mut self.at_step,
                 remote: &mut self.remote,
                 candidates: &mut self.candidates,
                 send_list: &mut self.send_list,
