@@ -209,6 +209,7 @@ enum Storage {
 }
 
 fn main() -> Result<()> {
+    host_tools::output::exit_quietly_when_stdout_closes();
     let Cli { command } = Cli::parse();
     match command {
         Command::Run { dir, args } => execute(&dir, args).map(|_| ()),

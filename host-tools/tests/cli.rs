@@ -237,3 +237,41 @@ fn solve_summary_prints_tool_forces() {
         .unwrap_or_else(|| panic!("no peak in {line}"));
     assert!(peak > 1e-5, "the probe touched the tube: {line}");
 }
+
+/// `pe compile ... | head`: a standard output closed before pe writes its report ends pe
+/// quietly by SIGPIPE, as any Unix tool, and not with a panic and a backtrace on stderr.
+#[cfg(unix)]
+#[test]
+fn a_closed_stdout_ends_pe_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::Stdio;
+    const SIGPIPE: i32 = 13;
+    let d = temp_dir("sigpipe");
+    let mut child = Command::new(PE)
+        .args([
+            "compile",
+            "--builtin",
+            "--level",
+            "coarse",
+            "--boards",
+            "2x2x2",
+            "-o",
+        ])
+        .arg(&d)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("pe runs");
+    // The reader goes away before pe has written anything.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("pe ends");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "pe panicked:\n{stderr}");
+    assert_eq!(
+        out.status.signal(),
+        Some(SIGPIPE),
+        "pe ends by SIGPIPE, not {:?}:\n{stderr}",
+        out.status
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}

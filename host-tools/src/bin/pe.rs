@@ -331,6 +331,7 @@ struct SolveOutputs {
 }
 
 fn main() -> Result<()> {
+    host_tools::output::exit_quietly_when_stdout_closes();
     let cli = Cli::parse();
     match cli.command {
         Command::Solve {

@@ -18,6 +18,19 @@ use crate::mesh::Mesh;
 use crate::output::vtk::{PointField, VtkSeriesWriter, VELOCITY};
 use crate::solver::StepState;
 
+/// A standard output closed early (`pe compile ... | head`) ends the process quietly, as
+/// it does any Unix tool, instead of panicking in `println!`: restores the default action of
+/// SIGPIPE, which the Rust runtime sets to ignore. Called first in `main` by `pe` and
+/// board-sim. Elsewhere than on Unix it does nothing.
+pub fn exit_quietly_when_stdout_closes() {
+    #[cfg(unix)]
+    // SAFETY: called at the start of `main`, before any thread exists; it only sets one
+    // signal's disposition back to the system default.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 /// The nodes CSV's header: the node tag, the initial position and the displacement, with
 /// their units (m).
 pub const NODES_CSV_HEADER: [&str; 7] = ["node", "x_m", "y_m", "z_m", "ux_m", "uy_m", "uz_m"];
