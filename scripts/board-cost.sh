@@ -123,5 +123,7 @@ awk '
 ' "$OUT/table.txt"
 
 # The table the code relies on must match what was just measured.
-PE_BOARD_COST_CSV="$OUT/board-cost.csv" cargo test --release -q -p system-tests --test board_cost \
+# (--workspace: the test build's features, so nothing is compiled again; `-p system-tests`
+# would resolve them without the other members' dev-dependencies and rebuild host-tools.)
+PE_BOARD_COST_CSV="$OUT/board-cost.csv" cargo test --workspace --release -q --test board_cost \
     -- --ignored
