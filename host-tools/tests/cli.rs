@@ -245,7 +245,6 @@ fn solve_summary_prints_tool_forces() {
 fn a_closed_stdout_ends_pe_quietly() {
     use std::os::unix::process::ExitStatusExt;
     use std::process::Stdio;
-    const SIGPIPE: i32 = 13;
     let d = temp_dir("sigpipe");
     let mut child = Command::new(PE)
         .args([
@@ -269,7 +268,7 @@ fn a_closed_stdout_ends_pe_quietly() {
     assert!(!stderr.contains("panicked"), "pe panicked:\n{stderr}");
     assert_eq!(
         out.status.signal(),
-        Some(SIGPIPE),
+        Some(libc::SIGPIPE),
         "pe ends by SIGPIPE, not {:?}:\n{stderr}",
         out.status
     );
