@@ -13,6 +13,7 @@ use pe_firmware::physics::{LameParameters, MaterialLaw, ReferenceHex, Volumetric
 
 use crate::mesh::Mesh;
 use crate::scene::{Law, MaterialSpec, RegionRef, Scene, Selector, SolverSpec};
+use crate::solver::batched::{Batched, Isa};
 
 /// A piecewise-linear function of time through `(t, value)` points, held constant outside.
 #[derive(Clone, Debug, PartialEq)]
@@ -584,11 +585,13 @@ impl Problem {
         let elements = elements::Elements::<f64>::build(self);
         let laws: Vec<MaterialLaw<f64>> = self.laws.iter().map(|l| l.cast::<f64>()).collect();
         let u = vec![[0.0; 3]; self.mesh.nodes.len()];
+        let batched = Batched::build(&elements, &laws, Isa::detect()).ok();
         let state = frequency::Linearised {
             problem: self,
             elements: &elements,
             laws: &laws,
             u: &u,
+            batched: batched.as_ref(),
         };
         let mut v = frequency::start_vector(self);
         let omega = frequency::max_frequency_from(&state, &mut v, 200)?;

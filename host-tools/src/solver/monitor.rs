@@ -230,6 +230,7 @@ impl<'p, T: Real> Model<'p, T> {
             elements: &self.elements,
             laws: &self.laws,
             u: &self.u,
+            batched: self.batched.as_ref(),
         };
         frequency::max_frequency_from(&state, v, iterations)
     }
