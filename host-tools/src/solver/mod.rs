@@ -4,8 +4,8 @@
 
 use anyhow::{anyhow, Result};
 use pe_firmware::physics::contact::{
-    build_candidates, check_travel, evaluate_pairs, evaluate_tools, Candidate, ContactModel,
-    ContactStats,
+    build_candidates, check_travel, evaluate_pairs_at, evaluate_tools, Candidate, ContactModel,
+    ContactStats, FaceGeometry,
 };
 use pe_firmware::physics::{CentralDifference, MaterialLaw, PhysicsError, Real};
 
@@ -84,6 +84,10 @@ const NODE_BLOCK: usize = 2048;
 pub struct ContactState {
     pub run: crate::problem::contact::ContactRun,
     pub candidates: Vec<Candidate>,
+    /// The faces the candidates name (ascending, once each), and each face's geometry at
+    /// the current step (refreshed every step for those faces).
+    faces_used: Vec<u32>,
+    geometry: Vec<Option<FaceGeometry>>,
     /// Contact-node positions at the last check.
     pub at_check: Vec<[f64; 3]>,
     /// Contact force per contact node at the last step (N).
@@ -106,9 +110,12 @@ impl ContactState {
         let run = setup.for_step(&problem.mesh, &inertial, dt_s);
         let n = run.nodes.len();
         let tools = run.tools.len();
+        let faces = run.faces.len();
         Some(ContactState {
             run,
             candidates: Vec::new(),
+            faces_used: Vec::new(),
+            geometry: vec![None; faces],
             at_check: vec![[0.0; 3]; n],
             force: vec![[0.0; 3]; n],
             tool_force: vec![[0.0; 3]; tools],
@@ -161,6 +168,9 @@ impl ContactState {
                 };
                 self.candidates.truncate(n);
                 self.candidates_max = self.candidates_max.max(n);
+                self.faces_used = self.candidates.iter().map(|c| c.face).collect();
+                self.faces_used.sort_unstable();
+                self.faces_used.dedup();
             }
             self.checks += 1;
         }
@@ -190,10 +200,17 @@ impl ContactState {
             &mut self.tool_force,
             &mut self.stats,
         )?;
-        evaluate_pairs(
+        for &f in &self.faces_used {
+            let g = m.face_geometry(f as usize, &pos)?;
+            if let Some(slot) = self.geometry.get_mut(f as usize) {
+                *slot = g;
+            }
+        }
+        evaluate_pairs_at(
             &m,
             &self.candidates,
             pos,
+            &self.geometry,
             |_| true,
             p.tolerance_m,
             &mut self.force,

@@ -185,7 +185,19 @@ fn clearly_above(d: V3, n: V3) -> bool {
 /// [`EDGE_TOLERANCE`].
 fn triangle_penetration(x: V3, t: [V3; 3], depth_max: f64) -> Option<(f64, V3, [f64; 3])> {
     let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
-    let n2 = dot(n, n);
+    triangle_penetration_normal(x, t, n, dot(n, n), depth_max)
+}
+
+/// [`triangle_penetration`] with the triangle's normal `n = (t1 − t0) × (t2 − t0)` and
+/// `n2 = n · n` given (computed once for many points: [`FaceGeometry`]).
+#[inline(always)]
+fn triangle_penetration_normal(
+    x: V3,
+    t: [V3; 3],
+    n: V3,
+    n2: f64,
+    depth_max: f64,
+) -> Option<(f64, V3, [f64; 3])> {
     if !(n2 > 0.0) {
         return None;
     }
@@ -213,22 +225,29 @@ fn triangle_penetration(x: V3, t: [V3; 3], depth_max: f64) -> Option<(f64, V3, [
     Some((-g, nh, [c0 / sum, c1 / sum, c2 / sum]))
 }
 
-/// Penetration of `x` into the quad `q` (split along the diagonal 0–2 into triangles
-/// (0,1,2) and (0,2,3), nodes ordered counter-clockwise seen from outside): the shallower
-/// of the two triangles it penetrates.
-pub fn quad_penetration(x: V3, q: &[V3; 4], depth_max: f64) -> Option<FacePenetration> {
-    let t1 =
-        triangle_penetration(x, [q[0], q[1], q[2]], depth_max).map(|(d, n, w)| FacePenetration {
-            depth_m: d,
-            normal: n,
-            weights: [w[0], w[1], w[2], 0.0],
-        });
-    let t2 =
-        triangle_penetration(x, [q[0], q[2], q[3]], depth_max).map(|(d, n, w)| FacePenetration {
-            depth_m: d,
-            normal: n,
-            weights: [w[0], 0.0, w[1], w[2]],
-        });
+/// The quad's two triangles, (0,1,2) and (0,2,3).
+#[inline(always)]
+fn quad_triangles(q: &[V3; 4]) -> [[V3; 3]; 2] {
+    [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]
+}
+
+/// The shallower of the quad's two triangle penetrations (the first on a tie), as the
+/// quad's: triangle (0,1,2)'s weights go to nodes 0, 1, 2 and (0,2,3)'s to 0, 2, 3.
+#[inline(always)]
+fn quad_result(
+    t1: Option<(f64, V3, [f64; 3])>,
+    t2: Option<(f64, V3, [f64; 3])>,
+) -> Option<FacePenetration> {
+    let t1 = t1.map(|(d, n, w)| FacePenetration {
+        depth_m: d,
+        normal: n,
+        weights: [w[0], w[1], w[2], 0.0],
+    });
+    let t2 = t2.map(|(d, n, w)| FacePenetration {
+        depth_m: d,
+        normal: n,
+        weights: [w[0], 0.0, w[1], w[2]],
+    });
     match (t1, t2) {
         (Some(a), Some(b)) => Some(if shallower(b.depth_m, a.depth_m) {
             b
@@ -236,6 +255,48 @@ pub fn quad_penetration(x: V3, q: &[V3; 4], depth_max: f64) -> Option<FacePenetr
             a
         }),
         (a, b) => a.or(b),
+    }
+}
+
+/// Penetration of `x` into the quad `q` (split along the diagonal 0–2 into triangles
+/// (0,1,2) and (0,2,3), nodes ordered counter-clockwise seen from outside): the shallower
+/// of the two triangles it penetrates.
+pub fn quad_penetration(x: V3, q: &[V3; 4], depth_max: f64) -> Option<FacePenetration> {
+    let [a, b] = quad_triangles(q);
+    let t1 = triangle_penetration(x, a, depth_max);
+    let t2 = triangle_penetration(x, b, depth_max);
+    quad_result(t1, t2)
+}
+
+/// A master quad at one state, for testing many slave nodes against it: its corners and
+/// its triangles' normals `n = (t1 − t0) × (t2 − t0)` with `n · n`, what
+/// [`quad_penetration`] computes first for every node. [`FaceGeometry::penetration`] gives
+/// [`quad_penetration`]'s result, bit for bit (the same operations on the same values).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FaceGeometry {
+    pub corners: [V3; 4],
+    normals: [V3; 2],
+    normals_squared: [f64; 2],
+}
+
+impl FaceGeometry {
+    pub fn new(corners: [V3; 4]) -> FaceGeometry {
+        let t = quad_triangles(&corners);
+        let normals = t.map(|t| cross(sub(t[1], t[0]), sub(t[2], t[0])));
+        FaceGeometry {
+            corners,
+            normals,
+            normals_squared: normals.map(|n| dot(n, n)),
+        }
+    }
+
+    /// [`quad_penetration`] of `x` into this quad.
+    pub fn penetration(&self, x: V3, depth_max: f64) -> Option<FacePenetration> {
+        let [a, b] = quad_triangles(&self.corners);
+        let (n, n2) = (self.normals, self.normals_squared);
+        let t1 = triangle_penetration_normal(x, a, n[0], n2[0], depth_max);
+        let t2 = triangle_penetration_normal(x, b, n[1], n2[1], depth_max);
+        quad_result(t1, t2)
     }
 }
 
@@ -325,6 +386,21 @@ impl ContactModel<'_> {
             (p.a, p.b, p.depth_max_m)
         } else {
             (p.b, p.a, p.depth_max_m)
+        })
+    }
+
+    /// Face `f`'s [`FaceGeometry`] at the positions `pos` (`None` if one is unknown), for
+    /// [`evaluate_pairs_at`].
+    pub fn face_geometry(
+        &self,
+        f: usize,
+        pos: &impl Fn(usize) -> Option<V3>,
+    ) -> Result<Option<FaceGeometry>, PhysicsError> {
+        let mut q = [[0.0; 3]; 4];
+        Ok(if self.face_points(f, pos, &mut q)? {
+            Some(FaceGeometry::new(q))
+        } else {
+            None
         })
     }
 
@@ -422,6 +498,72 @@ pub fn evaluate_pairs(
     force: &mut [V3],
     stats: &mut ContactStats,
 ) -> Result<(), PhysicsError> {
+    let face_test = |f: usize, x: V3, depth_max: f64| {
+        let mut q = [[0.0; 3]; 4];
+        Ok(if m.face_points(f, &pos, &mut q)? {
+            quad_penetration(x, &q, depth_max)
+        } else {
+            None
+        })
+    };
+    evaluate_pairs_with(
+        m,
+        candidates,
+        &pos,
+        apply,
+        tolerance_m,
+        force,
+        stats,
+        face_test,
+    )
+}
+
+/// [`evaluate_pairs`] with each master face's geometry at this state computed beforehand:
+/// `geometry[f]` is [`FaceGeometry::new`] of face `f`'s corner positions (`None` where one
+/// is unknown), for every face a candidate names. The same result, bit for bit, with the
+/// corners and normals computed once per face instead of once per candidate (a face is a
+/// candidate of about ten slaves).
+#[allow(clippy::too_many_arguments)]
+pub fn evaluate_pairs_at(
+    m: &ContactModel<'_>,
+    candidates: &[Candidate],
+    pos: impl Fn(usize) -> Option<V3>,
+    geometry: &[Option<FaceGeometry>],
+    apply: impl Fn(usize) -> bool,
+    tolerance_m: f64,
+    force: &mut [V3],
+    stats: &mut ContactStats,
+) -> Result<(), PhysicsError> {
+    let face_test = |f: usize, x: V3, depth_max: f64| match geometry.get(f) {
+        Some(g) => Ok(g.as_ref().and_then(|g| g.penetration(x, depth_max))),
+        None => Err(bad(f)),
+    };
+    evaluate_pairs_with(
+        m,
+        candidates,
+        &pos,
+        apply,
+        tolerance_m,
+        force,
+        stats,
+        face_test,
+    )
+}
+
+/// The loop of [`evaluate_pairs`], with `face_test(f, x, depth_max)` the penetration of a
+/// slave at `x` into face `f` (`Ok(None)`: none, or the face's position is unknown).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn evaluate_pairs_with(
+    m: &ContactModel<'_>,
+    candidates: &[Candidate],
+    pos: &impl Fn(usize) -> Option<V3>,
+    apply: impl Fn(usize) -> bool,
+    tolerance_m: f64,
+    force: &mut [V3],
+    stats: &mut ContactStats,
+    face_test: impl Fn(usize, V3, f64) -> Result<Option<FacePenetration>, PhysicsError>,
+) -> Result<(), PhysicsError> {
     let mut i = 0;
     while i < candidates.len() {
         let (direction, slave) = (candidates[i].direction, candidates[i].slave);
@@ -458,11 +600,7 @@ pub fn evaluate_pairs(
         }
         let mut best: Option<(usize, FacePenetration)> = None;
         for c in group {
-            let mut q = [[0.0; 3]; 4];
-            if !m.face_points(c.face as usize, &pos, &mut q)? {
-                continue;
-            }
-            if let Some(p) = quad_penetration(x, &q, depth_max) {
+            if let Some(p) = face_test(c.face as usize, x, depth_max)? {
                 if best.is_none_or(|(_, b)| shallower(p.depth_m, b.depth_m)) {
                     best = Some((c.face as usize, p));
                 }
@@ -652,6 +790,48 @@ mod tests {
     /// Just outside an edge (within [`EDGE_TOLERANCE`] of the triangle's weights) still
     /// counts, with the force moved onto the edge (weights clipped, summing to 1 to
     /// 1e-15); farther out it does not.
+    /// [`FaceGeometry::penetration`] is [`quad_penetration`] with the normals computed
+    /// once: the same result to the bit, on warped quads (the two triangles tilted apart)
+    /// and points above, below, beside, on edges and too deep. At least a quarter of the
+    /// points must penetrate, so the comparison covers the weights and normals, not only
+    /// `None = None`.
+    #[test]
+    fn face_geometry_gives_quad_penetration_bits() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let (mut hits, mut total) = (0, 0);
+        for _ in 0..200 {
+            let q: [V3; 4] = [
+                [0.0, 0.0, 0.0],
+                [1.0 + 0.2 * rnd(), 0.1 * rnd(), 0.1 * rnd()],
+                [1.0 + 0.2 * rnd(), 1.0 + 0.2 * rnd(), 0.2 * rnd()],
+                [0.1 * rnd(), 1.0 + 0.2 * rnd(), 0.1 * rnd()],
+            ];
+            let g = FaceGeometry::new(q);
+            for _ in 0..20 {
+                let x = [0.5 + 1.3 * rnd(), 0.5 + 1.3 * rnd(), 0.08 * rnd() - 0.02];
+                let (a, b) = (quad_penetration(x, &q, 0.05), g.penetration(x, 0.05));
+                total += 1;
+                match (a, b) {
+                    (None, None) => {}
+                    (Some(a), Some(b)) => {
+                        hits += 1;
+                        assert_eq!(a.depth_m.to_bits(), b.depth_m.to_bits());
+                        assert_eq!(a.normal.map(f64::to_bits), b.normal.map(f64::to_bits));
+                        assert_eq!(a.weights.map(f64::to_bits), b.weights.map(f64::to_bits));
+                    }
+                    (a, b) => panic!("at {x:?}: {a:?} against {b:?}"),
+                }
+            }
+        }
+        assert!(4 * hits >= total, "only {hits} of {total} points penetrate");
+    }
+
     #[test]
     fn a_node_just_outside_an_edge_is_caught_on_the_edge() {
         let q = [
