@@ -297,9 +297,13 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
                 continue;
             };
             if x.loads == 0 && x.contact.is_none() {
+                // Both read before `f` is written (the compiler cannot tell that the
+                // record and the force array never overlap): two multiple loads, one store.
+                let (g, mut v) = (x.gravity, *f);
                 for i in 0..3 {
-                    f[i] -= x.gravity[i];
+                    v[i] -= g[i];
                 }
+                *f = v;
             } else {
                 let fe = external_force(x, points, loads, contact.force, t);
                 for i in 0..3 {
