@@ -184,8 +184,14 @@ fn clearly_above(d: V3, n: V3) -> bool {
 /// if `0 < depth ≤ depth_max` and its projection lies inside, or outside an edge by at most
 /// [`EDGE_TOLERANCE`].
 fn triangle_penetration(x: V3, t: [V3; 3], depth_max: f64) -> Option<(f64, V3, [f64; 3])> {
-    let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
+    let n = triangle_normal(t);
     triangle_penetration_normal(x, t, n, dot(n, n), depth_max)
+}
+
+/// The (unnormalised) normal `n = (t1 − t0) × (t2 − t0)` of triangle `t`.
+#[inline(always)]
+fn triangle_normal(t: [V3; 3]) -> V3 {
+    cross(sub(t[1], t[0]), sub(t[2], t[0]))
 }
 
 /// [`triangle_penetration`] with the triangle's normal `n = (t1 − t0) × (t2 − t0)` and
@@ -282,7 +288,7 @@ pub struct FaceGeometry {
 impl FaceGeometry {
     pub fn new(corners: [V3; 4]) -> FaceGeometry {
         let t = quad_triangles(&corners);
-        let normals = t.map(|t| cross(sub(t[1], t[0]), sub(t[2], t[0])));
+        let normals = t.map(triangle_normal);
         FaceGeometry {
             corners,
             normals,
@@ -787,9 +793,6 @@ mod tests {
         assert!(quad_penetration([1.3, 0.6, -0.01], &q, 0.1).is_none());
     }
 
-    /// Just outside an edge (within [`EDGE_TOLERANCE`] of the triangle's weights) still
-    /// counts, with the force moved onto the edge (weights clipped, summing to 1 to
-    /// 1e-15); farther out it does not.
     /// [`FaceGeometry::penetration`] is [`quad_penetration`] with the normals computed
     /// once: the same result to the bit, on warped quads (the two triangles tilted apart)
     /// and points above, below, beside, on edges and too deep. At least a quarter of the
@@ -832,6 +835,9 @@ mod tests {
         assert!(4 * hits >= total, "only {hits} of {total} points penetrate");
     }
 
+    /// Just outside an edge (within [`EDGE_TOLERANCE`] of the triangle's weights) still
+    /// counts, with the force moved onto the edge (weights clipped, summing to 1 to
+    /// 1e-15); farther out it does not.
     #[test]
     fn a_node_just_outside_an_edge_is_caught_on_the_edge() {
         let q = [
