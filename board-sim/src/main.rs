@@ -557,7 +557,8 @@ fn execute(dir: &std::path::Path, a: RunArgs) -> Result<(board_sim::SimOutput, P
     // ones written to the ParaView series and counted in the summary and the report.
     let frames = graphics::surface_frames(&problem, &out);
     let paraview_frames = write_outputs(&a, &problem, &out, &frames, &manifest, graphics_stream)?;
-    let global = global_summary(&out, sim_s, frames.len());
+    let entry_bytes = link_proto::payload::node_entry_len(problem.solver.precision.wire());
+    let global = global_summary(&out, sim_s, frames.len(), entry_bytes as f64);
     if let Some(g) = &global {
         println!("{}", g.text);
     }
@@ -888,11 +889,13 @@ struct GlobalSummary {
 /// step, 72 MB/s, and 18 MB/s of graphics for its 2000-element model). `complete`: the
 /// graphics frames with every surface node received (the surface series' frames); the
 /// others were started too close to the end of the run to finish (a frame's chunks are
-/// spread over several steps).
+/// spread over several steps). `entry_bytes`: one contact-node entry's bytes (the index and
+/// three values of the run's precision).
 fn global_summary(
     out: &board_sim::SimOutput,
     sim_s: f64,
     complete: usize,
+    entry_bytes: f64,
 ) -> Option<GlobalSummary> {
     let g: Vec<&pe_firmware::runtime::GlobalStats> = out.boards.iter().map(|b| &b.global).collect();
     let packets: u64 = g.iter().map(|s| s.packets_sent).sum();
@@ -925,7 +928,7 @@ fn global_summary(
     let text = format!(
         "global network: {packets} packets, {:.1} MB/s in all; contact: {vectors:.1} node vectors per step ({:.1} MB/s at this step rate; the seed: ~300 vectors, 72 MB/s), {boxes} bounding-box packets over {checks} checks, at most {cand} candidates on a board; graphics: {complete} complete frames (the surface series' frames){}, {:.2} MB/s (the seed: 18 MB/s); tool force at the end {:?} N, peak {:?} N",
         bytes / sim_s / 1e6,
-        vectors * 28.0 / (sim_s / steps) / 1e6,
+        vectors * entry_bytes / (sim_s / steps) / 1e6,
         match incomplete {
             0 => String::new(),
             n => format!(" and {n} started too close to the end to complete"),
@@ -938,7 +941,7 @@ fn global_summary(
         "packets": packets,
         "bytes_per_s": bytes / sim_s,
         "contact_vectors_per_step": vectors,
-        "contact_bytes_per_s": vectors * 28.0 / (sim_s / steps),
+        "contact_bytes_per_s": vectors * entry_bytes / (sim_s / steps),
         "seed_contact_vectors_per_step": 300,
         "seed_contact_bytes_per_s": 72e6,
         "box_packets": boxes,

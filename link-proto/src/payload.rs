@@ -7,7 +7,7 @@
 //! | payload | layout |
 //! |---|---|
 //! | [`BoxPayload`] ([`PacketKind::BoundingBox`](crate::PacketKind)) | step u32, min 3×f64, max 3×f64 (52 bytes) |
-//! | nodes ([`PacketKind::CollisionExchange`](crate::PacketKind)) | step u32, last u8 (1: the sender's last packet of the step), count u16, then count × (contact-node index u32, displacement 3×f64) |
+//! | nodes ([`PacketKind::CollisionExchange`](crate::PacketKind)) | step u32, last u8 (1: the sender's last packet of the step), precision u8 (the value width, 4 or 8), count u16, then count × (contact-node index u32, displacement 3×f32 or 3×f64) |
 //! | [`ToolForcePayload`] ([`PacketKind::ToolForce`](crate::PacketKind)) | step u32, tool u8, force 3×f64 (29 bytes) |
 //! | [`HelloPayload`] ([`PacketKind::Hello`](crate::PacketKind)) | compilation id, 8 bytes as in the image header |
 //! | surface ([`PacketKind::GraphicsSurface`](crate::PacketKind)) | frame u32, step u32, chunk u8, chunks u8, count u16, then count × (mesh node u32, displacement 3×f32) |
@@ -20,6 +20,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use crate::error::{Error, Result};
+use crate::frame::Precision;
 use crate::limits::PACKET_PAYLOAD_LEN_MAX;
 
 /// Offset of entry `k`, `None` if the entry would end past `usize::MAX` (found by
@@ -105,25 +106,33 @@ pub struct NodesHeader {
     pub step: u32,
     /// The sender's last packet for this step.
     pub last: bool,
+    /// Width of the displacements: the sender's arithmetic (a board computing in f32 sends
+    /// its f32 values, exactly, in half the bytes).
+    pub precision: Precision,
     /// Entries that follow.
     pub count: u16,
 }
 
 /// Header length of a node payload.
-pub const NODES_HEADER_LEN: usize = 7;
-/// Length of one node entry.
-pub const NODE_ENTRY_LEN: usize = 28;
-/// Most node entries in one packet.
-pub const NODES_PER_PACKET_MAX: usize =
-    (PACKET_PAYLOAD_LEN_MAX - NODES_HEADER_LEN) / NODE_ENTRY_LEN;
+pub const NODES_HEADER_LEN: usize = 8;
+
+/// Length of one node entry whose displacement has `precision`: index u32, 3 values.
+pub const fn node_entry_len(precision: Precision) -> usize {
+    4 + 3 * precision.width()
+}
+
+/// Most node entries of `precision` in one packet.
+pub const fn nodes_per_packet_max(precision: Precision) -> usize {
+    (PACKET_PAYLOAD_LEN_MAX - NODES_HEADER_LEN) / node_entry_len(precision)
+}
 
 impl NodesHeader {
     /// Writes the header; the entries go after it with [`emit_node_entry`].
     pub fn emit(&self, buf: &mut [u8]) -> Result<usize> {
         put(buf, 0, &self.step.to_le_bytes())?;
-        put(buf, 4, &[self.last as u8])?;
-        put(buf, 5, &self.count.to_le_bytes())?;
-        Ok(NODES_HEADER_LEN + usize::from(self.count) * NODE_ENTRY_LEN)
+        put(buf, 4, &[self.last as u8, self.precision.code()])?;
+        put(buf, 6, &self.count.to_le_bytes())?;
+        Ok(NODES_HEADER_LEN + usize::from(self.count) * node_entry_len(self.precision))
     }
 
     /// Reads the header and checks that exactly `count` entries follow.
@@ -135,36 +144,56 @@ impl NodesHeader {
             Some(_) => return Err(Error::BadLength),
             None => return Err(Error::Truncated),
         };
-        let count = match b.get(5..7) {
+        let precision = Precision::from_code(*b.get(5).ok_or(Error::Truncated)?)?;
+        let count = match b.get(6..8) {
             Some(&[x, y]) => u16::from_le_bytes([x, y]),
             _ => return Err(Error::Truncated),
         };
-        let need = NODES_HEADER_LEN + usize::from(count) * NODE_ENTRY_LEN;
+        let need = NODES_HEADER_LEN + usize::from(count) * node_entry_len(precision);
         match b.len() {
             n if n < need => Err(Error::Truncated),
             n if n > need => Err(Error::BadLength),
-            _ => Ok(NodesHeader { step, last, count }),
+            _ => Ok(NodesHeader {
+                step,
+                last,
+                precision,
+                count,
+            }),
         }
     }
 }
 
-/// Writes node entry `k` (contact-node index, displacement).
-pub fn emit_node_entry(buf: &mut [u8], k: usize, index: u32, u: [f64; 3]) -> Result<()> {
-    let at = entry_offset(NODES_HEADER_LEN, k, NODE_ENTRY_LEN).ok_or(Error::BufferTooSmall)?;
+/// Writes node entry `k` (contact-node index, displacement) of a payload whose values have
+/// `precision` (an f32 entry holds `u` rounded to f32: exact for a board computing in f32).
+pub fn emit_node_entry(
+    buf: &mut [u8],
+    precision: Precision,
+    k: usize,
+    index: u32,
+    u: [f64; 3],
+) -> Result<()> {
+    let len = node_entry_len(precision);
+    let at = entry_offset(NODES_HEADER_LEN, k, len).ok_or(Error::BufferTooSmall)?;
     put(buf, at, &index.to_le_bytes())?;
     for i in 0..3 {
-        put(buf, at + 4 + 8 * i, &u[i].to_le_bytes())?;
+        match precision {
+            Precision::F32 => put(buf, at + 4 + 4 * i, &(u[i] as f32).to_le_bytes())?,
+            Precision::F64 => put(buf, at + 4 + 8 * i, &u[i].to_le_bytes())?,
+        }
     }
     Ok(())
 }
 
-/// Reads node entry `k` of a payload whose header parsed.
-pub fn node_entry(b: &[u8], k: usize) -> Result<(u32, [f64; 3])> {
-    let at = entry_offset(NODES_HEADER_LEN, k, NODE_ENTRY_LEN).ok_or(Error::Truncated)?;
-    Ok((
-        u32_at(b, at)?,
-        [f64_at(b, at + 4)?, f64_at(b, at + 12)?, f64_at(b, at + 20)?],
-    ))
+/// Reads node entry `k` of a payload whose header (of `precision`) parsed.
+pub fn node_entry(b: &[u8], precision: Precision, k: usize) -> Result<(u32, [f64; 3])> {
+    let len = node_entry_len(precision);
+    let at = entry_offset(NODES_HEADER_LEN, k, len).ok_or(Error::Truncated)?;
+    let w = precision.width();
+    let value = |i: usize| match precision {
+        Precision::F32 => f32_at(b, at + 4 + w * i).map(f64::from),
+        Precision::F64 => f64_at(b, at + 4 + w * i),
+    };
+    Ok((u32_at(b, at)?, [value(0)?, value(1)?, value(2)?]))
 }
 
 /// The compilation id of the image a board runs (to the host, before step 0).
@@ -324,17 +353,44 @@ mod tests {
         let n = b.emit(&mut buf).unwrap();
         assert_eq!(BoxPayload::parse(&buf[..n]).unwrap(), b);
         assert_eq!(BoxPayload::parse(&buf[..n - 1]), Err(Error::Truncated));
-        let h = NodesHeader {
-            step: 9,
-            last: true,
-            count: 2,
-        };
-        let n = h.emit(&mut buf).unwrap();
-        emit_node_entry(&mut buf, 0, 5, [1.0, 2.0, 3.0]).unwrap();
-        emit_node_entry(&mut buf, 1, 6, [4.0, 5.0, 6.0]).unwrap();
-        assert_eq!(NodesHeader::parse(&buf[..n]).unwrap(), h);
-        assert_eq!(node_entry(&buf[..n], 1).unwrap(), (6, [4.0, 5.0, 6.0]));
-        assert_eq!(NodesHeader::parse(&buf[..n + 1]), Err(Error::BadLength));
+        // Both widths: the values (far from zero, with bits below f32's precision in f64)
+        // come back exactly as emitted, f32 entries as the f32 rounding of what was given.
+        let u = [[1.0, -2.5, 3.0e-3], [4.0 + 1e-12, 5.0, -6.25]];
+        for precision in [Precision::F32, Precision::F64] {
+            let h = NodesHeader {
+                step: 9,
+                last: true,
+                precision,
+                count: 2,
+            };
+            let n = h.emit(&mut buf).unwrap();
+            assert_eq!(n, NODES_HEADER_LEN + 2 * node_entry_len(precision));
+            emit_node_entry(&mut buf, precision, 0, 5, u[0]).unwrap();
+            emit_node_entry(&mut buf, precision, 1, 6, u[1]).unwrap();
+            assert_eq!(NodesHeader::parse(&buf[..n]).unwrap(), h);
+            let want = match precision {
+                Precision::F32 => u[1].map(|v| f64::from(v as f32)),
+                Precision::F64 => u[1],
+            };
+            assert_eq!(node_entry(&buf[..n], precision, 1).unwrap(), (6, want));
+            assert_eq!(NodesHeader::parse(&buf[..n + 1]), Err(Error::BadLength));
+            assert_eq!(NodesHeader::parse(&buf[..n - 1]), Err(Error::Truncated));
+        }
+        assert_ne!(
+            f64::from(u[1][0] as f32),
+            u[1][0],
+            "the f64 value has bits f32 drops"
+        );
+        // An f32 entry is 16 bytes against 28, and a packet holds more of them.
+        assert_eq!(node_entry_len(Precision::F32), 16);
+        assert_eq!(node_entry_len(Precision::F64), 28);
+        assert!(nodes_per_packet_max(Precision::F32) > nodes_per_packet_max(Precision::F64));
+        // An unknown width code is refused.
+        buf[5] = 3;
+        assert_eq!(
+            NodesHeader::parse(&buf[..8]),
+            Err(Error::UnknownPrecision(3))
+        );
         let t = ToolForcePayload {
             step: 3,
             tool: 1,

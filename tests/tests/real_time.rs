@@ -197,16 +197,19 @@ fn verdict_matches_an_independent_computation() {
 /// independently from the contact setup and the plan: each board's box holds the
 /// pair-surface nodes it owns (reference positions); boards whose boxes grown by the margin
 /// overlap are partners; a board sends a partner every owned pair node inside the partner's
-/// grown box, in packets of at most `NODES_PER_PACKET_MAX` entries and at least one a
-/// step (header, node header and CRC each, 28 bytes an entry). The busiest port (the larger
-/// of in and out) over the global rate must equal the report's to a relative 1e-12, and
+/// grown box, in packets of at most `nodes_per_packet_max` entries and at least one a
+/// step (header, node header and CRC each; an entry is the index, 4 bytes, and three values
+/// of the scene's precision: 28 bytes in f64, 16 in f32, where the boards send their f32
+/// values as they are). The busiest port (the larger of in and out) over the global rate
+/// must equal the report's to a relative 1e-12 in both precisions, and
 /// the built-in coarse scene on 2x2x2 (compute and links made 1000x faster, so only the
 /// global port can decide) must fail on it, naming that board, and keep real time once the
 /// global network is 1000x faster too.
 #[test]
 fn contact_traffic_on_the_global_ports_is_in_the_verdict() {
-    use link_proto::payload::{NODES_HEADER_LEN, NODES_PER_PACKET_MAX, NODE_ENTRY_LEN};
+    use link_proto::payload::NODES_HEADER_LEN;
     let p = system_tests::builtin_problem("coarse", 10);
+    assert_eq!(p.solver.precision.name(), "f64");
     let fast = BoardProfile {
         link_bytes_per_s: PE_BOARD.link_bytes_per_s * 1000,
         link_latency_ns: 1,
@@ -236,34 +239,58 @@ fn contact_traffic_on_the_global_ports_is_in_the_verdict() {
     };
     let inside =
         |q: &[f64; 3], b: &([f64; 3], [f64; 3])| (0..3).all(|k| b.0[k] <= q[k] && q[k] <= b.1[k]);
-    let packet = |n: usize| {
-        n.div_ceil(NODES_PER_PACKET_MAX).max(1)
+    // Bytes of the packets carrying `n` entries of `width`-byte values.
+    let packet = |n: usize, width: usize| {
+        let entry_len = 4 + 3 * width;
+        let per_packet = (link_proto::PACKET_PAYLOAD_LEN_MAX - NODES_HEADER_LEN) / entry_len;
+        n.div_ceil(per_packet).max(1)
             * (link_proto::PACKET_HEADER_LEN + NODES_HEADER_LEN + link_proto::CRC_LEN)
-            + n * NODE_ENTRY_LEN
+            + n * entry_len
     };
-    let (mut bytes_in, mut bytes_out) = (vec![0usize; boards], vec![0usize; boards]);
     let contact_boards: Vec<usize> = (0..boards).filter(|&b| !owned[b].is_empty()).collect();
     assert!(contact_boards.len() >= 2, "a global exchange to check");
-    for &a in &contact_boards {
-        for &b in &contact_boards {
-            let (ga, gb) = (grown(&owned[a]), grown(&owned[b]));
-            // Boxes grown by the margin overlap iff one grown box meets the other's points'
-            // box; test the grown boxes against each other shrunk once.
-            let overlap =
-                (0..3).all(|k| gb.0[k] + margin <= ga.1[k] && ga.0[k] <= gb.1[k] - margin);
-            if a == b || !overlap {
-                continue;
+    let busiest_port = |width: usize| {
+        let (mut bytes_in, mut bytes_out) = (vec![0usize; boards], vec![0usize; boards]);
+        for &a in &contact_boards {
+            for &b in &contact_boards {
+                let (ga, gb) = (grown(&owned[a]), grown(&owned[b]));
+                // Boxes grown by the margin overlap iff one grown box meets the other's
+                // points' box; test the grown boxes against each other shrunk once.
+                let overlap =
+                    (0..3).all(|k| gb.0[k] + margin <= ga.1[k] && ga.0[k] <= gb.1[k] - margin);
+                if a == b || !overlap {
+                    continue;
+                }
+                let sent = owned[a].iter().filter(|q| inside(q, &gb)).count();
+                bytes_out[a] += packet(sent, width);
+                bytes_in[b] += packet(sent, width);
             }
-            let sent = owned[a].iter().filter(|q| inside(q, &gb)).count();
-            bytes_out[a] += packet(sent);
-            bytes_in[b] += packet(sent);
         }
-    }
-    let busiest = (0..boards)
-        .map(|b| bytes_in[b].max(bytes_out[b]))
-        .max()
-        .expect("boards");
+        (0..boards)
+            .map(|b| bytes_in[b].max(bytes_out[b]))
+            .max()
+            .expect("boards")
+    };
+    let busiest = busiest_port(8);
     assert!(busiest > 0);
+    // In f32 the same partition and the same nodes: the port carries 16-byte entries.
+    let mut p32 = p.clone();
+    p32.solver.precision = pe_firmware::image::Precision::F32;
+    let pl32 = plan(&p32, machine).expect("plans");
+    assert_eq!(pl32.element_board, pl.element_board);
+    let images32 = compile_images(&p32, &pl32).expect("images");
+    let r32 = report("coarse f32", &p32, &pl32, &images32, &fast).expect("report");
+    let g32 = r32
+        .real_time
+        .global_busiest
+        .as_ref()
+        .expect("a global port load");
+    let busiest32 = busiest_port(4);
+    assert_eq!(g32.bytes_in_per_step.max(g32.bytes_out_per_step), busiest32);
+    assert!(
+        busiest32 < busiest,
+        "f32 entries are smaller: {busiest32} against {busiest} bytes"
+    );
     let time = busiest as f64 / PE_BOARD.global_bytes_per_s as f64;
     let v = &r.real_time;
     let g = v.global_busiest.as_ref().expect("a global port load");

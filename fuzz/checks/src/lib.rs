@@ -172,14 +172,17 @@ pub fn payload_parse(data: &[u8]) {
         let count = usize::from(h.count);
         for k in 0..count {
             assert!(
-                node_entry(data, k).is_ok(),
+                node_entry(data, h.precision, k).is_ok(),
                 "node entry {k} of {count} reads"
             );
         }
-        assert!(node_entry(data, count).is_err(), "no entry past the count");
+        assert!(
+            node_entry(data, h.precision, count).is_err(),
+            "no entry past the count"
+        );
         let n = h.emit(&mut out).expect("a parsed node header re-emits");
         assert_eq!(n, data.len());
-        assert_eq!(&out[..7], &data[..7]);
+        assert_eq!(&out[..8], &data[..8]);
     }
     if let Ok(h) = SurfaceHeader::parse(data) {
         let count = usize::from(h.count);
@@ -200,7 +203,8 @@ pub fn payload_parse(data: &[u8]) {
     // Entries at any index of any bytes: an error, never a panic (the runtime reads them
     // only after the header parsed, but the functions are public).
     for k in [0, 1, usize::MAX / 64, usize::MAX] {
-        let _ = node_entry(data, k);
+        let _ = node_entry(data, link_proto::Precision::F32, k);
+        let _ = node_entry(data, link_proto::Precision::F64, k);
         let _ = surface_entry(data, k);
     }
 }

@@ -106,7 +106,7 @@ pub struct ContactCompileReport {
 
 /// What one board's global port carries per step for contact, with the tissue at rest:
 /// a node packet to (and from) every partner each step, even an empty one (header, node
-/// header, 28-byte entries, CRC).
+/// header, entries of 16 bytes in f32 and 28 in f64, CRC).
 #[derive(Clone, Debug, Serialize)]
 pub struct GlobalPortLoad {
     pub board: [usize; 3],
@@ -117,11 +117,11 @@ pub struct GlobalPortLoad {
 }
 
 /// Bytes of contact-node packets carrying `n` node entries.
-fn node_packet_bytes(n: usize) -> usize {
-    use link_proto::payload::{NODES_HEADER_LEN, NODES_PER_PACKET_MAX, NODE_ENTRY_LEN};
-    let packets = n.div_ceil(NODES_PER_PACKET_MAX).max(1);
+fn node_packet_bytes(n: usize, precision: link_proto::Precision) -> usize {
+    use link_proto::payload::{node_entry_len, nodes_per_packet_max, NODES_HEADER_LEN};
+    let packets = n.div_ceil(nodes_per_packet_max(precision)).max(1);
     packets * (link_proto::PACKET_HEADER_LEN + NODES_HEADER_LEN + link_proto::CRC_LEN)
-        + n * NODE_ENTRY_LEN
+        + n * node_entry_len(precision)
 }
 
 /// The contact traffic at rest: the runtime's box test on the reference positions.
@@ -186,8 +186,8 @@ fn contact_report(
                 .filter(|n| (0..3).all(|k| r.0[k] <= n.reference[k] && n.reference[k] <= r.1[k]))
                 .count();
             vectors += sent;
-            bytes_out[i] += node_packet_bytes(sent);
-            bytes_in[j] += node_packet_bytes(sent);
+            bytes_out[i] += node_packet_bytes(sent, problem.solver.precision.wire());
+            bytes_in[j] += node_packet_bytes(sent, problem.solver.precision.wire());
         }
     }
     let global_busiest_at_rest = (0..boards.len())
@@ -211,7 +211,10 @@ fn contact_report(
         box_margin_m: p.box_margin_m,
         channels_at_rest: channels / 2,
         vectors_per_step_at_rest: vectors,
-        bytes_per_s_at_rest: (vectors * link_proto::payload::NODE_ENTRY_LEN) as f64 * rate,
+        bytes_per_s_at_rest: (vectors
+            * link_proto::payload::node_entry_len(problem.solver.precision.wire()))
+            as f64
+            * rate,
         seed_vectors_per_step: 300,
         seed_bytes_per_s: 72e6,
         global_busiest_at_rest,

@@ -84,6 +84,15 @@ impl Precision {
             Precision::F64 => "f64",
         }
     }
+
+    /// The width a board of this precision puts its values on the wire with (force frames,
+    /// contact-node packets).
+    pub const fn wire(self) -> link_proto::Precision {
+        match self {
+            Precision::F32 => link_proto::Precision::F32,
+            Precision::F64 => link_proto::Precision::F64,
+        }
+    }
 }
 
 impl Integration {

@@ -7,7 +7,7 @@
 //! in [`ContactStorage`].
 
 use link_proto::payload::{
-    emit_node_entry, node_entry, BoxPayload, NodesHeader, ToolForcePayload, NODES_PER_PACKET_MAX,
+    emit_node_entry, node_entry, nodes_per_packet_max, BoxPayload, NodesHeader, ToolForcePayload,
 };
 use link_proto::{Links, PacketKind, PacketRepr, PACKET_HEADER_LEN};
 
@@ -236,7 +236,8 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                     None => return Ok(false),
                     Some(true) => self.contact.phase = Phase::SendNodes(k + 1, 0),
                     Some(false) => {
-                        self.contact.phase = Phase::SendNodes(k, off + NODES_PER_PACKET_MAX)
+                        let max = nodes_per_packet_max(T::wire(&[]).precision());
+                        self.contact.phase = Phase::SendNodes(k, off + max)
                     }
                 },
                 Phase::AwaitNodes => {
@@ -356,11 +357,14 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
     ) -> Result<Option<bool>, Fault> {
         let (s, e) = self.contact.send_ranges[k];
         let total = (e - s) as usize;
-        let count = (total - off.min(total)).min(NODES_PER_PACKET_MAX);
+        // The displacements go in this board's own precision: exact, and f32 halves them.
+        let precision = T::wire(&[]).precision();
+        let count = (total - off.min(total)).min(nodes_per_packet_max(precision));
         let last = off + count >= total;
         let h = NodesHeader {
             step: self.step as u32,
             last,
+            precision,
             count: count as u16,
         };
         let mut len = 0;
@@ -373,7 +377,7 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                 Some(l) => self.st.u[l as usize].map(|v| v.to_f64()),
                 None => [f64::NAN; 3],
             };
-            ok = ok.and(emit_node_entry(payload, j, c as u32, u));
+            ok = ok.and(emit_node_entry(payload, precision, j, c as u32, u));
         }
         ok.map_err(|error| self.fault(FaultKind::BadPacket { error }))?;
         let dst = self.contact.boards[k];
@@ -446,13 +450,16 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                 }
                 (PacketKind::CollisionExchange, Some(k)) => {
                     let h = NodesHeader::parse(payload).map_err(bad)?;
-                    if h.step != now && h.step != now.wrapping_add(1) {
+                    // Every board of a compilation computes in one precision.
+                    if (h.step != now && h.step != now.wrapping_add(1))
+                        || h.precision != T::wire(&[]).precision()
+                    {
                         return Err(self.fault(unexpected(h.step)));
                     }
                     let par = (h.step % 2) as usize;
                     let nc = self.header.counts.contact_nodes as usize;
                     for e in 0..h.count as usize {
-                        let (c, u) = node_entry(payload, e).map_err(bad)?;
+                        let (c, u) = node_entry(payload, h.precision, e).map_err(bad)?;
                         let Some(slot) = self.st.contact.remote[..nc].get_mut(c as usize) else {
                             return Err(self.fault(unexpected(h.step)));
                         };
