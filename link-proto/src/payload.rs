@@ -175,10 +175,11 @@ pub fn emit_node_entry(
     let len = node_entry_len(precision);
     let at = entry_offset(NODES_HEADER_LEN, k, len).ok_or(Error::BufferTooSmall)?;
     put(buf, at, &index.to_le_bytes())?;
+    let w = precision.width();
     for i in 0..3 {
         match precision {
-            Precision::F32 => put(buf, at + 4 + 4 * i, &(u[i] as f32).to_le_bytes())?,
-            Precision::F64 => put(buf, at + 4 + 8 * i, &u[i].to_le_bytes())?,
+            Precision::F32 => put(buf, at + 4 + w * i, &(u[i] as f32).to_le_bytes())?,
+            Precision::F64 => put(buf, at + 4 + w * i, &u[i].to_le_bytes())?,
         }
     }
     Ok(())

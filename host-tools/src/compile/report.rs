@@ -136,6 +136,7 @@ fn contact_report(
         return Ok(None);
     };
     let p = run.params;
+    let wire = problem.solver.precision.wire();
     let owner_of = |c: &pe_firmware::physics::contact::ContactNode| {
         plan.node_owner[c.global as usize] as usize
     };
@@ -186,8 +187,8 @@ fn contact_report(
                 .filter(|n| (0..3).all(|k| r.0[k] <= n.reference[k] && n.reference[k] <= r.1[k]))
                 .count();
             vectors += sent;
-            bytes_out[i] += node_packet_bytes(sent, problem.solver.precision.wire());
-            bytes_in[j] += node_packet_bytes(sent, problem.solver.precision.wire());
+            bytes_out[i] += node_packet_bytes(sent, wire);
+            bytes_in[j] += node_packet_bytes(sent, wire);
         }
     }
     let global_busiest_at_rest = (0..boards.len())
@@ -211,10 +212,7 @@ fn contact_report(
         box_margin_m: p.box_margin_m,
         channels_at_rest: channels / 2,
         vectors_per_step_at_rest: vectors,
-        bytes_per_s_at_rest: (vectors
-            * link_proto::payload::node_entry_len(problem.solver.precision.wire()))
-            as f64
-            * rate,
+        bytes_per_s_at_rest: (vectors * link_proto::payload::node_entry_len(wire)) as f64 * rate,
         seed_vectors_per_step: 300,
         seed_bytes_per_s: 72e6,
         global_busiest_at_rest,
