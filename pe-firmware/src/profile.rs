@@ -310,8 +310,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 522,
             cuboid_per_element_step: 589,
             per_node_update: 76,
-            per_contact_node: 1000,
-            step_per_element: 1582,
+            per_contact_node: 500,
+            step_per_element: 1417,
         },
         FirmwareCost {
             precision: F64,
@@ -323,8 +323,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 0,
             cuboid_per_element_step: 0,
             per_node_update: 76,
-            per_contact_node: 866,
-            step_per_element: 5005,
+            per_contact_node: 366,
+            step_per_element: 4841,
         },
         FirmwareCost {
             precision: F32,
@@ -336,8 +336,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 404,
             cuboid_per_element_step: 489,
             per_node_update: 87,
-            per_contact_node: 1026,
-            step_per_element: 1327,
+            per_contact_node: 507,
+            step_per_element: 1158,
         },
         FirmwareCost {
             precision: F32,
@@ -349,8 +349,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 0,
             cuboid_per_element_step: 0,
             per_node_update: 87,
-            per_contact_node: 1058,
-            step_per_element: 3858,
+            per_contact_node: 539,
+            step_per_element: 3688,
         },
     ]
 };

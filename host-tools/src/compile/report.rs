@@ -254,6 +254,10 @@ pub struct BoardSummary {
     pub batches: [usize; 4],
     pub nodes: usize,
     pub owned_nodes: usize,
+    /// Nodes on a contact surface the board holds (the compute figure charges each the
+    /// measured cost per contact node), and how many of them it owns.
+    pub contact_nodes: usize,
+    pub owned_contact_nodes: usize,
     pub exchange: [usize; 6],
     pub image_bytes: usize,
     pub ram_bytes: u64,
@@ -320,7 +324,7 @@ pub fn report(
         image_bytes_max: images.iter().map(|i| i.bytes.len()).max().unwrap_or(0),
         ram_bytes_max: images.iter().map(|i| i.ram_bytes).max().unwrap_or(0),
         capacity,
-        boards: board_summaries(plan, images),
+        boards: board_summaries(problem, plan, images),
     })
 }
 
@@ -649,7 +653,14 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
     }
 }
 
-fn board_summaries(plan: &Plan, images: &[BoardImage]) -> Vec<BoardSummary> {
+fn board_summaries(problem: &Problem, plan: &Plan, images: &[BoardImage]) -> Vec<BoardSummary> {
+    let mut on_contact = vec![false; problem.mesh.nodes.len()];
+    if let Some(c) = &problem.contact {
+        for &n in &c.node_globals {
+            on_contact[n as usize] = true;
+        }
+    }
+    let contact = |n: &u32| on_contact.get(*n as usize).copied().unwrap_or(false);
     plan.boards
         .iter()
         .zip(images)
@@ -665,6 +676,13 @@ fn board_summaries(plan: &Plan, images: &[BoardImage]) -> Vec<BoardSummary> {
             ],
             nodes: b.nodes.len(),
             owned_nodes: b.owner.iter().filter(|o| **o).count(),
+            contact_nodes: b.nodes.iter().filter(|n| contact(n)).count(),
+            owned_contact_nodes: b
+                .nodes
+                .iter()
+                .zip(&b.owner)
+                .filter(|(n, o)| **o && contact(n))
+                .count(),
             exchange: core::array::from_fn(|f| b.exchange[f].len()),
             image_bytes: im.bytes.len(),
             ram_bytes: im.ram_bytes,

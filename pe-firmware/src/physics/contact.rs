@@ -264,10 +264,56 @@ fn quad_result(
     }
 }
 
+/// A quad's axis-aligned bounds: per axis the least and greatest corner coordinate.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct QuadBounds {
+    lo: V3,
+    hi: V3,
+}
+
+impl QuadBounds {
+    #[inline(always)]
+    fn new(q: &[V3; 4]) -> QuadBounds {
+        let mut b = QuadBounds { lo: q[0], hi: q[0] };
+        for p in &q[1..] {
+            for i in 0..3 {
+                b.lo[i] = b.lo[i].min(p[i]);
+                b.hi[i] = b.hi[i].max(p[i]);
+            }
+        }
+        b
+    }
+}
+
+/// Whether `x` is so far outside the quad's bounds that neither triangle can hold it, so
+/// [`quad_penetration`] is `None` without its two tests. A triangle takes `x` only if
+/// `x = p − g n̂` with `p` in the triangle's plane at barycentric weights of at least
+/// `−EDGE_TOLERANCE` (at most two negative, so `p` lies within the triangle's bounds grown
+/// by `2 EDGE_TOLERANCE` times their largest extent `e`) and `0 < −g ≤ depth_max` (each
+/// coordinate of `g n̂` at most `depth_max`): `x` lies within the quad's bounds grown by
+/// `depth_max + 2 EDGE_TOLERANCE e`. The bound used is 1% wider than that (round-off in the
+/// tests it stands for is some 1e-15 of it on a face of fair shape), so a point it rejects
+/// is one the full test rejects: the result is the same, bit for bit. (Only in a triangle so
+/// thin that its weights' round-off exceeds that 1% could the full test have taken a point
+/// this rejects: there its answer is round-off.) Every solver, serial and on the boards, goes
+/// through it. Most candidates of a search beside their face are decided here. A NaN
+/// anywhere is never rejected (it takes the full test).
+#[inline(always)]
+fn clearly_outside(x: V3, b: &QuadBounds, depth_max: f64) -> bool {
+    let e = (b.hi[0] - b.lo[0])
+        .max(b.hi[1] - b.lo[1])
+        .max(b.hi[2] - b.lo[2]);
+    let grow = 1.01 * (depth_max + 2.0 * EDGE_TOLERANCE * e);
+    (0..3).any(|i| x[i] < b.lo[i] - grow || x[i] > b.hi[i] + grow)
+}
+
 /// Penetration of `x` into the quad `q` (split along the diagonal 0–2 into triangles
 /// (0,1,2) and (0,2,3), nodes ordered counter-clockwise seen from outside): the shallower
 /// of the two triangles it penetrates.
 pub fn quad_penetration(x: V3, q: &[V3; 4], depth_max: f64) -> Option<FacePenetration> {
+    if clearly_outside(x, &QuadBounds::new(q), depth_max) {
+        return None;
+    }
     let [a, b] = quad_triangles(q);
     let t1 = triangle_penetration(x, a, depth_max);
     let t2 = triangle_penetration(x, b, depth_max);
@@ -283,6 +329,7 @@ pub struct FaceGeometry {
     pub corners: [V3; 4],
     normals: [V3; 2],
     normals_squared: [f64; 2],
+    bounds: QuadBounds,
 }
 
 impl FaceGeometry {
@@ -293,11 +340,15 @@ impl FaceGeometry {
             corners,
             normals,
             normals_squared: normals.map(|n| dot(n, n)),
+            bounds: QuadBounds::new(&corners),
         }
     }
 
     /// [`quad_penetration`] of `x` into this quad.
     pub fn penetration(&self, x: V3, depth_max: f64) -> Option<FacePenetration> {
+        if clearly_outside(x, &self.bounds, depth_max) {
+            return None;
+        }
         let [a, b] = quad_triangles(&self.corners);
         let (n, n2) = (self.normals, self.normals_squared);
         let t1 = triangle_penetration_normal(x, a, n[0], n2[0], depth_max);
@@ -487,6 +538,44 @@ pub fn build_candidates(
     } else {
         Ok(n)
     }
+}
+
+/// Keeps, in order, the groups of `candidates` (a slave's run of faces in one direction, in
+/// [`build_candidates`] order) that [`evaluate_pairs`] would not skip: those whose slave or
+/// some node of some face has `apply`. Returns how many candidates are kept (at the front).
+/// Done once at a check, it spares a board the skipped groups at every step until the next
+/// check (on a board of a partition most groups are another board's); the forces and
+/// statistics are the same. An index out of the model's tables is an error, as there.
+pub fn keep_applied_groups(
+    m: &ContactModel<'_>,
+    candidates: &mut [Candidate],
+    apply: impl Fn(usize) -> bool,
+) -> Result<usize, PhysicsError> {
+    let (mut i, mut kept) = (0, 0);
+    while i < candidates.len() {
+        let (direction, slave) = (candidates[i].direction, candidates[i].slave);
+        let mut j = i;
+        let mut here = apply(slave as usize);
+        while j < candidates.len()
+            && candidates[j].direction == direction
+            && candidates[j].slave == slave
+        {
+            let f = candidates[j].face as usize;
+            for &n in &m.faces.get(f).ok_or(bad(f))?.nodes {
+                if n as usize >= m.nodes.len() {
+                    return Err(bad(n as usize));
+                }
+                here |= apply(n as usize);
+            }
+            j += 1;
+        }
+        if here {
+            candidates.copy_within(i..j, kept);
+            kept += j - i;
+        }
+        i = j;
+    }
+    Ok(kept)
 }
 
 /// Node-to-surface forces over `candidates` (in [`build_candidates`] order): for each
@@ -833,6 +922,170 @@ mod tests {
             }
         }
         assert!(4 * hits >= total, "only {hits} of {total} points penetrate");
+    }
+
+    /// The bounds test in front of the two triangle tests changes no result. On skewed quads
+    /// turned about two axes (so a depth along the normal moves every coordinate), points
+    /// are drawn where the full test is decided by a hair: projections from inside to
+    /// 1.5 EDGE_TOLERANCE outside a triangle (weights down to -0.03), depths from above the
+    /// face to 1.2 depth_max below it, plus points far to the side. The answer must be the
+    /// full test's (`quad_result` of both triangles), bit for bit; and the draw must reach
+    /// both sides (full-test hits, and misses the bounds alone decide), or it shows nothing.
+    #[test]
+    fn the_bounds_test_changes_no_penetration() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut hits, mut decided_by_bounds, mut total) = (0, 0, 0);
+        let depth_max = 0.3;
+        for _ in 0..300 {
+            let (a, b) = (6.0 * rnd(), 6.0 * rnd());
+            let turn = |p: V3| {
+                let (ca, sa, cb, sb) = (libm::cos(a), libm::sin(a), libm::cos(b), libm::sin(b));
+                let y = [p[0], ca * p[1] - sa * p[2], sa * p[1] + ca * p[2]];
+                [cb * y[0] - sb * y[1], sb * y[0] + cb * y[1], y[2]]
+            };
+            let q: [V3; 4] = [
+                [0.0, 0.0, 0.0],
+                [1.0 + 0.4 * rnd(), 0.3 * rnd() - 0.15, 0.2 * rnd() - 0.1],
+                [1.0 + 0.4 * rnd(), 1.0 + 0.4 * rnd(), 0.3 * rnd() - 0.15],
+                [0.3 * rnd() - 0.15, 1.0 + 0.4 * rnd(), 0.2 * rnd() - 0.1],
+            ]
+            .map(turn);
+            let tris = quad_triangles(&q);
+            for k in 0..60 {
+                let x = if k % 4 == 3 {
+                    // Far to the side: what most candidates of a search are.
+                    core::array::from_fn(|i| q[0][i] + 8.0 * rnd() - 4.0)
+                } else {
+                    let t = tris[k % 2];
+                    let w0 = 1.06 * rnd() - 0.03;
+                    let w1 = (1.03 - w0) * rnd() - 0.03;
+                    let w2 = 1.0 - w0 - w1;
+                    let p: V3 =
+                        core::array::from_fn(|i| w0 * t[0][i] + w1 * t[1][i] + w2 * t[2][i]);
+                    let n = triangle_normal(t);
+                    let nh = scale(n, 1.0 / libm::sqrt(dot(n, n)));
+                    let depth = depth_max * (1.4 * rnd() - 0.2);
+                    core::array::from_fn(|i| p[i] - depth * nh[i])
+                };
+                let full = quad_result(
+                    triangle_penetration(x, tris[0], depth_max),
+                    triangle_penetration(x, tris[1], depth_max),
+                );
+                let fast = quad_penetration(x, &q, depth_max);
+                total += 1;
+                if clearly_outside(x, &QuadBounds::new(&q), depth_max) {
+                    decided_by_bounds += 1;
+                }
+                match (full, fast) {
+                    (None, None) => {}
+                    (Some(f), Some(g)) => {
+                        hits += 1;
+                        assert_eq!(f.depth_m.to_bits(), g.depth_m.to_bits());
+                        assert_eq!(f.normal.map(f64::to_bits), g.normal.map(f64::to_bits));
+                        assert_eq!(f.weights.map(f64::to_bits), g.weights.map(f64::to_bits));
+                    }
+                    (f, g) => panic!("at {x:?} in {q:?}: full test {f:?}, with bounds {g:?}"),
+                }
+            }
+        }
+        assert_eq!(total, 300 * 60);
+        assert!(5 * hits >= total, "only {hits} of {total} points penetrate");
+        assert!(
+            5 * decided_by_bounds >= total,
+            "the bounds decided only {decided_by_bounds} of {total}"
+        );
+    }
+
+    /// Two overlapping grids of quads (surface 0 facing +z at z = 0, surface 1 facing -z at
+    /// z = -0.02, shifted half a cell, nodes jittered): every node of each is 0.02 deep in
+    /// the other. With a board's share of the nodes applied (a third, by index), the groups
+    /// [`keep_applied_groups`] keeps give the same forces and statistics, bit for bit, as
+    /// the whole list (which [`evaluate_pairs`] filters per step); and the check means
+    /// something: forces are applied, groups are dropped and some are kept.
+    #[test]
+    fn keeping_the_applied_groups_changes_no_force() {
+        extern crate std;
+        use std::{vec, vec::Vec};
+        let mut seed = 0x5851_f42d_4c95_7f2du64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let (side, h) = (6usize, 0.1);
+        let mut nodes = Vec::new();
+        let mut faces = Vec::new();
+        for (surface, z, shift) in [(0u8, 0.0, 0.0), (1u8, -0.02, 0.5 * h)] {
+            let base = nodes.len() as u32;
+            for j in 0..side {
+                for i in 0..side {
+                    nodes.push(ContactNode {
+                        global: nodes.len() as u32,
+                        reference: [
+                            i as f64 * h + shift + 0.01 * rnd(),
+                            j as f64 * h + shift + 0.01 * rnd(),
+                            z + 0.002 * rnd(),
+                        ],
+                        penalty_n_per_m: 1e3,
+                        surfaces: 1 << surface,
+                    });
+                }
+            }
+            for j in 0..side - 1 {
+                for i in 0..side - 1 {
+                    let k = |a: usize, b: usize| base + (b * side + a) as u32;
+                    let up = [k(i, j), k(i + 1, j), k(i + 1, j + 1), k(i, j + 1)];
+                    let down = [up[0], up[3], up[2], up[1]];
+                    faces.push(ContactFace {
+                        nodes: if surface == 0 { up } else { down },
+                        surface,
+                    });
+                }
+            }
+        }
+        let pairs = [ContactPair {
+            a: 0,
+            b: 1,
+            depth_max_m: 0.05,
+        }];
+        let m = ContactModel {
+            nodes: &nodes,
+            faces: &faces,
+            pairs: &pairs,
+            tools: &[],
+        };
+        let pos = |c: usize| nodes.get(c).map(|n| n.reference);
+        let mut all = vec![Candidate::default(); 4096];
+        let n = build_candidates(&m, pos, 0.03, &mut all).expect("room for the candidates");
+        all.truncate(n);
+        let apply = |c: usize| c.is_multiple_of(3);
+        let mut kept = all.clone();
+        let k = keep_applied_groups(&m, &mut kept, apply).expect("valid indices");
+        kept.truncate(k);
+        assert!(0 < k && k < n, "kept {k} of {n} candidates");
+        let run = |cands: &[Candidate]| {
+            let mut force = vec![[0.0; 3]; nodes.len()];
+            let mut stats = ContactStats::default();
+            evaluate_pairs(&m, cands, pos, apply, 1.0, &mut force, &mut stats).expect("no error");
+            (force, stats)
+        };
+        let ((f_all, s_all), (f_kept, s_kept)) = (run(&all), run(&kept));
+        assert_eq!(f_all.len(), nodes.len());
+        assert_eq!(f_kept.len(), nodes.len());
+        let applied = f_all.iter().filter(|f| f.iter().any(|&v| v != 0.0)).count();
+        assert!(applied > 10, "only {applied} nodes got a force");
+        assert!(s_all.active > 10, "only {} contacts", s_all.active);
+        for (a, b) in f_all.iter().zip(&f_kept) {
+            assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+        }
+        assert_eq!(s_all, s_kept);
     }
 
     /// Just outside an edge (within [`EDGE_TOLERANCE`] of the triangle's weights) still

@@ -11,12 +11,13 @@ use link_proto::payload::{
 };
 use link_proto::{Links, PacketKind, PacketRepr, PACKET_HEADER_LEN};
 
+use super::marks::cost_mark;
 use super::storage::{ContactStorage, RemoteSlot};
 use super::{Fault, FaultKind, Runtime, WireReal};
 use crate::image::{path_value, ContactNode, ContactNodePlace, ContactPair, ElementRecord, Tool};
 use crate::physics::contact::{
-    build_candidates, check_travel, evaluate_pairs, evaluate_tools, Capsule, ContactModel,
-    ContactStats,
+    build_candidates, check_travel, evaluate_pairs, evaluate_tools, keep_applied_groups, Capsule,
+    ContactModel, ContactStats,
 };
 use crate::physics::Real;
 
@@ -255,7 +256,10 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                     self.contact.phase = Phase::Evaluate;
                 }
                 Phase::Evaluate => {
-                    self.evaluate_contact()?;
+                    cost_mark(0);
+                    let done = self.evaluate_contact();
+                    cost_mark(1);
+                    done?;
                     self.contact.phase = Phase::SendTools(0);
                 }
                 Phase::SendTools(t) if t >= self.header.counts.tools as usize => {
@@ -548,7 +552,16 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                     })
                 },
             )?;
-            state.candidates_len = n;
+            // Only the groups that give this board's nodes a force are evaluated each step.
+            let kept = candidates
+                .get_mut(..n)
+                .ok_or(fault(FaultKind::ContactCapacity {
+                    what: "contact candidates",
+                    needed: n as u32,
+                    max,
+                }))?;
+            state.candidates_len =
+                keep_applied_groups(&model, kept, own).map_err(|e| fault(FaultKind::Physics(e)))?;
             self.port.stats.checks += 1;
             self.port.stats.candidates_max = self.port.stats.candidates_max.max(n as u32);
         }

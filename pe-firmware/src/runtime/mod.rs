@@ -20,6 +20,7 @@ mod global;
 mod graphics;
 mod hello;
 mod load;
+mod marks;
 pub mod program;
 pub mod storage;
 

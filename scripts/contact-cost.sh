@@ -1,0 +1,73 @@
+#!/usr/bin/env bash
+# Contact cost on each board of an emulated array, measured: executed Cortex-M7
+# instructions of the contact evaluation (`evaluate_contact`: positions, travel check, tool
+# and pair tests) per step, on every board of the built-in coarse scene compiled for
+# MACHINES (default 1x1x1 and 2x2x2), exact counts from QEMU's insncount plugin
+# (../shared/tools/insncount) watching the firmware's cost marks (the `cost-marks` feature,
+# pe-firmware/src/runtime/marks.rs). A 1x1x1 bench (scripts/board-cost.sh) cannot show
+# what a board of a partition pays: here each board's median, mean and largest (a check
+# step, which also builds the candidates) are printed beside what the compile report
+# charges it (`contact nodes on the board x instructions per contact node`).
+#
+# Slow: the plugin counts every instruction of every board (about 4 minutes for 2x2x2 at
+# the default STEPS on 2 cores). Not run by CI; a measurement to rerun when the contact
+# code changes. Env: STEPS (default 150), MACHINES, OUT.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+TARGET_DIR=${CARGO_TARGET_DIR:-$ROOT/target}
+STEPS=${STEPS:-150}
+MACHINES=${MACHINES:-1x1x1 2x2x2}
+OUT=${OUT:-$TARGET_DIR/contact-cost}
+PLUGIN_SRC=${PLUGIN_SRC:-$ROOT/../shared/tools/insncount/insncount.c}
+rm -rf "$OUT" && mkdir -p "$OUT"
+source scripts/qemu-lib.sh
+command -v gcc >/dev/null 2>&1 || { apt-get update -qq && apt-get install -y -qq gcc libc6-dev >/dev/null; }
+gcc -O2 -shared -fPIC -fvisibility=hidden -o "$OUT/libinsncount.so" "$PLUGIN_SRC"
+ELF=$(build_firmware qemu,cost-marks)
+NM=nm
+command -v llvm-nm >/dev/null 2>&1 && NM=llvm-nm
+# The crate forbids no_mangle: the marker is found by the name inside its mangled symbol.
+MARK=0x$("$NM" "$ELF" | awk '/pe_cost_mark/ { print $1; exit }')
+[ "$MARK" != 0x ] || { echo "contact-cost: no pe_cost_mark in $ELF" >&2; exit 1; }
+
+# board-sim starts QEMU through this wrapper: the plugin, one log per board.
+cat >"$OUT/qemu.sh" <<EOF
+#!/usr/bin/env bash
+[ "\${1:-}" = --version ] && exec qemu-system-arm --version
+args=("\$@"); k=board
+for ((i = 0; i < \${#args[@]}; i++)); do
+    [ "\${args[\$i]}" = -kernel ] && k=\$(basename "\${args[\$((i + 1))]}" .elf)
+done
+exec qemu-system-arm -icount shift=0 -plugin "$OUT/libinsncount.so,mark=$MARK" \\
+    -d plugin -D "\$INSN_LOGS/\$k.log" "\$@"
+EOF
+chmod +x "$OUT/qemu.sh"
+
+for M in $MACHINES; do
+    D=$OUT/$M
+    mkdir -p "$D/logs"
+    "$PE" compile --builtin --level coarse --boards "$M" --profile qemu-mps2-an500 \
+        --steps "$STEPS" -o "$D/compiled" >/dev/null
+    INSN_LOGS=$D/logs "$SIM" qemu "$D/compiled" --firmware "$ELF" --qemu "$OUT/qemu.sh" \
+        --quiet >"$D/run.txt"
+    echo "== builtin coarse on $M, $STEPS steps: contact instructions per step"
+    python3 - "$D" <<'PY'
+import glob, json, os, re, statistics, sys
+d = sys.argv[1]
+rep = json.load(open(os.path.join(d, "compiled", "report.json")))
+per_node = rep["capacity"]["instructions_per_contact_node"]
+print(f"{'board':>13} {'contact nodes':>14} {'owned':>6} {'median':>9} {'mean':>9} {'largest':>9} {'report charges':>15}")
+for b in rep["boards"]:
+    name = "board-%d-%d-%d" % tuple(b["board"])
+    text = open(os.path.join(d, "logs", name + ".log")).read()
+    # Marks 0 and 1 bracket the evaluation: the odd marks' deltas are its cost.
+    cost = [int(m.group(2)) for m in re.finditer(r"mark (\d+) at \d+ \(delta (\d+)\)", text)
+            if int(m.group(1)) % 2 == 1]
+    if not cost:
+        sys.exit(f"contact-cost: no marks in {name}'s log")
+    n, owned = b["contact_nodes"], b["owned_contact_nodes"]
+    print(f"{name:>13} {n:>14} {owned:>6} {statistics.median(cost):>9.0f} "
+          f"{statistics.mean(cost):>9.0f} {max(cost):>9} {n * per_node:>15}")
+PY
+done
