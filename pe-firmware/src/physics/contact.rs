@@ -540,6 +540,45 @@ pub fn build_candidates(
     }
 }
 
+/// How many candidates at the front of `candidates` form its first group (one slave in one
+/// direction: [`build_candidates`] writes them together).
+#[inline(always)]
+fn group_len(candidates: &[Candidate]) -> usize {
+    let Some(first) = candidates.first() else {
+        return 0;
+    };
+    candidates
+        .iter()
+        .take_while(|c| c.direction == first.direction && c.slave == first.slave)
+        .count()
+}
+
+/// Whether the group of `slave` (its candidates `group`) gives a node with `apply` a force:
+/// the slave or some node of some face has it. A face or node index out of the model's
+/// tables is an error (checked unless the slave applies).
+#[inline(always)]
+fn group_applies(
+    m: &ContactModel<'_>,
+    slave: usize,
+    group: &[Candidate],
+    apply: &impl Fn(usize) -> bool,
+) -> Result<bool, PhysicsError> {
+    if apply(slave) {
+        return Ok(true);
+    }
+    let mut here = false;
+    for c in group {
+        let face = m.faces.get(c.face as usize).ok_or(bad(c.face as usize))?;
+        for &n in &face.nodes {
+            if n as usize >= m.nodes.len() {
+                return Err(bad(n as usize));
+            }
+            here |= apply(n as usize);
+        }
+    }
+    Ok(here)
+}
+
 /// Keeps, in order, the groups of `candidates` (a slave's run of faces in one direction, in
 /// [`build_candidates`] order) that [`evaluate_pairs`] would not skip: those whose slave or
 /// some node of some face has `apply`. Returns how many candidates are kept (at the front).
@@ -553,23 +592,9 @@ pub fn keep_applied_groups(
 ) -> Result<usize, PhysicsError> {
     let (mut i, mut kept) = (0, 0);
     while i < candidates.len() {
-        let (direction, slave) = (candidates[i].direction, candidates[i].slave);
-        let mut j = i;
-        let mut here = apply(slave as usize);
-        while j < candidates.len()
-            && candidates[j].direction == direction
-            && candidates[j].slave == slave
-        {
-            let f = candidates[j].face as usize;
-            for &n in &m.faces.get(f).ok_or(bad(f))?.nodes {
-                if n as usize >= m.nodes.len() {
-                    return Err(bad(n as usize));
-                }
-                here |= apply(n as usize);
-            }
-            j += 1;
-        }
-        if here {
+        let j = i + group_len(&candidates[i..]);
+        let slave = candidates[i].slave as usize;
+        if group_applies(m, slave, &candidates[i..j], &apply)? {
             candidates.copy_within(i..j, kept);
             kept += j - i;
         }
@@ -662,13 +687,7 @@ fn evaluate_pairs_with(
     let mut i = 0;
     while i < candidates.len() {
         let (direction, slave) = (candidates[i].direction, candidates[i].slave);
-        let mut j = i;
-        while j < candidates.len()
-            && candidates[j].direction == direction
-            && candidates[j].slave == slave
-        {
-            j += 1;
-        }
+        let j = i + group_len(&candidates[i..]);
         let group = &candidates[i..j];
         i = j;
         let s = slave as usize;
@@ -678,20 +697,8 @@ fn evaluate_pairs_with(
         // A group none of whose nodes gets a force here (another board's contact): skipped
         // before the penetration tests, with the same result (nothing added, no statistic)
         // and its indices still checked.
-        if !apply(s) {
-            let mut here = false;
-            for c in group {
-                let face = m.faces.get(c.face as usize).ok_or(bad(c.face as usize))?;
-                for &n in &face.nodes {
-                    if n as usize >= m.nodes.len() {
-                        return Err(bad(n as usize));
-                    }
-                    here |= apply(n as usize);
-                }
-            }
-            if !here {
-                continue;
-            }
+        if !group_applies(m, s, group, &apply)? {
+            continue;
         }
         let mut best: Option<(usize, FacePenetration)> = None;
         for c in group {
@@ -840,7 +847,9 @@ pub fn pair_surface_mask(pairs: &[ContactPair]) -> u8 {
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
     use super::*;
+    use std::{format, vec, vec::Vec};
 
     #[test]
     fn capsule_depth_and_normal_match_the_geometry() {
@@ -882,6 +891,35 @@ mod tests {
         assert!(quad_penetration([1.3, 0.6, -0.01], &q, 0.1).is_none());
     }
 
+    /// Asserts that two penetration results are the same, bit for bit (both none, or equal
+    /// depth, normal and weights); `Some` says they penetrate. `at` names the case.
+    fn same_penetration_bits(
+        a: Option<FacePenetration>,
+        b: Option<FacePenetration>,
+        at: impl Fn() -> std::string::String,
+    ) -> bool {
+        match (a, b) {
+            (None, None) => false,
+            (Some(a), Some(b)) => {
+                assert_eq!(a.depth_m.to_bits(), b.depth_m.to_bits(), "{}", at());
+                assert_eq!(
+                    a.normal.map(f64::to_bits),
+                    b.normal.map(f64::to_bits),
+                    "{}",
+                    at()
+                );
+                assert_eq!(
+                    a.weights.map(f64::to_bits),
+                    b.weights.map(f64::to_bits),
+                    "{}",
+                    at()
+                );
+                true
+            }
+            (a, b) => panic!("{}: {a:?} against {b:?}", at()),
+        }
+    }
+
     /// [`FaceGeometry::penetration`] is [`quad_penetration`] with the normals computed
     /// once: the same result to the bit, on warped quads (the two triangles tilted apart)
     /// and points above, below, beside, on edges and too deep. At least a quarter of the
@@ -909,15 +947,8 @@ mod tests {
                 let x = [0.5 + 1.3 * rnd(), 0.5 + 1.3 * rnd(), 0.08 * rnd() - 0.02];
                 let (a, b) = (quad_penetration(x, &q, 0.05), g.penetration(x, 0.05));
                 total += 1;
-                match (a, b) {
-                    (None, None) => {}
-                    (Some(a), Some(b)) => {
-                        hits += 1;
-                        assert_eq!(a.depth_m.to_bits(), b.depth_m.to_bits());
-                        assert_eq!(a.normal.map(f64::to_bits), b.normal.map(f64::to_bits));
-                        assert_eq!(a.weights.map(f64::to_bits), b.weights.map(f64::to_bits));
-                    }
-                    (a, b) => panic!("at {x:?}: {a:?} against {b:?}"),
+                if same_penetration_bits(a, b, || format!("at {x:?}")) {
+                    hits += 1;
                 }
             }
         }
@@ -982,15 +1013,8 @@ mod tests {
                 if clearly_outside(x, &QuadBounds::new(&q), depth_max) {
                     decided_by_bounds += 1;
                 }
-                match (full, fast) {
-                    (None, None) => {}
-                    (Some(f), Some(g)) => {
-                        hits += 1;
-                        assert_eq!(f.depth_m.to_bits(), g.depth_m.to_bits());
-                        assert_eq!(f.normal.map(f64::to_bits), g.normal.map(f64::to_bits));
-                        assert_eq!(f.weights.map(f64::to_bits), g.weights.map(f64::to_bits));
-                    }
-                    (f, g) => panic!("at {x:?} in {q:?}: full test {f:?}, with bounds {g:?}"),
+                if same_penetration_bits(full, fast, || format!("at {x:?} in {q:?}")) {
+                    hits += 1;
                 }
             }
         }
@@ -1010,8 +1034,6 @@ mod tests {
     /// something: forces are applied, groups are dropped and some are kept.
     #[test]
     fn keeping_the_applied_groups_changes_no_force() {
-        extern crate std;
-        use std::{vec, vec::Vec};
         let mut seed = 0x5851_f42d_4c95_7f2du64;
         let mut rnd = move || {
             seed ^= seed << 13;
