@@ -7,7 +7,9 @@
 # pe-firmware/src/runtime/marks.rs). A 1x1x1 bench (scripts/board-cost.sh) cannot show
 # what a board of a partition pays: here each board's median, mean and largest (a check
 # step, which also builds the candidates) are printed beside what the compile report
-# charges it (`contact nodes on the board x instructions per contact node`).
+# charges it (pe_firmware::profile::FirmwareCost::charged_contact_nodes: the whole contact
+# table x instructions per contact node on a board that owns a contact node, nothing on
+# one that owns none).
 #
 # Slow: the plugin counts every instruction of every board (about 4 minutes for 2x2x2 at
 # the default STEPS on 2 cores). Not run by CI; a measurement to rerun when the contact
@@ -57,6 +59,7 @@ import glob, json, os, re, statistics, sys
 d = sys.argv[1]
 rep = json.load(open(os.path.join(d, "compiled", "report.json")))
 per_node = rep["capacity"]["instructions_per_contact_node"]
+table = rep["contact"]["contact_nodes"]
 print(f"{'board':>13} {'contact nodes':>14} {'owned':>6} {'median':>9} {'mean':>9} {'largest':>9} {'report charges':>15}")
 for b in rep["boards"]:
     name = "board-%d-%d-%d" % tuple(b["board"])
@@ -68,6 +71,6 @@ for b in rep["boards"]:
         sys.exit(f"contact-cost: no marks in {name}'s log")
     n, owned = b["contact_nodes"], b["owned_contact_nodes"]
     print(f"{name:>13} {n:>14} {owned:>6} {statistics.median(cost):>9.0f} "
-          f"{statistics.mean(cost):>9.0f} {max(cost):>9} {n * per_node:>15}")
+          f"{statistics.mean(cost):>9.0f} {max(cost):>9} {(table if owned else 0) * per_node:>15}")
 PY
 done

@@ -10,7 +10,7 @@
 
 use host_tools::compile::{decode_image, image_file_name, DecodedImage};
 use pe_firmware::image::{Integration, Precision};
-use pe_firmware::profile::{measured_cost, BoardProfile};
+use pe_firmware::profile::{measured_cost, BoardProfile, FirmwareCost};
 use pe_firmware::runtime::{Op, Program, ROUNDS_PER_AXIS_MAX};
 use serde::Serialize;
 
@@ -87,6 +87,12 @@ fn frame_s(t: &SimTiming, values: usize, width: usize) -> f64 {
     t.link_latency_s + bytes as f64 / t.link_bytes_per_s
 }
 
+/// The contact nodes a board's step is charged for ([`FirmwareCost::charged_contact_nodes`]).
+fn charged_contact_nodes(im: &DecodedImage) -> usize {
+    let owned = im.contact_nodes.iter().filter(|(_, p)| p.owned).count();
+    FirmwareCost::charged_contact_nodes(im.contact_nodes.len(), owned)
+}
+
 /// Models one step of the machine whose images are in `dir`.
 pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::Result<StepTiming> {
     let count = dims.iter().product::<usize>();
@@ -140,7 +146,7 @@ pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::R
                 }
                 Op::Update => {
                     let c = (im.header.counts.nodes as f64 * t.cycles_per_node_update
-                        + im.header.counts.contact_nodes as f64 * t.cycles_per_contact_node)
+                        + charged_contact_nodes(im) as f64 * t.cycles_per_contact_node)
                         / t.clock_hz;
                     now[b] += c;
                     compute[b] += c;

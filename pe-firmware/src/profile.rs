@@ -252,8 +252,8 @@ impl FirmwareCost {
     }
 
     /// Instructions of one step of a board holding `per_kernel[k]` elements of each kernel
-    /// ([`Kernel`] order), `nodes` nodes of which `contact_nodes` on a contact surface (no
-    /// exchange).
+    /// ([`Kernel`] order) and `nodes` nodes, charged for `contact_nodes` contact nodes
+    /// ([`Self::charged_contact_nodes`]; no exchange).
     pub fn step_instructions(
         &self,
         per_kernel: [usize; 3],
@@ -266,6 +266,24 @@ impl FirmwareCost {
             .sum::<f64>()
             + nodes as f64 * self.per_node_update as f64
             + contact_nodes as f64 * self.per_contact_node as f64
+    }
+
+    /// The contact-surface nodes a board's step is charged [`Self::per_contact_node`] for
+    /// (the one rule of the compile report and board-sim's timing model), from the
+    /// contact table's length (every board holds the whole table) and the contact nodes
+    /// the board owns:
+    /// - a board that owns a contact node evaluates the contact problem of the whole
+    ///   table: its positions and, at each check, the candidate groups that give one of
+    ///   its nodes a force, which on a small contact surface are most of them (measured by
+    ///   `scripts/contact-cost.sh`: see the README's board-cost section);
+    /// - a board that owns none skips the evaluation (every result would be zero), and is
+    ///   charged nothing.
+    pub fn charged_contact_nodes(table_nodes: usize, owned_contact_nodes: usize) -> usize {
+        if owned_contact_nodes > 0 {
+            table_nodes
+        } else {
+            0
+        }
     }
 
     /// Per element of a mix with fractions `mix[k]` of each kernel ([`Kernel`] order).

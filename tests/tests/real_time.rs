@@ -76,8 +76,9 @@ fn a_scene_over_the_link_rate_names_the_link() {
 /// (not from the report's link table): per board and face, bytes = sum over rounds of 3
 /// components x the precision's width x the vectors sent, plus one frame header and CRC
 /// per round that sends; time = bytes / rate + frames x frame latency. Compute = the most
-/// instructions of any board (elements x per element-step + nodes x per node update) over
-/// the clock. Keeps real time iff compute <= dt / 2 and no link direction needs more than
+/// instructions of any board (elements x per element-step + nodes x per node update + the
+/// whole contact table x per contact node on a board that owns a contact node) over the
+/// clock. Keeps real time iff compute <= dt / 2 and no link direction needs more than
 /// dt. Cases of both outcomes (the liver at its 1.4 ms step keeps it; the seed box at
 /// 100 us and the built-in scene on a slow-link profile do not). Times compare to a
 /// relative 1e-12 (the same sums in another order), counts exactly.
@@ -157,11 +158,19 @@ fn verdict_matches_an_independent_computation() {
                         }
                     })
                     .sum();
+                // A board that owns a contact node evaluates the whole table; one that
+                // owns none skips the evaluation.
                 let contact = p.contact.as_ref().map_or(0, |c| {
-                    b.nodes
+                    let owns = b
+                        .nodes
                         .iter()
-                        .filter(|n| c.node_globals.contains(n))
-                        .count()
+                        .zip(&b.owner)
+                        .any(|(n, &o)| o && c.node_globals.contains(n));
+                    if owns {
+                        c.node_globals.len()
+                    } else {
+                        0
+                    }
                 });
                 (elements
                     + b.nodes.len() as f64 * cost.per_node_update as f64

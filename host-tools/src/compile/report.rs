@@ -3,7 +3,7 @@
 
 use anyhow::Result;
 use pe_firmware::image::*;
-use pe_firmware::profile::BoardProfile;
+use pe_firmware::profile::{BoardProfile, FirmwareCost};
 use serde::Serialize;
 
 use super::image::BoardImage;
@@ -254,8 +254,9 @@ pub struct BoardSummary {
     pub batches: [usize; 4],
     pub nodes: usize,
     pub owned_nodes: usize,
-    /// Nodes on a contact surface the board holds (the compute figure charges each the
-    /// measured cost per contact node), and how many of them it owns.
+    /// Nodes on a contact surface the board holds, and how many of them it owns (the
+    /// compute figure charges a board that owns one the whole contact table, one that
+    /// owns none nothing: [`FirmwareCost::charged_contact_nodes`]).
     pub contact_nodes: usize,
     pub owned_contact_nodes: usize,
     pub exchange: [usize; 6],
@@ -611,8 +612,12 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
         .as_ref()
         .map(|c| c.node_globals.iter().copied().collect())
         .unwrap_or_default();
-    let contact_nodes =
-        |b: &super::plan::BoardPlan| b.nodes.iter().filter(|n| on_contact.contains(n)).count();
+    let contact_nodes = |b: &super::plan::BoardPlan| {
+        let owned = (b.nodes.iter().zip(&b.owner))
+            .filter(|(n, o)| **o && on_contact.contains(n))
+            .count();
+        FirmwareCost::charged_contact_nodes(on_contact.len(), owned)
+    };
     let (busiest, busiest_board) = plan
         .boards
         .iter()
@@ -794,7 +799,7 @@ pub fn summary(r: &CompileReport) -> String {
     );
     let c = &r.capacity;
     s += &format!(
-        "  element kernels: {} cuboids, {} parallelepipeds, {} general\n  board compute ({} profile, {:.0} MHz, measured {} instructions per element-step (general), {} (parallelepiped), {} (cuboid), {} per node update and {} more per contact node, one instruction per cycle assumed): busiest board {:.1} us per step against dt = {:.1} us ({}); {:.1} elements per board at this scene's rate, {:.1} at 10 kHz, so {} boards for this scene at 10 kHz\n",
+        "  element kernels: {} cuboids, {} parallelepipeds, {} general\n  board compute ({} profile, {:.0} MHz, measured {} instructions per element-step (general), {} (parallelepiped), {} (cuboid), {} per node update, {} more per contact node of the whole table on a board that owns one, one instruction per cycle assumed): busiest board {:.1} us per step against dt = {:.1} us ({}); {:.1} elements per board at this scene's rate, {:.1} at 10 kHz, so {} boards for this scene at 10 kHz\n",
         c.elements_per_kernel[2], c.elements_per_kernel[1], c.elements_per_kernel[0],
         r.profile, c.clock_hz as f64 / 1e6, c.instructions_per_element_step, c.instructions_per_box_element_step, c.instructions_per_cuboid_element_step, c.instructions_per_node_update, c.instructions_per_contact_node,
         c.step_compute_s_max * 1e6, r.dt_s * 1e6,

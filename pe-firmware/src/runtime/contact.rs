@@ -53,6 +53,10 @@ pub struct ContactState {
     /// Global-network addresses of the contact boards, and this board's slot among them.
     pub(super) boards: [u8; BOARDS_MAX],
     pub(super) slot: Option<usize>,
+    /// Whether this board owns a contact node: every contact force, tool force and
+    /// statistic a board computes is for its owned nodes, so a board that owns none skips
+    /// the evaluation (its results are zero).
+    pub(super) owns_nodes: bool,
     phase: Phase,
     /// Received boxes by step parity and slot: (step + 1, box).
     boxes: [[(u32, Aabb); BOARDS_MAX]; 2],
@@ -87,6 +91,7 @@ impl ContactState {
             }; TOOLS_MAX],
             boards: [0; BOARDS_MAX],
             slot: None,
+            owns_nodes: false,
             phase: Phase::Start,
             boxes: [[(0, ([0.0; 3], [0.0; 3])); BOARDS_MAX]; 2],
             my_box: ([0.0; 3], [0.0; 3]),
@@ -496,6 +501,15 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             kind,
         };
         let state = &mut self.contact;
+        if !state.owns_nodes {
+            // Every result below is filtered by `own`, which is false for every node: they
+            // would all be zero (`check` is false too: only owners of pair nodes hold a
+            // slot). The contact forces stay as the load cleared them: nothing else writes
+            // them.
+            state.tool_force = [[0.0; 3]; TOOLS_MAX];
+            state.stats = ContactStats::default();
+            return Ok(());
+        }
         let mut capsules = [Capsule {
             a: [0.0; 3],
             b: [0.0; 3],

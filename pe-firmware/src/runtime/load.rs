@@ -85,6 +85,7 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         contact.slot = contact.boards[..n_boards]
             .iter()
             .position(|&b| b == address);
+        contact.owns_nodes = st.contact.places.iter().take(nc).any(|p| p.owned);
         let has_contact = c.tools > 0 || c.pairs > 0;
         let has_graphics = c.graphics_nodes > 0 && header.graphics.interval_steps > 0;
         Ok(Runtime {
