@@ -607,16 +607,11 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
         }
         n
     };
-    let on_contact: std::collections::HashSet<u32> = problem
-        .contact
-        .as_ref()
-        .map(|c| c.node_globals.iter().copied().collect())
-        .unwrap_or_default();
+    let on_contact = contact_node_mask(problem);
+    let table_nodes = on_contact.iter().filter(|&&c| c).count();
     let contact_nodes = |b: &super::plan::BoardPlan| {
-        let owned = (b.nodes.iter().zip(&b.owner))
-            .filter(|(n, o)| **o && on_contact.contains(n))
-            .count();
-        FirmwareCost::charged_contact_nodes(on_contact.len(), owned)
+        let (_, owned) = board_contact_nodes(b, &on_contact);
+        FirmwareCost::charged_contact_nodes(table_nodes, owned)
     };
     let (busiest, busiest_board) = plan
         .boards
@@ -635,7 +630,7 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
         .max_by_key(|b| b.elements.len())
         .map(|b| b.nodes.len() as f64 / b.elements.len().max(1) as f64)
         .unwrap_or(2.0);
-    let cpe = on_contact.len() as f64 / problem.mesh.cells.len().max(1) as f64;
+    let cpe = table_nodes as f64 / problem.mesh.cells.len().max(1) as f64;
     let n = problem.mesh.cells.len();
     let elements_per_kernel = per_kernel(&mut (0..n));
     let mix = elements_per_kernel.map(|k| k as f64 / n.max(1) as f64);
@@ -658,40 +653,53 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
     }
 }
 
-fn board_summaries(problem: &Problem, plan: &Plan, images: &[BoardImage]) -> Vec<BoardSummary> {
+/// Whether each mesh node lies on a contact surface.
+fn contact_node_mask(problem: &Problem) -> Vec<bool> {
     let mut on_contact = vec![false; problem.mesh.nodes.len()];
     if let Some(c) = &problem.contact {
         for &n in &c.node_globals {
             on_contact[n as usize] = true;
         }
     }
+    on_contact
+}
+
+/// The contact nodes board `b` holds, and how many of them it owns.
+fn board_contact_nodes(b: &super::plan::BoardPlan, on_contact: &[bool]) -> (usize, usize) {
     let contact = |n: &u32| on_contact.get(*n as usize).copied().unwrap_or(false);
+    let held = b.nodes.iter().filter(|n| contact(n)).count();
+    let owned = (b.nodes.iter().zip(&b.owner))
+        .filter(|(n, o)| **o && contact(n))
+        .count();
+    (held, owned)
+}
+
+fn board_summaries(problem: &Problem, plan: &Plan, images: &[BoardImage]) -> Vec<BoardSummary> {
+    let on_contact = contact_node_mask(problem);
     plan.boards
         .iter()
         .zip(images)
-        .map(|(b, im)| BoardSummary {
-            board: b.coords,
-            file: image_file_name(b.coords),
-            elements: b.elements.len(),
-            batches: [
-                b.batch_ends[0],
-                b.batch_ends[1] - b.batch_ends[0],
-                b.batch_ends[2] - b.batch_ends[1],
-                b.batch_ends[3] - b.batch_ends[2],
-            ],
-            nodes: b.nodes.len(),
-            owned_nodes: b.owner.iter().filter(|o| **o).count(),
-            contact_nodes: b.nodes.iter().filter(|n| contact(n)).count(),
-            owned_contact_nodes: b
-                .nodes
-                .iter()
-                .zip(&b.owner)
-                .filter(|(n, o)| **o && contact(n))
-                .count(),
-            exchange: core::array::from_fn(|f| b.exchange[f].len()),
-            image_bytes: im.bytes.len(),
-            ram_bytes: im.ram_bytes,
-        })
+        .map(|(b, im)| (b, im, board_contact_nodes(b, &on_contact)))
+        .map(
+            |(b, im, (contact_nodes, owned_contact_nodes))| BoardSummary {
+                board: b.coords,
+                file: image_file_name(b.coords),
+                elements: b.elements.len(),
+                batches: [
+                    b.batch_ends[0],
+                    b.batch_ends[1] - b.batch_ends[0],
+                    b.batch_ends[2] - b.batch_ends[1],
+                    b.batch_ends[3] - b.batch_ends[2],
+                ],
+                nodes: b.nodes.len(),
+                owned_nodes: b.owner.iter().filter(|o| **o).count(),
+                contact_nodes,
+                owned_contact_nodes,
+                exchange: core::array::from_fn(|f| b.exchange[f].len()),
+                image_bytes: im.bytes.len(),
+                ram_bytes: im.ram_bytes,
+            },
+        )
         .collect()
 }
 

@@ -514,16 +514,10 @@ pub fn build_candidates(
             if m.face_points(f, &pos, &mut q) != Ok(true) {
                 continue;
             }
-            // The face's bounds grown by the margin (the same values the test of each node
-            // would compute).
-            let (lo, hi): (V3, V3) = (
-                core::array::from_fn(|i| {
-                    q.iter().map(|p| p[i]).fold(f64::INFINITY, f64::min) - margin_m
-                }),
-                core::array::from_fn(|i| {
-                    q.iter().map(|p| p[i]).fold(f64::NEG_INFINITY, f64::max) + margin_m
-                }),
-            );
+            // The face's bounds grown by the margin, once for all its slaves.
+            let b = QuadBounds::new(&q);
+            let lo: V3 = core::array::from_fn(|i| b.lo[i] - margin_m);
+            let hi: V3 = core::array::from_fn(|i| b.hi[i] + margin_m);
             for (s, node) in m.nodes.iter().enumerate() {
                 if node.surfaces & (1 << slave) == 0 {
                     continue;
