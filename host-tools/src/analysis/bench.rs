@@ -107,9 +107,16 @@ impl Real for Counted {
         bump(3);
         Counted(libm::sqrt(self.0))
     }
+    /// As `f64`'s: the series near 1 (its operations counted), `libm` elsewhere.
     fn ln(self) -> Self {
-        bump(3);
-        Counted(libm::log(self.0))
+        use pe_firmware::physics::real::{ln_near_one, LN_SERIES_RADIUS, LN_SERIES_TERMS_F64};
+        let d = self - Counted(1.0);
+        if d.0.abs() <= LN_SERIES_RADIUS {
+            ln_near_one(d, LN_SERIES_TERMS_F64)
+        } else {
+            bump(3);
+            Counted(libm::log(self.0))
+        }
     }
     fn cbrt(self) -> Self {
         bump(3);

@@ -6,7 +6,7 @@
 //! the same order: the host's batched kernel computes the board's bits by construction.
 //! Arithmetic is element-wise IEEE 754 (a compiler may pack it into SIMD registers, which
 //! round the same way; no fused multiply-add is ever formed); `ln`, `cbrt` and `sqrt` call
-//! `libm` once per lane, as the scalar does.
+//! the scalar's function once per lane.
 //!
 //! Comparisons order two lane vectors only when every lane agrees (`a > b` holds when it
 //! holds in every lane), so a kernel's test `J > 0` passes only when it passes for all of

@@ -1,11 +1,10 @@
 //! Lane types over AVX registers (x86-64): 4 f64 in a `__m256d`, 8 f32 in a `__m256`, as
 //! [`Real`]s whose every operation is one IEEE 754 instruction per lane (add, sub, mul,
-//! div, sqrt: correctly rounded, the scalar's bits) or the scalar `libm` function per lane
-//! (`cbrt`; `ln` too for a lane outside the normal positive range). `ln` of normal positive
-//! lanes is `libm`'s own algorithm (FreeBSD's `e_log.c` / `e_logf.c`: the argument
-//! reduction per lane in integers, then the polynomial in the registers, in `libm`'s order
-//! of operations), so it gives `libm`'s bits; a test holds it to `libm` on inputs across
-//! the whole range. No fused multiply-add is used.
+//! div, sqrt: correctly rounded, the scalar's bits) or the scalar function per lane
+//! (`cbrt`). `ln` is the scalar's [`Real::ln`]: when every lane lies where the scalar takes
+//! its series ([`ln_near_one`], the kernels' Jacobians), the series in the registers, in the
+//! scalar's order of operations; otherwise the scalar per lane. A test holds it to the
+//! scalar on inputs across the whole range. No fused multiply-add is used.
 //!
 //! Safety: the methods call AVX intrinsics. They are only executed inside functions
 //! compiled with `#[target_feature(enable = "avx")]` and reached after
@@ -16,6 +15,9 @@ use core::arch::x86_64::*;
 use core::cmp::Ordering;
 use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 
+use pe_firmware::physics::real::{
+    ln_near_one, LN_SERIES_RADIUS, LN_SERIES_TERMS_F32, LN_SERIES_TERMS_F64,
+};
 use pe_firmware::physics::{LaneReal, Real};
 
 macro_rules! avx_lanes {
@@ -331,96 +333,31 @@ impl F32x8 {
     }
 }
 
-/// `libm::log`'s constants (libm 0.2, `log.rs`), the same literals (kept verbatim, digits
-/// beyond the type's precision included, so they are visibly libm's).
-#[allow(clippy::excessive_precision)]
-mod log64 {
-    pub const LN2_HI: f64 = 6.93147180369123816490e-01;
-    pub const LN2_LO: f64 = 1.90821492927058770002e-10;
-    pub const LG1: f64 = 6.666666666666735130e-01;
-    pub const LG2: f64 = 3.999999999940941908e-01;
-    pub const LG3: f64 = 2.857142874366239149e-01;
-    pub const LG4: f64 = 2.222219843214978396e-01;
-    pub const LG5: f64 = 1.818357216161805012e-01;
-    pub const LG6: f64 = 1.531383769920937332e-01;
-    pub const LG7: f64 = 1.479819860511658591e-01;
-}
-
-/// `libm::logf`'s constants (libm 0.2, `logf.rs`), the same literals (verbatim).
-#[allow(clippy::excessive_precision)]
-mod log32 {
-    pub const LN2_HI: f32 = 6.9313812256e-01;
-    pub const LN2_LO: f32 = 9.0580006145e-06;
-    pub const LG1: f32 = 0.66666662693;
-    pub const LG2: f32 = 0.40000972152;
-    pub const LG3: f32 = 0.28498786688;
-    pub const LG4: f32 = 0.24279078841;
-}
-
 impl F64x4 {
-    /// `libm::log` lane by lane (see the module doc).
+    /// [`Real::ln`] of `f64` lane by lane (see the module doc).
     #[inline(always)]
     fn ln_lanes(self) -> Self {
-        use log64::*;
-        let x = self.lanes();
-        let (mut reduced, mut dk) = ([0.0f64; 4], [0.0f64; 4]);
-        for l in 0..4 {
-            let ui = x[l].to_bits();
-            let hx = (ui >> 32) as u32;
-            // Zero, subnormal, negative, infinite or NaN: libm's special paths.
-            if !(0x0010_0000..0x7ff0_0000).contains(&hx) {
-                return self.each(<f64 as Real>::ln);
-            }
-            // Reduce x into [sqrt(2)/2, sqrt(2)]: x = 2^k (1 + f).
-            let hx = hx + (0x3ff0_0000 - 0x3fe6_a09e);
-            let k = ((hx >> 20) as i32) - 0x3ff;
-            let hx = (hx & 0x000f_ffff) + 0x3fe6_a09e;
-            reduced[l] = f64::from_bits(((hx as u64) << 32) | (ui & 0xffff_ffff));
-            dk[l] = k as f64;
+        let d = self - Self::splat(1.0);
+        if d.abs().all::<_CMP_LE_OQ>(Self::splat(LN_SERIES_RADIUS)) {
+            ln_near_one(d, LN_SERIES_TERMS_F64)
+        } else {
+            self.each(<f64 as Real>::ln)
         }
-        let c = Self::splat;
-        let (x, dk) = (Self::of(reduced), Self::of(dk));
-        let f = x - c(1.0);
-        let hfsq = c(0.5) * f * f;
-        let s = f / (c(2.0) + f);
-        let z = s * s;
-        let w = z * z;
-        let t1 = w * (c(LG2) + w * (c(LG4) + w * c(LG6)));
-        let t2 = z * (c(LG1) + w * (c(LG3) + w * (c(LG5) + w * c(LG7))));
-        let r = t2 + t1;
-        s * (hfsq + r) + dk * c(LN2_LO) - hfsq + f + dk * c(LN2_HI)
     }
 }
 
 impl F32x8 {
-    /// `libm::logf` lane by lane (see the module doc).
+    /// [`Real::ln`] of `f32` lane by lane (see the module doc).
     #[inline(always)]
     fn ln_lanes(self) -> Self {
-        use log32::*;
-        let x = self.lanes();
-        let (mut reduced, mut dk) = ([0.0f32; 8], [0.0f32; 8]);
-        for l in 0..8 {
-            let ix = x[l].to_bits();
-            // Zero, subnormal, negative, infinite or NaN: libm's special paths.
-            if !(0x0080_0000..0x7f80_0000).contains(&ix) {
-                return self.each(<f32 as Real>::ln);
-            }
-            let ix = ix + (0x3f80_0000 - 0x3f35_04f3);
-            let k = ((ix >> 23) as i32) - 0x7f;
-            reduced[l] = f32::from_bits((ix & 0x007f_ffff) + 0x3f35_04f3);
-            dk[l] = k as f32;
+        let d = self - Self::splat(1.0);
+        if d.abs()
+            .all::<_CMP_LE_OQ>(Self::splat(LN_SERIES_RADIUS as f32))
+        {
+            ln_near_one(d, LN_SERIES_TERMS_F32)
+        } else {
+            self.each(<f32 as Real>::ln)
         }
-        let c = Self::splat;
-        let (x, dk) = (Self::of(reduced), Self::of(dk));
-        let f = x - c(1.0);
-        let s = f / (c(2.0) + f);
-        let z = s * s;
-        let w = z * z;
-        let t1 = w * (c(LG2) + w * c(LG4));
-        let t2 = z * (c(LG1) + w * c(LG3));
-        let r = t2 + t1;
-        let hfsq = c(0.5) * f * f;
-        s * (hfsq + r) + dk * c(LN2_LO) - hfsq + f + dk * c(LN2_HI)
     }
 }
 
@@ -465,7 +402,7 @@ mod tests {
     }
 
     #[test]
-    fn lane_ln_is_libm_log_bit_for_bit() {
+    fn lane_ln_is_the_scalar_ln_bit_for_bit() {
         if !std::arch::is_x86_feature_detected!("avx") {
             return;
         }
@@ -475,10 +412,10 @@ mod tests {
             let x: [f64; 4] = [chunk[0], chunk[1], chunk[2], chunk[3]];
             let got = F64x4::of(x).ln().lanes();
             for l in 0..4 {
-                let want = libm::log(x[l]);
+                let want = <f64 as Real>::ln(x[l]);
                 assert!(
                     got[l].to_bits() == want.to_bits() || (got[l].is_nan() && want.is_nan()),
-                    "log({:e}) = {:e}, libm {:e}",
+                    "log({:e}) = {:e}, scalar {:e}",
                     x[l],
                     got[l],
                     want
@@ -499,10 +436,10 @@ mod tests {
             });
             let got = F32x8::of(x).ln().lanes();
             for l in 0..8 {
-                let want = libm::logf(x[l]);
+                let want = <f32 as Real>::ln(x[l]);
                 assert!(
                     got[l].to_bits() == want.to_bits() || (got[l].is_nan() && want.is_nan()),
-                    "logf({:e}) = {:e}, libm {:e}",
+                    "logf({:e}) = {:e}, scalar {:e}",
                     x[l],
                     got[l],
                     want
@@ -511,5 +448,51 @@ mod tests {
             }
         }
         assert!(checked32 >= 800_000);
+    }
+
+    /// Whole packs inside the series range take the vector series, packs with one lane
+    /// outside take the scalar per lane: both give the scalar's bits. Far from trivial:
+    /// the values span the range, so their logarithms span [ln 0.8, ln 1.25].
+    #[test]
+    fn lane_ln_takes_the_series_where_the_scalar_does() {
+        if !std::arch::is_x86_feature_detected!("avx") {
+            return;
+        }
+        let n = 400_000;
+        let r = LN_SERIES_RADIUS;
+        let xs: Vec<f64> = (0..=n)
+            .map(|k| 1.0 - r + 2.0 * r * k as f64 / n as f64)
+            .collect();
+        assert_eq!(xs.first(), Some(&(1.0 - r)));
+        assert_eq!(xs.last(), Some(&(1.0 + r)));
+        let (mut lo, mut hi) = (0.0f64, 0.0f64);
+        for (c, chunk) in xs.chunks_exact(4).enumerate() {
+            let mut x: [f64; 4] = [chunk[0], chunk[1], chunk[2], chunk[3]];
+            // Every seventh pack has a lane just outside the range.
+            if c % 7 == 0 {
+                x[c % 4] = if c % 2 == 0 { 0.87 } else { 1.13 };
+            }
+            let got = F64x4::of(x).ln().lanes();
+            for l in 0..4 {
+                let want = <f64 as Real>::ln(x[l]);
+                assert_eq!(got[l].to_bits(), want.to_bits(), "log({:e})", x[l]);
+                (lo, hi) = (lo.min(got[l]), hi.max(got[l]));
+            }
+        }
+        assert!(lo < -0.13 && hi > 0.11, "logarithms span [{lo}, {hi}]");
+        let (mut lo, mut hi) = (0.0f32, 0.0f32);
+        for (c, chunk) in xs.chunks_exact(8).enumerate() {
+            let mut x: [f32; 8] = core::array::from_fn(|l| chunk[l] as f32);
+            if c % 7 == 0 {
+                x[c % 8] = if c % 2 == 0 { 0.87 } else { 1.13 };
+            }
+            let got = F32x8::of(x).ln().lanes();
+            for l in 0..8 {
+                let want = <f32 as Real>::ln(x[l]);
+                assert_eq!(got[l].to_bits(), want.to_bits(), "logf({:e})", x[l]);
+                (lo, hi) = (lo.min(got[l]), hi.max(got[l]));
+            }
+        }
+        assert!(lo < -0.13 && hi > 0.11, "logarithms span [{lo}, {hi}]");
     }
 }
