@@ -603,6 +603,10 @@ trait Corners<T> {
     fn add(&mut self, p: usize, v: [T; 3]);
     /// Subtracts `v` from the force at corner `p` (adds `−v`, to the bit).
     fn sub(&mut self, p: usize, v: [T; 3]);
+    /// Adds `v` to component `i` of the force at corner `p`.
+    fn add_one(&mut self, p: usize, i: usize, v: T);
+    /// Subtracts `v` from component `i` of the force at corner `p`.
+    fn sub_one(&mut self, p: usize, i: usize, v: T);
 }
 
 /// A kernel in the corner basis: reads the displacements from and adds the forces to
@@ -615,32 +619,17 @@ trait CornerKernel<T: Real> {
     ) -> Result<(), NonPositiveJacobian>;
 }
 
-/// An element's own arrays (Gmsh order).
-struct Local<'a, T> {
-    u: &'a [[T; 3]; 8],
-    f: [[T; 3]; 8],
-}
-
-impl<'a, T: Real> Local<'a, T> {
-    #[inline(always)]
-    fn new(u: &'a [[T; 3]; 8]) -> Self {
-        Local {
-            u,
-            f: [[T::ZERO; 3]; 8],
-        }
-    }
-}
-
 /// [`HexElement::internal_forces`] of a corner-basis kernel: the kernel on the element's
-/// own arrays.
+/// own arrays (Gmsh order), through [`Global`] with the nodes `0..8`, so the element's
+/// forces are the board's to the bit.
 #[inline(always)]
 fn local_forces<T: Real>(
     u: &[[T; 3]; 8],
-    kernel: impl FnOnce(&mut Local<'_, T>) -> Result<(), NonPositiveJacobian>,
+    kernel: impl FnOnce(&mut Global<'_, T>) -> Result<(), NonPositiveJacobian>,
 ) -> Result<[[T; 3]; 8], NonPositiveJacobian> {
-    let mut local = Local::new(u);
-    kernel(&mut local)?;
-    Ok(local.f)
+    let mut f = [[T::ZERO; 3]; 8];
+    kernel(&mut Global::of_element(u, &mut f))?;
+    Ok(f)
 }
 
 /// [`HexElement::accumulate`] of a corner-basis kernel: the kernel on the board's arrays.
@@ -653,27 +642,6 @@ fn global_forces<T: Real>(
 ) -> Result<(), KernelFault> {
     let mut g = Global::new(nodes, u, f)?;
     kernel(&mut g).map_err(KernelFault::Inverted)
-}
-
-impl<T: Real> Corners<T> for Local<'_, T> {
-    #[inline(always)]
-    fn get(&self, p: usize, i: usize) -> T {
-        self.u[CORNER[p]][i]
-    }
-    #[inline(always)]
-    fn add(&mut self, p: usize, v: [T; 3]) {
-        let d = &mut self.f[CORNER[p]];
-        for i in 0..3 {
-            d[i] += v[i];
-        }
-    }
-    #[inline(always)]
-    fn sub(&mut self, p: usize, v: [T; 3]) {
-        let d = &mut self.f[CORNER[p]];
-        for i in 0..3 {
-            d[i] -= v[i];
-        }
-    }
 }
 
 /// The board's arrays at the element's nodes: [`Global::new`] checks every node against
@@ -706,12 +674,37 @@ impl<'a, T: Real> Global<'a, T> {
         ];
         Ok(Global { u, f, at })
     }
+
+    /// An element's own arrays (Gmsh order), as the board's arrays of its 8 nodes
+    /// `0..8`: nothing to check.
+    #[inline(always)]
+    fn of_element(u: &'a [[T; 3]; 8], f: &'a mut [[T; 3]; 8]) -> Self {
+        Global {
+            u: CORNER.map(|a| &u[a]),
+            f,
+            at: CORNER,
+        }
+    }
 }
 
 impl<T: Real> Corners<T> for Global<'_, T> {
     #[inline(always)]
     fn get(&self, p: usize, i: usize) -> T {
         self.u[p][i]
+    }
+    #[inline(always)]
+    fn add_one(&mut self, p: usize, i: usize, v: T) {
+        // Always in range (see `Global::new`).
+        if let Some(d) = self.f.get_mut(self.at[p]) {
+            d[i] += v;
+        }
+    }
+    #[inline(always)]
+    fn sub_one(&mut self, p: usize, i: usize, v: T) {
+        // Always in range (see `Global::new`).
+        if let Some(d) = self.f.get_mut(self.at[p]) {
+            d[i] -= v;
+        }
     }
     #[inline(always)]
     fn add(&mut self, p: usize, v: [T; 3]) {
@@ -753,6 +746,17 @@ fn add_synthesis<T: Real>(c: &mut impl Corners<T>, m: [[T; 8]; 3]) {
     c.sub(0, [v[0][0], v[1][0], v[2][0]]);
     for p in 1..8 {
         c.add(p, [v[0][p], v[1][p], v[2][p]]);
+    }
+}
+
+/// Adds the nodal values of the moments `m` of component `i` (`m[0]` zero and not read:
+/// see [`synthesis8_mean_free`]) to the corners' forces, one component at a time.
+#[inline(always)]
+fn add_synthesis_of_component<T: Real>(c: &mut impl Corners<T>, i: usize, m: [T; 8]) {
+    let v = synthesis8_mean_free(m);
+    c.sub_one(0, i, v[0]);
+    for p in 1..8 {
+        c.add_one(p, i, v[p]);
     }
 }
 
@@ -813,40 +817,94 @@ pub struct HexReduced<T> {
 
 impl<T: Real> HexReduced<T> {
     /// `F = I + H` and the hourglass displacements `q_α`, one displacement component (row
-    /// of `H`) at a time.
+    /// of `H`) at a time: with [`Real::FORCES_BY_COMPONENT`], each component's `q_α` with
+    /// its row, otherwise all `q_α` after `H` (the same values; the shape the board's
+    /// compiler serves best).
     #[inline(always)]
     fn deformation(&self, corners: &impl Corners<T>) -> (Mat3<T>, [[T; 3]; 4]) {
-        let beta = &self.gradient_moments;
         let mut h = [[T::ZERO; 3]; 3];
-        let mut hg = [[T::ZERO; 4]; 3];
-        for i in 0..3 {
-            let c = moments_of(corners, i);
-            h[i] = array(
+        let mut q = [[T::ZERO; 3]; 4];
+        if T::FORCES_BY_COMPONENT {
+            for i in 0..3 {
+                let c = moments_of(corners, i);
+                h[i] = self.gradient_row(&c);
+                for alpha in 0..4 {
+                    q[alpha][i] = self.hourglass_displacement(c[HOURGLASS[alpha]], &h[i], alpha);
+                }
+            }
+        } else {
+            let mut hg = [[T::ZERO; 4]; 3];
+            for i in 0..3 {
+                let c = moments_of(corners, i);
+                h[i] = self.gradient_row(&c);
+                hg[i] = array(
+                    #[inline(always)]
+                    |a| c[HOURGLASS[a]],
+                );
+            }
+            q = array(
                 #[inline(always)]
-                |j| {
-                    let mut s = c[MASKS[0]] * beta[0][j];
-                    for k in 1..7 {
-                        s += c[MASKS[k]] * beta[k][j];
-                    }
-                    s
+                |alpha| {
+                    array(
+                        #[inline(always)]
+                        |i| self.hourglass_displacement(hg[i][alpha], &h[i], alpha),
+                    )
                 },
             );
-            hg[i] = array(
-                #[inline(always)]
-                |a| c[HOURGLASS[a]],
-            );
         }
-        let q = array(
-            #[inline(always)]
-            |alpha| {
-                let g = &self.hourglass_geometry[alpha];
-                array(
-                    #[inline(always)]
-                    |i| hg[i][alpha] - (h[i][0] * g[0] + h[i][1] * g[1] + h[i][2] * g[2]),
-                )
-            },
-        );
         (plus_identity(h), q)
+    }
+
+    /// A row of `H`: `Σ_k c_k β_k` over the displacement moments `c` of one component.
+    #[inline(always)]
+    fn gradient_row(&self, c: &[T; 8]) -> [T; 3] {
+        let beta = &self.gradient_moments;
+        array(
+            #[inline(always)]
+            |j| {
+                let mut s = c[MASKS[0]] * beta[0][j];
+                for k in 1..7 {
+                    s += c[MASKS[k]] * beta[k][j];
+                }
+                s
+            },
+        )
+    }
+
+    /// One component of `q_α = c_α − H γ_α`, from that component's `c_α` and row of `H`.
+    #[inline(always)]
+    fn hourglass_displacement(&self, c_alpha: T, h_row: &[T; 3], alpha: usize) -> T {
+        let g = &self.hourglass_geometry[alpha];
+        c_alpha - (h_row[0] * g[0] + h_row[1] * g[1] + h_row[2] * g[2])
+    }
+
+    /// Row `i` of `V₀ P − Σ_α Q_α ⊗ γ_α`.
+    #[inline(always)]
+    fn stress_row(&self, p: &Mat3<T>, big_q: &[[T; 3]; 4], i: usize) -> [T; 3] {
+        array(
+            #[inline(always)]
+            |j| {
+                let mut m = self.volume * p[i][j];
+                for alpha in 0..4 {
+                    m -= big_q[alpha][i] * self.hourglass_geometry[alpha][j];
+                }
+                m
+            },
+        )
+    }
+
+    /// The force moments of component `i` from its stress row: `row · β_k`, plus `Q_α` on
+    /// the hourglass masks.
+    #[inline(always)]
+    fn force_moments(&self, row: &[T; 3], big_q: &[[T; 3]; 4], i: usize) -> [T; 8] {
+        let mut m = [T::ZERO; 8];
+        for (k, b) in self.gradient_moments.iter().enumerate() {
+            m[MASKS[k]] = row[0] * b[0] + row[1] * b[1] + row[2] * b[2];
+        }
+        for alpha in 0..4 {
+            m[HOURGLASS[alpha]] += big_q[alpha][i];
+        }
+        m
     }
 }
 
@@ -870,37 +928,21 @@ impl<T: Real> CornerKernel<T> for HexReduced<T> {
         );
         let big_q = kept_in_memory(big_q);
         let p = law.first_piola_kirchhoff(&f)?;
-        // V₀ P − Σ_α Q_α ⊗ γ_α
-        let pm: Mat3<T> = array(
+        let rows: Mat3<T> = array(
             #[inline(always)]
-            |i| {
-                array(
-                    #[inline(always)]
-                    |j| {
-                        let mut m = self.volume * p[i][j];
-                        for alpha in 0..4 {
-                            m -= big_q[alpha][i] * self.hourglass_geometry[alpha][j];
-                        }
-                        m
-                    },
-                )
-            },
+            |i| self.stress_row(&p, &big_q, i),
         );
-        let m = array(
-            #[inline(always)]
-            |i| {
-                let row = &pm[i];
-                let mut m = [T::ZERO; 8];
-                for (k, b) in self.gradient_moments.iter().enumerate() {
-                    m[MASKS[k]] = row[0] * b[0] + row[1] * b[1] + row[2] * b[2];
-                }
-                for alpha in 0..4 {
-                    m[HOURGLASS[alpha]] += big_q[alpha][i];
-                }
-                m
-            },
-        );
-        add_synthesis(corners, m);
+        if T::FORCES_BY_COMPONENT {
+            for i in 0..3 {
+                add_synthesis_of_component(corners, i, self.force_moments(&rows[i], &big_q, i));
+            }
+        } else {
+            let m = array(
+                #[inline(always)]
+                |i| self.force_moments(&rows[i], &big_q, i),
+            );
+            add_synthesis(corners, m);
+        }
         Ok(())
     }
 }
@@ -956,21 +998,20 @@ impl<T: Real> CornerKernel<T> for HexBox<T> {
         let (f, hg) = self.deformation(corners);
         let p = law.first_piola_kirchhoff(&f)?;
         let k = self.hourglass_stiffness;
-        let m = array(
-            #[inline(always)]
-            |i| {
-                let row = &p[i];
-                let mut m = [T::ZERO; 8];
-                for (j, bv) in self.basis_volume.iter().enumerate() {
-                    m[LINEAR[j]] = row[0] * bv[0] + row[1] * bv[1] + row[2] * bv[2];
-                }
-                for alpha in 0..4 {
-                    m[HOURGLASS[alpha]] = k * hg[i][alpha];
-                }
-                m
-            },
-        );
-        add_synthesis(corners, m);
+        let moments = |i: usize| {
+            let row = &p[i];
+            let mut m = [T::ZERO; 8];
+            for (j, bv) in self.basis_volume.iter().enumerate() {
+                m[LINEAR[j]] = row[0] * bv[0] + row[1] * bv[1] + row[2] * bv[2];
+            }
+            for alpha in 0..4 {
+                m[HOURGLASS[alpha]] = k * hg[i][alpha];
+            }
+            m
+        };
+        for i in 0..3 {
+            add_synthesis_of_component(corners, i, moments(i));
+        }
         Ok(())
     }
 }
@@ -998,7 +1039,8 @@ macro_rules! corner_element {
                 law: &MaterialLaw<T>,
                 u: &[[T; 3]; 8],
             ) -> Result<T, NonPositiveJacobian> {
-                let (f, hg) = self.deformation(&Local::new(u));
+                let mut unused = [[T::ZERO; 3]; 8];
+                let (f, hg) = self.deformation(&Global::of_element(u, &mut unused));
                 let w = law.strain_energy_density(&f)? * self.volume;
                 let qq: T = hg.iter().flatten().fold(T::ZERO, |s, v| s + *v * *v);
                 Ok(w + T::from_f64(0.5) * self.hourglass_stiffness * qq)
@@ -1073,21 +1115,20 @@ impl<T: Real> CornerKernel<T> for HexCuboid<T> {
         // The hourglass moments' forces `k c_α` before the law, kept (see `kept_in_memory`).
         let khg = kept_in_memory(hg.map(|row| row.map(|c| k * c)));
         let p = law.first_piola_kirchhoff(&f)?;
-        let m = array(
-            #[inline(always)]
-            |i| {
-                let row = &p[i];
-                let mut m = [T::ZERO; 8];
-                for j in 0..3 {
-                    m[LINEAR[j]] = row[j] * self.scale_volume[j];
-                }
-                for alpha in 0..4 {
-                    m[HOURGLASS[alpha]] = khg[i][alpha];
-                }
-                m
-            },
-        );
-        add_synthesis(corners, m);
+        let moments = |i: usize| {
+            let row = &p[i];
+            let mut m = [T::ZERO; 8];
+            for j in 0..3 {
+                m[LINEAR[j]] = row[j] * self.scale_volume[j];
+            }
+            for alpha in 0..4 {
+                m[HOURGLASS[alpha]] = khg[i][alpha];
+            }
+            m
+        };
+        for i in 0..3 {
+            add_synthesis_of_component(corners, i, moments(i));
+        }
         Ok(())
     }
 }
@@ -1232,6 +1273,16 @@ impl<L: Real> Corners<L> for LaneCorners<L> {
     #[inline(always)]
     fn sub(&mut self, p: usize, v: [L; 3]) {
         self.f[p] = v.map(|x| -x);
+    }
+    /// As [`Corners::add`], one component.
+    #[inline(always)]
+    fn add_one(&mut self, p: usize, i: usize, v: L) {
+        self.f[p][i] = v;
+    }
+    /// As [`Corners::sub`], one component.
+    #[inline(always)]
+    fn sub_one(&mut self, p: usize, i: usize, v: L) {
+        self.f[p][i] = -v;
     }
 }
 
