@@ -998,7 +998,10 @@ impl<T: Real> CornerKernel<T> for HexBox<T> {
         let (f, hg) = self.deformation(corners);
         let p = law.first_piola_kirchhoff(&f)?;
         let k = self.hourglass_stiffness;
-        let moments = |i: usize| {
+        // Each component's moments written out in the loop, not by a closure: a closure
+        // cannot be marked `inline(always)` here, and one left out of line keeps the
+        // host's SIMD lanes out of their registers (see `real::array`).
+        for i in 0..3 {
             let row = &p[i];
             let mut m = [T::ZERO; 8];
             for (j, bv) in self.basis_volume.iter().enumerate() {
@@ -1007,10 +1010,7 @@ impl<T: Real> CornerKernel<T> for HexBox<T> {
             for alpha in 0..4 {
                 m[HOURGLASS[alpha]] = k * hg[i][alpha];
             }
-            m
-        };
-        for i in 0..3 {
-            add_synthesis_of_component(corners, i, moments(i));
+            add_synthesis_of_component(corners, i, m);
         }
         Ok(())
     }
@@ -1113,9 +1113,18 @@ impl<T: Real> CornerKernel<T> for HexCuboid<T> {
         let (f, hg) = self.deformation(corners);
         let k = self.hourglass_stiffness;
         // The hourglass moments' forces `k c_α` before the law, kept (see `kept_in_memory`).
-        let khg = kept_in_memory(hg.map(|row| row.map(|c| k * c)));
+        let khg: [[T; 4]; 3] = kept_in_memory(array(
+            #[inline(always)]
+            |i| {
+                array(
+                    #[inline(always)]
+                    |alpha| k * hg[i][alpha],
+                )
+            },
+        ));
         let p = law.first_piola_kirchhoff(&f)?;
-        let moments = |i: usize| {
+        // Each component's moments written out in the loop (see `HexBox`'s kernel).
+        for i in 0..3 {
             let row = &p[i];
             let mut m = [T::ZERO; 8];
             for j in 0..3 {
@@ -1124,10 +1133,7 @@ impl<T: Real> CornerKernel<T> for HexCuboid<T> {
             for alpha in 0..4 {
                 m[HOURGLASS[alpha]] = khg[i][alpha];
             }
-            m
-        };
-        for i in 0..3 {
-            add_synthesis_of_component(corners, i, moments(i));
+            add_synthesis_of_component(corners, i, m);
         }
         Ok(())
     }
@@ -1272,7 +1278,10 @@ impl<L: Real> Corners<L> for LaneCorners<L> {
     /// As [`Corners::add`] of `−v` (`0 − v = −v` up to the sign of a zero).
     #[inline(always)]
     fn sub(&mut self, p: usize, v: [L; 3]) {
-        self.f[p] = v.map(|x| -x);
+        self.f[p] = array(
+            #[inline(always)]
+            |i| -v[i],
+        );
     }
     /// As [`Corners::add`], one component.
     #[inline(always)]
