@@ -1,10 +1,13 @@
 //! Lane types over AVX registers (x86-64): 4 f64 in a `__m256d`, 8 f32 in a `__m256`, as
 //! [`Real`]s whose every operation is one IEEE 754 instruction per lane (add, sub, mul,
 //! div, sqrt: correctly rounded, the scalar's bits) or the scalar function per lane
-//! (`cbrt`). `ln` is the scalar's [`Real::ln`]: when every lane lies where the scalar takes
-//! its series ([`ln_near_one`], the kernels' Jacobians), the series in the registers, in the
-//! scalar's order of operations; otherwise the scalar per lane. A test holds it to the
-//! scalar on inputs across the whole range. No fused multiply-add is used.
+//! (`cbrt`). `ln` is the scalar's [`Real::ln`] in the registers: the series
+//! ([`ln_near_one`]) in the lanes where the scalar takes it (the kernels' Jacobians), and
+//! `libm`'s own algorithm in the others (FreeBSD's `e_log.c` / `e_logf.c`: the argument
+//! reduction per lane in integers, then the polynomial in the registers, in `libm`'s order
+//! of operations), both in the scalar's order of operations, so the scalar's bits; the
+//! scalar per lane when a lane is not a positive normal number. Tests hold it to the scalar
+//! on inputs across the whole range. No fused multiply-add is used.
 //!
 //! Safety: the methods call AVX intrinsics. They are only executed inside functions
 //! compiled with `#[target_feature(enable = "avx")]` and reached after
@@ -333,31 +336,143 @@ impl F32x8 {
     }
 }
 
+/// `libm::log`'s constants (libm 0.2, `log.rs`), the same literals (kept verbatim, digits
+/// beyond the type's precision included, so they are visibly libm's).
+#[allow(clippy::excessive_precision)]
+mod log64 {
+    pub const LN2_HI: f64 = 6.93147180369123816490e-01;
+    pub const LN2_LO: f64 = 1.90821492927058770002e-10;
+    pub const LG1: f64 = 6.666666666666735130e-01;
+    pub const LG2: f64 = 3.999999999940941908e-01;
+    pub const LG3: f64 = 2.857142874366239149e-01;
+    pub const LG4: f64 = 2.222219843214978396e-01;
+    pub const LG5: f64 = 1.818357216161805012e-01;
+    pub const LG6: f64 = 1.531383769920937332e-01;
+    pub const LG7: f64 = 1.479819860511658591e-01;
+}
+
+/// `libm::logf`'s constants (libm 0.2, `logf.rs`), the same literals (verbatim).
+#[allow(clippy::excessive_precision)]
+mod log32 {
+    pub const LN2_HI: f32 = 6.9313812256e-01;
+    pub const LN2_LO: f32 = 9.0580006145e-06;
+    pub const LG1: f32 = 0.66666662693;
+    pub const LG2: f32 = 0.40000972152;
+    pub const LG3: f32 = 0.28498786688;
+    pub const LG4: f32 = 0.24279078841;
+}
+
 impl F64x4 {
-    /// [`Real::ln`] of `f64` lane by lane (see the module doc).
+    /// [`Real::ln`] of `f64` lane by lane (see the module doc): the series where every
+    /// lane is in its range; else `libm::log` in the registers, the series blended in for
+    /// the lanes in range; the scalar per lane when a lane is not a positive normal number.
     #[inline(always)]
     fn ln_lanes(self) -> Self {
         let d = self - Self::splat(1.0);
-        if d.abs().all::<_CMP_LE_OQ>(Self::splat(LN_SERIES_RADIUS)) {
-            ln_near_one(d, LN_SERIES_TERMS_F64)
-        } else {
-            self.each(<f64 as Real>::ln)
+        // SAFETY: AVX is present (module doc).
+        let near =
+            unsafe { _mm256_cmp_pd::<_CMP_LE_OQ>(d.abs().0, _mm256_set1_pd(LN_SERIES_RADIUS)) };
+        // SAFETY: as above.
+        let lanes_near = unsafe { _mm256_movemask_pd(near) };
+        if lanes_near == 0b1111 {
+            return ln_near_one(d, LN_SERIES_TERMS_F64);
         }
+        let Some(far) = self.libm_log() else {
+            return self.each(<f64 as Real>::ln);
+        };
+        if lanes_near == 0 {
+            return far;
+        }
+        let series = ln_near_one(d, LN_SERIES_TERMS_F64);
+        // SAFETY: AVX is present (module doc). Takes `series` where `near` is set.
+        F64x4(unsafe { _mm256_blendv_pd(far.0, series.0, near) })
+    }
+
+    /// `libm::log` lane by lane, in libm's order of operations (its bits); None when a
+    /// lane is zero, subnormal, negative, infinite or NaN (libm's special paths).
+    #[inline(always)]
+    fn libm_log(self) -> Option<Self> {
+        use log64::*;
+        let x = self.lanes();
+        let (mut reduced, mut dk) = ([0.0f64; 4], [0.0f64; 4]);
+        for l in 0..4 {
+            let ui = x[l].to_bits();
+            let hx = (ui >> 32) as u32;
+            if !(0x0010_0000..0x7ff0_0000).contains(&hx) {
+                return None;
+            }
+            // Reduce x into [sqrt(2)/2, sqrt(2)]: x = 2^k (1 + f).
+            let hx = hx + (0x3ff0_0000 - 0x3fe6_a09e);
+            let k = ((hx >> 20) as i32) - 0x3ff;
+            let hx = (hx & 0x000f_ffff) + 0x3fe6_a09e;
+            reduced[l] = f64::from_bits(((hx as u64) << 32) | (ui & 0xffff_ffff));
+            dk[l] = k as f64;
+        }
+        let c = Self::splat;
+        let (x, dk) = (Self::of(reduced), Self::of(dk));
+        let f = x - c(1.0);
+        let hfsq = c(0.5) * f * f;
+        let s = f / (c(2.0) + f);
+        let z = s * s;
+        let w = z * z;
+        let t1 = w * (c(LG2) + w * (c(LG4) + w * c(LG6)));
+        let t2 = z * (c(LG1) + w * (c(LG3) + w * (c(LG5) + w * c(LG7))));
+        let r = t2 + t1;
+        Some(s * (hfsq + r) + dk * c(LN2_LO) - hfsq + f + dk * c(LN2_HI))
     }
 }
 
 impl F32x8 {
-    /// [`Real::ln`] of `f32` lane by lane (see the module doc).
+    /// [`Real::ln`] of `f32` lane by lane (as [`F64x4::ln_lanes`]).
     #[inline(always)]
     fn ln_lanes(self) -> Self {
         let d = self - Self::splat(1.0);
-        if d.abs()
-            .all::<_CMP_LE_OQ>(Self::splat(LN_SERIES_RADIUS as f32))
-        {
-            ln_near_one(d, LN_SERIES_TERMS_F32)
-        } else {
-            self.each(<f32 as Real>::ln)
+        let radius = LN_SERIES_RADIUS as f32;
+        // SAFETY: AVX is present (module doc).
+        let near = unsafe { _mm256_cmp_ps::<_CMP_LE_OQ>(d.abs().0, _mm256_set1_ps(radius)) };
+        // SAFETY: as above.
+        let lanes_near = unsafe { _mm256_movemask_ps(near) };
+        if lanes_near == 0xff {
+            return ln_near_one(d, LN_SERIES_TERMS_F32);
         }
+        let Some(far) = self.libm_log() else {
+            return self.each(<f32 as Real>::ln);
+        };
+        if lanes_near == 0 {
+            return far;
+        }
+        let series = ln_near_one(d, LN_SERIES_TERMS_F32);
+        // SAFETY: AVX is present (module doc). Takes `series` where `near` is set.
+        F32x8(unsafe { _mm256_blendv_ps(far.0, series.0, near) })
+    }
+
+    /// `libm::logf` lane by lane (as [`F64x4::libm_log`]).
+    #[inline(always)]
+    fn libm_log(self) -> Option<Self> {
+        use log32::*;
+        let x = self.lanes();
+        let (mut reduced, mut dk) = ([0.0f32; 8], [0.0f32; 8]);
+        for l in 0..8 {
+            let ix = x[l].to_bits();
+            if !(0x0080_0000..0x7f80_0000).contains(&ix) {
+                return None;
+            }
+            let ix = ix + (0x3f80_0000 - 0x3f35_04f3);
+            let k = ((ix >> 23) as i32) - 0x7f;
+            reduced[l] = f32::from_bits((ix & 0x007f_ffff) + 0x3f35_04f3);
+            dk[l] = k as f32;
+        }
+        let c = Self::splat;
+        let (x, dk) = (Self::of(reduced), Self::of(dk));
+        let f = x - c(1.0);
+        let s = f / (c(2.0) + f);
+        let z = s * s;
+        let w = z * z;
+        let t1 = w * (c(LG2) + w * c(LG4));
+        let t2 = z * (c(LG1) + w * c(LG3));
+        let r = t2 + t1;
+        let hfsq = c(0.5) * f * f;
+        Some(s * (hfsq + r) + dk * c(LN2_LO) - hfsq + f + dk * c(LN2_HI))
     }
 }
 
