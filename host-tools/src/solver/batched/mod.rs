@@ -165,8 +165,10 @@ pub trait ElementLoop<T: Real>: Send + Sync {
 /// are cut into blocks of whole packs; a node belongs to the first block that touches
 /// it. Each block's thread adds its forces straight into the nodes it owns (in element
 /// order: no earlier block touches them), and keeps its forces on other nodes aside, in
-/// order; these are added after all blocks finished, block by block. So every node sums
-/// its elements' forces from zero in kernel order, as one thread does.
+/// order; these are added after all blocks finished, block by block (in parallel over the
+/// owners: each owner's nodes take their kept forces in block order, then in the order
+/// they were produced). So every node sums its elements' forces from zero in kernel
+/// order, as one thread does.
 pub struct Plan {
     /// Per block, the pack index ranges of each kernel list (general, parallelepipeds,
     /// cuboids; full integration uses the first).
@@ -175,6 +177,9 @@ pub struct Plan {
     owner: Vec<u16>,
     /// Per block, the nodes of its forces kept aside, in the order it produces them.
     aside: Vec<Vec<u32>>,
+    /// Per owning block, the kept forces on its nodes as (block, index in `aside[block]`),
+    /// in block order, then in the order each block produced them.
+    aside_by_owner: Vec<Vec<(u32, u32)>>,
 }
 
 impl Plan {
@@ -407,10 +412,18 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
             }
             done += active;
         }
+        let mut aside_by_owner = vec![Vec::new(); parts];
+        for (b, nodes) in aside.iter().enumerate() {
+            for (i, &n) in nodes.iter().enumerate() {
+                let o = *owner.get(n as usize)? as usize;
+                aside_by_owner.get_mut(o)?.push((b as u32, i as u32));
+            }
+        }
         Some(Plan {
             blocks,
             owner,
             aside,
+            aside_by_owner,
         })
     }
 
@@ -469,19 +482,27 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
         if !ok.iter().all(|&k| k) {
             return false;
         }
-        // The forces kept aside, block by block, each in the order it produced them.
-        for (nodes, values) in plan.aside.iter().zip(kept.iter()) {
-            if nodes.len() != values.len() {
-                return false;
-            }
-            for (&n, v) in nodes.iter().zip(values) {
-                if let Some(d) = f.get_mut(n as usize) {
-                    for i in 0..3 {
-                        d[i] += v[i];
+        // The forces kept aside, each owner's on its nodes, block by block, each block's
+        // in the order it produced them.
+        if plan.aside.iter().zip(kept.iter()).any(|(n, v)| n.len() != v.len()) {
+            return false;
+        }
+        let kept = &*kept;
+        pool.install(|| {
+            plan.aside_by_owner.par_iter().for_each(|list| {
+                for &(b, i) in list {
+                    let (b, i) = (b as usize, i as usize);
+                    let node = plan.aside.get(b).and_then(|a| a.get(i));
+                    let value = kept.get(b).and_then(|k| k.get(i));
+                    if let (Some(&n), Some(&v)) = (node, value) {
+                        // SAFETY: node `n` is owned by this list's block (`Plan::plan`
+                        // files a kept force under its node's owner), and no other list
+                        // holds that block's nodes.
+                        unsafe { shared.add(n as usize, v) }
                     }
                 }
-            }
-        }
+            })
+        });
         true
     }
 }
