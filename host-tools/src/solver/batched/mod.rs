@@ -484,7 +484,12 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
         }
         // The forces kept aside, each owner's on its nodes, block by block, each block's
         // in the order it produced them.
-        if plan.aside.iter().zip(kept.iter()).any(|(n, v)| n.len() != v.len()) {
+        if plan
+            .aside
+            .iter()
+            .zip(kept.iter())
+            .any(|(n, v)| n.len() != v.len())
+        {
             return false;
         }
         let kept = &*kept;
