@@ -12,6 +12,10 @@ RUSTFLAGS="-C target-cpu=cortex-m7" cargo build --release --target thumbv7em-non
 # Host tests (optimised: the physics tests run 1e5-step simulations).
 cargo test --workspace --release
 
+# The host's SIMD element loops keep their lanes in registers (no kernel closure, `map` or
+# intrinsic left out of line): a speed property the bit-identity tests cannot see.
+bash scripts/check-simd-inlined.sh
+
 # The board firmware on an emulated Cortex-M7 (QEMU mps2-an500): bit-identical to `pe solve`
 # and board-sim (f64, f32), faults reported. Installs qemu-system-arm if missing.
 bash scripts/qemu-check.sh
