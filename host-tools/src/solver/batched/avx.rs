@@ -26,7 +26,7 @@ use pe_firmware::physics::{LaneReal, Real};
 macro_rules! avx_lanes {
     ($name:ident, $reg:ty, $s:ty, $n:expr, $add:ident, $sub:ident, $mul:ident, $div:ident,
      $sqrt:ident, $xor:ident, $andnot:ident, $set1:ident, $loadu:ident, $storeu:ident,
-     $cmp:ident, $movemask:ident) => {
+     $cmp:ident, $movemask:ident, $blendv:ident, $ln_terms:expr) => {
         /// AVX lanes; see the module doc.
         #[derive(Clone, Copy, Debug)]
         #[repr(transparent)]
@@ -63,6 +63,30 @@ macro_rules! avx_lanes {
             fn all<const CMP: i32>(self, o: Self) -> bool {
                 // SAFETY: AVX is present (module doc).
                 unsafe { $movemask($cmp::<CMP>(self.0, o.0)) == (1 << $n) - 1 }
+            }
+            /// [`Real::ln`] of the scalar lane by lane (see the module doc): the series
+            /// where every lane is in its range; else `libm`'s log in the registers
+            /// (`libm_log`), the series blended in for the lanes in range; the scalar per
+            /// lane when a lane is not a positive normal number.
+            #[inline(always)]
+            fn ln_lanes(self) -> Self {
+                let d = self - Self::splat(1.0);
+                // SAFETY: AVX is present (module doc).
+                let near = unsafe { $cmp::<_CMP_LE_OQ>(d.abs().0, $set1(LN_SERIES_RADIUS as $s)) };
+                // SAFETY: as above.
+                let lanes_near = unsafe { $movemask(near) };
+                if lanes_near == (1 << $n) - 1 {
+                    return ln_near_one(d, $ln_terms);
+                }
+                let Some(far) = self.libm_log() else {
+                    return self.each(<$s as Real>::ln);
+                };
+                if lanes_near == 0 {
+                    return far;
+                }
+                let series = ln_near_one(d, $ln_terms);
+                // SAFETY: AVX is present (module doc). Takes `series` where `near` is set.
+                $name(unsafe { $blendv(far.0, series.0, near) })
             }
         }
 
@@ -241,7 +265,9 @@ avx_lanes!(
     _mm256_loadu_pd,
     _mm256_storeu_pd,
     _mm256_cmp_pd,
-    _mm256_movemask_pd
+    _mm256_movemask_pd,
+    _mm256_blendv_pd,
+    LN_SERIES_TERMS_F64
 );
 avx_lanes!(
     F32x8,
@@ -259,7 +285,9 @@ avx_lanes!(
     _mm256_loadu_ps,
     _mm256_storeu_ps,
     _mm256_cmp_ps,
-    _mm256_movemask_ps
+    _mm256_movemask_ps,
+    _mm256_blendv_ps,
+    LN_SERIES_TERMS_F32
 );
 
 /// The gather of the corners' displacements, for both lane types: each lane's 3-vector
@@ -363,31 +391,6 @@ mod log32 {
 }
 
 impl F64x4 {
-    /// [`Real::ln`] of `f64` lane by lane (see the module doc): the series where every
-    /// lane is in its range; else `libm::log` in the registers, the series blended in for
-    /// the lanes in range; the scalar per lane when a lane is not a positive normal number.
-    #[inline(always)]
-    fn ln_lanes(self) -> Self {
-        let d = self - Self::splat(1.0);
-        // SAFETY: AVX is present (module doc).
-        let near =
-            unsafe { _mm256_cmp_pd::<_CMP_LE_OQ>(d.abs().0, _mm256_set1_pd(LN_SERIES_RADIUS)) };
-        // SAFETY: as above.
-        let lanes_near = unsafe { _mm256_movemask_pd(near) };
-        if lanes_near == 0b1111 {
-            return ln_near_one(d, LN_SERIES_TERMS_F64);
-        }
-        let Some(far) = self.libm_log() else {
-            return self.each(<f64 as Real>::ln);
-        };
-        if lanes_near == 0 {
-            return far;
-        }
-        let series = ln_near_one(d, LN_SERIES_TERMS_F64);
-        // SAFETY: AVX is present (module doc). Takes `series` where `near` is set.
-        F64x4(unsafe { _mm256_blendv_pd(far.0, series.0, near) })
-    }
-
     /// `libm::log` lane by lane, in libm's order of operations (its bits); None when a
     /// lane is zero, subnormal, negative, infinite or NaN (libm's special paths).
     #[inline(always)]
@@ -423,29 +426,6 @@ impl F64x4 {
 }
 
 impl F32x8 {
-    /// [`Real::ln`] of `f32` lane by lane (as [`F64x4::ln_lanes`]).
-    #[inline(always)]
-    fn ln_lanes(self) -> Self {
-        let d = self - Self::splat(1.0);
-        let radius = LN_SERIES_RADIUS as f32;
-        // SAFETY: AVX is present (module doc).
-        let near = unsafe { _mm256_cmp_ps::<_CMP_LE_OQ>(d.abs().0, _mm256_set1_ps(radius)) };
-        // SAFETY: as above.
-        let lanes_near = unsafe { _mm256_movemask_ps(near) };
-        if lanes_near == 0xff {
-            return ln_near_one(d, LN_SERIES_TERMS_F32);
-        }
-        let Some(far) = self.libm_log() else {
-            return self.each(<f32 as Real>::ln);
-        };
-        if lanes_near == 0 {
-            return far;
-        }
-        let series = ln_near_one(d, LN_SERIES_TERMS_F32);
-        // SAFETY: AVX is present (module doc). Takes `series` where `near` is set.
-        F32x8(unsafe { _mm256_blendv_ps(far.0, series.0, near) })
-    }
-
     /// `libm::logf` lane by lane (as [`F64x4::libm_log`]).
     #[inline(always)]
     fn libm_log(self) -> Option<Self> {
