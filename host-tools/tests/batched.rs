@@ -9,6 +9,7 @@
 //! tolerance is zero; each comparison first checks that the forces are far from trivial.
 
 use host_tools::problem::elements::Elements;
+use host_tools::problem::Problem;
 use host_tools::solver::batched::{Batched, Isa};
 use pe_firmware::physics::{
     LameParameters, MaterialLaw, PhysicsError, Real, ReferenceHex, Volumetric,
@@ -448,4 +449,68 @@ fn an_inverted_element_in_a_boards_batch_is_named_as_the_board_names_it() {
     }
     for_type::<f64>();
     for_type::<f32>();
+}
+
+/// The parallel plan (`pe solve --threads N`) checks who owns a node only on the packs
+/// that touch a node of an earlier block; the rest add their forces straight in. Counted
+/// independently from the mesh: the bench box's cells are all cuboids, packed in mesh
+/// order `N` at a time, and block `b` starts at the first pack `p` with
+/// `p N parts >= b cells` (the plan's equal split); a pack is checked when one of its
+/// cells' nodes belongs to a cell of an earlier block. A cut at a layer boundary checks
+/// one layer of `nx ny` cells, so 4 blocks of the 20 000-cell box check about 14%.
+#[test]
+fn the_parallel_plan_checks_owners_only_where_blocks_meet() {
+    use pe_firmware::image::{Integration, Precision};
+    for cells in [2000, 20000] {
+        let scene =
+            host_tools::analysis::bench::bench_scene(cells, Integration::Reduced, Precision::F64)
+                .expect("scene");
+        let p = Problem::from_scene(&scene, std::path::Path::new(".")).expect("problem");
+        let elements = Elements::<f64>::build(&p);
+        let laws: Vec<MaterialLaw<f64>> = p.laws.iter().map(|l| l.cast::<f64>()).collect();
+        let b = Batched::build(&elements, &laws, Isa::detect()).expect("packs");
+        let lanes = if b.describe().starts_with("f64x4") {
+            4
+        } else {
+            0
+        };
+        assert_eq!(lanes, 4, "f64 packs 4 lanes: {}", b.describe());
+        let count = p.mesh.cells.len();
+        let packs = count.div_ceil(lanes);
+        for parts in [1, 2, 4, 6] {
+            let plan = b
+                .element_loop()
+                .plan(parts, p.mesh.nodes.len())
+                .expect("plan");
+            assert_eq!(plan.blocks(), parts, "{count} cells: blocks");
+            let block_of = |pack: usize| {
+                (0..parts)
+                    .rev()
+                    .find(|&b| pack * lanes * parts >= b * count)
+                    .unwrap_or(0)
+            };
+            let mut first = vec![usize::MAX; p.mesh.nodes.len()];
+            for (c, nodes) in p.mesh.cells.iter().enumerate() {
+                for &n in nodes {
+                    first[n as usize] = first[n as usize].min(block_of(c / lanes));
+                }
+            }
+            let checked = (0..packs)
+                .filter(|&k| {
+                    let cells = &p.mesh.cells[k * lanes..((k + 1) * lanes).min(count)];
+                    cells
+                        .iter()
+                        .flatten()
+                        .any(|&n| first[n as usize] < block_of(k))
+                })
+                .count();
+            let what = format!("{count} cells, {parts} blocks");
+            assert_eq!(plan.checked_packs(), (checked, packs), "{what}");
+            assert_eq!(checked == 0, parts == 1, "{what}: {checked} checked");
+            if count > 20000 && parts <= 4 {
+                // (parts - 1) cuts, each one layer of 44 x 22 cells: 14% at 4 blocks.
+                assert!(checked * 100 <= 15 * packs, "{what}: {checked} of {packs}");
+            }
+        }
+    }
 }

@@ -161,6 +161,10 @@ pub trait ElementLoop<T: Real>: Send + Sync {
     }
 }
 
+/// A block's runs of packs of one kernel list, in order: each a pack index range and
+/// whether it checks who owns each node.
+type Runs = Vec<(Range<usize>, bool)>;
+
 /// Elements shared among threads with the scalar loop's bits. The elements (kernel order)
 /// are cut into blocks of whole packs; a node belongs to the first block that touches
 /// it. Each block's thread adds its forces straight into the nodes it owns (in element
@@ -169,10 +173,15 @@ pub trait ElementLoop<T: Real>: Send + Sync {
 /// owners: each owner's nodes take their kept forces in block order, then in the order
 /// they were produced). So every node sums its elements' forces from zero in kernel
 /// order, as one thread does.
+///
+/// A pack all of whose nodes its block owns (most of them) adds its forces without
+/// asking who owns each node: only the runs of packs that touch an earlier block's node
+/// pay that check.
 pub struct Plan {
-    /// Per block, the pack index ranges of each kernel list (general, parallelepipeds,
-    /// cuboids; full integration uses the first).
-    blocks: Vec<[Range<usize>; 3]>,
+    /// Per block, the runs of packs of each kernel list (general, parallelepipeds,
+    /// cuboids; full integration uses the first), in order: each a pack index range and
+    /// whether a pack of it touches a node the block does not own.
+    blocks: Vec<[Runs; 3]>,
     /// Owning block of each node (`u16::MAX`: no element).
     owner: Vec<u16>,
     /// Per block, the nodes of its forces kept aside, in the order it produces them.
@@ -183,6 +192,20 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// The blocks' packs, and how many of them are in runs that check each node's owner
+    /// (runs touching a node another block owns): `(checked, all)`.
+    pub fn checked_packs(&self) -> (usize, usize) {
+        let runs = self.blocks.iter().flatten().flatten();
+        runs.fold((0, 0), |(c, a), (r, shared)| {
+            (c + if *shared { r.len() } else { 0 }, a + r.len())
+        })
+    }
+
+    /// The number of blocks.
+    pub fn blocks(&self) -> usize {
+        self.blocks.len()
+    }
+
     /// Room for each block's forces kept aside.
     pub fn kept_buffers<T>(&self) -> Vec<Vec<[T; 3]>> {
         self.aside
@@ -200,6 +223,11 @@ struct SharedForces<T>(*mut [T; 3], usize);
 unsafe impl<T: Send> Sync for SharedForces<T> {}
 
 impl<T: Real> SharedForces<T> {
+    /// The same array, for another closure to own.
+    fn copy(&self) -> Self {
+        SharedForces(self.0, self.1)
+    }
+
     /// Adds `v` at node `n`.
     ///
     /// # Safety
@@ -385,7 +413,7 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
             .clamp(1, order.len().max(1))
             .min(u16::MAX as usize - 1);
         let elements: usize = order.iter().map(|&(k, i)| lists[k][i].1).sum();
-        let mut blocks = vec![[0..0, 0..0, 0..0]; parts];
+        let mut blocks: Vec<[Runs; 3]> = vec![[Vec::new(), Vec::new(), Vec::new()]; parts];
         let mut owner = vec![u16::MAX; node_count];
         let mut aside = vec![Vec::new(); parts];
         let (mut done, mut block) = (0, 0);
@@ -394,12 +422,7 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
             while block + 1 < parts && done * parts >= (block + 1) * elements {
                 block += 1;
             }
-            let r = &mut blocks[block][k];
-            if r.start == r.end {
-                *r = i..i + 1;
-            } else {
-                r.end = i + 1;
-            }
+            let kept_before = aside[block].len();
             for at in nodes.iter().take(*active) {
                 for &n in at {
                     match owner.get_mut(n as usize) {
@@ -409,6 +432,12 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
                         None => return None,
                     }
                 }
+            }
+            let shared = aside[block].len() > kept_before;
+            let runs = &mut blocks[block][k];
+            match runs.last_mut() {
+                Some((r, s)) if *s == shared && r.end == i => r.end = i + 1,
+                _ => runs.push((i..i + 1, shared)),
             }
             done += active;
         }
@@ -446,17 +475,24 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
                 .par_iter()
                 .zip(kept.par_iter_mut())
                 .enumerate()
-                .map(|(b, (ranges, kept))| {
+                .map(|(b, (runs, kept))| {
                     kept.clear();
-                    let owner = &plan.owner;
-                    let shared = &shared;
-                    let mut scatter = |n: usize, v: [S; 3]| {
-                        if owner.get(n) == Some(&(b as u16)) {
+                    // Plain copies (not references) in the closures, so the force
+                    // stores, through a raw pointer, do not make the loop reload them.
+                    let (owner, block) = (plan.owner.as_slice(), b as u16);
+                    let (own, mine) = (shared.copy(), shared.copy());
+                    let mut checked = move |n: usize, v: [S; 3]| {
+                        if owner.get(n) == Some(&block) {
                             // SAFETY: block `b` owns node `n` (see `Plan`).
-                            unsafe { shared.add(n, v) }
+                            unsafe { own.add(n, v) }
                         } else {
                             kept.push(v);
                         }
+                    };
+                    let mut owned = move |n: usize, v: [S; 3]| {
+                        // SAFETY: the plan found every node of these packs owned by
+                        // block `b` (a run not marked shared).
+                        unsafe { mine.add(n, v) }
                     };
                     match &self.packs {
                         Packs::Reduced {
@@ -464,17 +500,11 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
                             boxes,
                             cuboids,
                         } => {
-                            let g = general.get(ranges[0].clone()).unwrap_or(&[]);
-                            let x = boxes.get(ranges[1].clone()).unwrap_or(&[]);
-                            let c = cuboids.get(ranges[2].clone()).unwrap_or(&[]);
-                            run_with(g, u, &mut scatter, isa).is_none()
-                                && run_with(x, u, &mut scatter, isa).is_none()
-                                && run_with(c, u, &mut scatter, isa).is_none()
+                            run_runs(general, &runs[0], u, &mut checked, &mut owned, isa)
+                                && run_runs(boxes, &runs[1], u, &mut checked, &mut owned, isa)
+                                && run_runs(cuboids, &runs[2], u, &mut checked, &mut owned, isa)
                         }
-                        Packs::Full(p) => {
-                            let p = p.get(ranges[0].clone()).unwrap_or(&[]);
-                            run_with(p, u, &mut scatter, isa).is_none()
-                        }
+                        Packs::Full(p) => run_runs(p, &runs[0], u, &mut checked, &mut owned, isa),
                     }
                 })
                 .collect::<Vec<bool>>()
@@ -510,6 +540,33 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
         });
         true
     }
+}
+
+/// The runs of `packs` in order, each on [`run_with`] with `checked` (a run touching
+/// nodes another block owns) or `owned`; false if a pack failed.
+fn run_runs<K, S, L, const N: usize>(
+    packs: &[Batch<K, L, N>],
+    runs: &[(Range<usize>, bool)],
+    u: &[[S; 3]],
+    checked: &mut impl FnMut(usize, [S; 3]),
+    owned: &mut impl FnMut(usize, [S; 3]),
+    isa: Isa,
+) -> bool
+where
+    K: LaneKernel<S, L, N>,
+    S: Real,
+    L: LaneReal<S, N>,
+{
+    runs.iter().all(|(r, shared)| {
+        let Some(p) = packs.get(r.clone()) else {
+            return false;
+        };
+        if *shared {
+            run_with(p, u, checked, isa).is_none()
+        } else {
+            run_with(p, u, owned, isa).is_none()
+        }
+    })
 }
 
 /// Each pack's nodes in scatter order (per lane) and its active count.
