@@ -145,16 +145,27 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                 values: repr.payload.len() as u16,
             }));
         }
-        for (j, entry) in self.st.recvs[s as usize..e as usize].iter().enumerate() {
-            let k = entry.node as usize;
-            for i in 0..3 {
-                let v = T::from_f64(repr.payload.get(3 * j + i).unwrap_or(f64::NAN));
-                let cur = self.st.force[k][i];
-                self.st.force[k][i] = match entry.combine {
-                    Combine::Before => v + cur,
-                    Combine::After => cur + v,
-                    Combine::Replace => v,
-                };
+        // The payload holds exactly three values per entry (checked above): walked once,
+        // in order, instead of indexed value by value.
+        let mut values = repr.payload.iter();
+        for entry in &self.st.recvs[s as usize..e as usize] {
+            // The loader checked every node index (`image::codec`): never skipped.
+            let Some(force) = self.st.force.get_mut(entry.node as usize) else {
+                continue;
+            };
+            let v = [(); 3].map(|()| T::from_f64(values.next().unwrap_or(f64::NAN)));
+            match entry.combine {
+                Combine::Before => {
+                    for (f, v) in force.iter_mut().zip(v) {
+                        *f = v + *f;
+                    }
+                }
+                Combine::After => {
+                    for (f, v) in force.iter_mut().zip(v) {
+                        *f += v;
+                    }
+                }
+                Combine::Replace => *force = v,
             }
         }
         Ok(true)
