@@ -20,29 +20,61 @@ pub const LINK_QUEUE_FRAMES: usize = 16;
 /// A board's doorbell: rung when a frame arrives for it.
 #[derive(Default)]
 pub struct Doorbell {
-    rung: Mutex<bool>,
+    /// Rung since the last wait, and how many threads are parked in [`Doorbell::wait`].
+    state: Mutex<Bell>,
     cv: Condvar,
 }
 
+#[derive(Default)]
+struct Bell {
+    rung: bool,
+    parked: u32,
+}
+
 impl Doorbell {
+    /// Rings: a parked waiter wakes, a later wait returns at once. Wakes (a system call)
+    /// only when a waiter is parked: most frames arrive while their board's worker is busy
+    /// or spinning, and a ring per frame was a system call per frame.
     pub fn ring(&self) {
-        if let Ok(mut r) = self.rung.lock() {
-            *r = true;
-        }
-        self.cv.notify_one();
-    }
-    /// Waits until rung (or `timeout`), and clears it.
-    pub fn wait(&self, timeout: Duration) {
-        if let Ok(mut r) = self.rung.lock() {
-            if !*r {
-                if let Ok((g, _)) = self.cv.wait_timeout(r, timeout) {
-                    r = g;
-                } else {
-                    return;
-                }
+        let parked = match self.state.lock() {
+            Ok(mut b) => {
+                b.rung = true;
+                b.parked > 0
             }
-            *r = false;
+            Err(_) => true,
+        };
+        if parked {
+            self.cv.notify_one();
         }
+    }
+    /// Waits until rung (or `timeout`), and clears it; whether a ring ended it (false when
+    /// the timeout did). The count of parked waiters changes under the lock that `ring`
+    /// reads it under, so no ring is missed.
+    pub fn wait(&self, timeout: Duration) -> bool {
+        let Ok(mut b) = self.state.lock() else {
+            return false;
+        };
+        if !b.rung {
+            b.parked += 1;
+            match self.cv.wait_timeout(b, timeout) {
+                Ok((g, waited)) => {
+                    b = g;
+                    b.parked -= 1;
+                    if waited.timed_out() {
+                        b.rung = false;
+                        return false;
+                    }
+                }
+                Err(_) => return false,
+            }
+        }
+        std::mem::replace(&mut b.rung, false)
+    }
+
+    /// Threads parked in [`Doorbell::wait`] now.
+    #[cfg(test)]
+    fn parked(&self) -> u32 {
+        self.state.lock().map(|b| b.parked).unwrap_or(0)
     }
 }
 
@@ -978,5 +1010,36 @@ impl BoardLinks {
             BoardLinks::Plain(_) => 0,
             BoardLinks::Recovering(g) => g.unacknowledged(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A ring with no one parked is kept for the next wait, and a ring while a thread is
+    /// parked wakes it: its wait reports the ring, not the end of its 60 s timeout (which
+    /// is what a ring that skipped the wake-up would leave it to). The waiter waits again
+    /// after a spurious wake-up (the ring then finds it unparked and is kept for it).
+    #[test]
+    fn a_ring_wakes_a_parked_waiter_and_is_kept_when_none_is_parked() {
+        let bell = Arc::new(Doorbell::default());
+        bell.ring();
+        assert!(
+            bell.wait(Duration::from_secs(60)),
+            "the ring before the wait is kept"
+        );
+        assert_eq!(bell.parked(), 0);
+        let b = bell.clone();
+        let waiter = std::thread::spawn(move || (0..3).any(|_| b.wait(Duration::from_secs(20))));
+        while bell.parked() == 0 {
+            std::thread::yield_now();
+        }
+        bell.ring();
+        assert!(
+            waiter.join().unwrap_or(false),
+            "the parked waiter saw the ring"
+        );
+        assert_eq!(bell.parked(), 0);
     }
 }
