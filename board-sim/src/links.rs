@@ -1018,7 +1018,7 @@ mod tests {
     use super::*;
 
     /// A ring with no one parked is kept for the next wait, and a ring while a thread is
-    /// parked wakes it: its wait reports the ring, not the end of its 60 s timeout (which
+    /// parked wakes it: its wait reports the ring, not the end of its 20 s timeout (which
     /// is what a ring that skipped the wake-up would leave it to). The waiter waits again
     /// after a spurious wake-up (the ring then finds it unparked and is kept for it).
     #[test]
