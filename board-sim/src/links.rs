@@ -78,9 +78,29 @@ impl Doorbell {
     }
 }
 
+/// A link's frames in flight, and the buffers of frames taken, kept for the next frames
+/// (a link carries millions of frames in a run: no allocation each).
+#[derive(Default)]
+struct Queue {
+    frames: VecDeque<Vec<u8>>,
+    spare: Vec<Vec<u8>>,
+}
+
+impl Queue {
+    fn len(&self) -> usize {
+        self.frames.len()
+    }
+    fn push_back(&mut self, bytes: &[u8]) {
+        let mut v = self.spare.pop().unwrap_or_default();
+        v.clear();
+        v.extend_from_slice(bytes);
+        self.frames.push_back(v);
+    }
+}
+
 /// One directed link: a bounded queue of frames plus the receiver's doorbell.
 pub struct Channel {
-    queue: Mutex<VecDeque<Vec<u8>>>,
+    queue: Mutex<Queue>,
     /// Frames in `queue`, kept beside it so that a receiver polling an empty link does not
     /// take the lock (a board polls its links far more often than frames arrive).
     len: AtomicUsize,
@@ -266,7 +286,7 @@ fn push(ch: &Channel, packet: &[u8], max: usize) -> Result<(), SendError> {
     if q.len() >= max {
         return Err(SendError::WouldBlock);
     }
-    q.push_back(packet.to_vec());
+    q.push_back(packet);
     ch.len.store(q.len(), Ordering::Release);
     drop(q);
     ch.bell.ring();
@@ -290,7 +310,7 @@ impl Links for EmuLinks {
         if q.len() >= LINK_QUEUE_FRAMES {
             return Err(SendError::WouldBlock);
         }
-        q.push_back(frame.to_vec());
+        q.push_back(frame);
         ch.len.store(q.len(), Ordering::Release);
         drop(q);
         ch.bell.ring();
@@ -343,7 +363,7 @@ pub fn build_links(
         let c = coords(b);
         if let Some(a) = link_proto::link::board_at(c[0], c[1], c[2]) {
             inboxes[a as usize] = Some(Arc::new(Channel {
-                queue: Mutex::new(VecDeque::new()),
+                queue: Mutex::new(Queue::default()),
                 len: AtomicUsize::new(0),
                 bell: bells[b].clone(),
             }));
@@ -390,7 +410,7 @@ pub fn build_links(
             }
             let nb = index(d);
             let ch = Arc::new(Channel {
-                queue: Mutex::new(VecDeque::new()),
+                queue: Mutex::new(Queue::default()),
                 len: AtomicUsize::new(0),
                 bell: bells[nb].clone(),
             });
@@ -832,16 +852,16 @@ fn pop_into(ch: &Channel, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
         return Ok(None);
     }
     let mut q = ch.queue.lock().map_err(|_| RecvError::NoLink)?;
-    let front = q.pop_front();
+    let front = q.frames.pop_front();
     ch.len.store(q.len(), Ordering::Release);
     match front {
         None => Ok(None),
         Some(f) => {
-            let dst = buf
-                .get_mut(..f.len())
-                .ok_or(RecvError::BufferTooSmall { needed: f.len() })?;
-            dst.copy_from_slice(&f);
-            Ok(Some(f.len()))
+            let n = f.len();
+            let copied = buf.get_mut(..n).map(|dst| dst.copy_from_slice(&f));
+            q.spare.push(f);
+            copied.ok_or(RecvError::BufferTooSmall { needed: n })?;
+            Ok(Some(n))
         }
     }
 }
