@@ -898,6 +898,7 @@ fn run_worker<T: WireReal + 'static, E: ElementRecord<T> + 'static>(
     };
     loop {
         let mut progressed = false;
+        env.clock.tick();
         for (i, ctx) in boards.iter().enumerate() {
             if matches!(state[i], State::Done | State::Draining) {
                 links[i].poll();
@@ -1195,6 +1196,7 @@ impl Collected {
 fn spawn_workers(
     per_worker: Vec<(Vec<BoardCtx>, Vec<BoxedLinks>)>,
     bells: &[Arc<links::Doorbell>],
+    clocks: &[Arc<links::SweepClock>],
     tx: &mpsc::Sender<Report>,
     stop: &Arc<std::sync::atomic::AtomicBool>,
     sizing: StorageSizing,
@@ -1205,12 +1207,13 @@ fn spawn_workers(
     for (w, (ctxs, mut ls)) in per_worker.into_iter().enumerate() {
         let out = tx.clone();
         let bell = bells[w].clone();
+        let clock = clocks[w].clone();
         let stop = stop.clone();
         let h = std::thread::Builder::new()
             .name(format!("board-worker-{w}"))
             .stack_size(16 << 20)
             .spawn(move || {
-                let mut env = ThreadEnv::new(bell);
+                let mut env = ThreadEnv::new(bell, clock);
                 if let Err(f) = dispatch(ctxs, sizing, &mut ls, &mut env, &out, p, i) {
                     // A board's image was refused: nothing of this worker runs.
                     stop.store(true, Ordering::Relaxed);
@@ -1255,11 +1258,16 @@ pub fn run(
                 .unwrap_or(2)
         })
         .clamp(1, count);
+    // Contiguous blocks of boards (x fastest) per worker: most links join boards of one
+    // worker, whose frames need no other core.
+    let worker_of = |b: usize| b * workers / count;
     let bells: Vec<Arc<links::Doorbell>> = (0..workers)
         .map(|_| Arc::new(links::Doorbell::default()))
         .collect();
+    let clocks: Vec<Arc<links::SweepClock>> =
+        (0..workers).map(|_| links::SweepClock::new()).collect();
     let board_bells: Vec<Arc<links::Doorbell>> =
-        (0..count).map(|b| bells[b % workers].clone()).collect();
+        (0..count).map(|b| bells[worker_of(b)].clone()).collect();
     let (links, net) = build_links(dims, &board_bells, opts.global_recovery.is_some());
     let (tx, rx) = mpsc::channel::<Report>();
     let progress = Arc::new(AtomicU64::new(0));
@@ -1300,7 +1308,13 @@ pub fn run(
             None => Lower::Clean(link),
         };
         let l = Box::new(
-            BoardLinks::new(lower, opts.recovery, opts.global_recovery).map_err(|e| {
+            BoardLinks::new(
+                lower,
+                clocks[worker_of(b)].clone(),
+                opts.recovery,
+                opts.global_recovery,
+            )
+            .map_err(|e| {
                 anyhow!(
                     "link recovery {:?} / global recovery {:?}: {e}",
                     opts.recovery,
@@ -1308,10 +1322,18 @@ pub fn run(
                 )
             })?,
         );
-        per_worker[b % workers].0.push(ctx);
-        per_worker[b % workers].1.push(l);
+        per_worker[worker_of(b)].0.push(ctx);
+        per_worker[worker_of(b)].1.push(l);
     }
-    let handles = spawn_workers(per_worker, &bells, &tx, &stop, opts.storage, &header)?;
+    let handles = spawn_workers(
+        per_worker,
+        &bells,
+        &clocks,
+        &tx,
+        &stop,
+        opts.storage,
+        &header,
+    )?;
     drop(tx);
     let mut c = Collected::new(steps, n_nodes, count);
     // After the first fault the other boards run on for a grace period, so that every board
