@@ -306,15 +306,7 @@ pub struct EmuLinks {
 impl Links for EmuLinks {
     fn try_send(&mut self, face: Face, frame: &[u8]) -> Result<(), SendError> {
         let ch = self.tx[face.index()].as_ref().ok_or(SendError::NoLink)?;
-        let mut q = ch.queue.lock().map_err(|_| SendError::NoLink)?;
-        if q.len() >= LINK_QUEUE_FRAMES {
-            return Err(SendError::WouldBlock);
-        }
-        q.push_back(frame);
-        ch.len.store(q.len(), Ordering::Release);
-        drop(q);
-        ch.bell.ring();
-        Ok(())
+        push(ch, frame, LINK_QUEUE_FRAMES)
     }
 
     fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
@@ -438,10 +430,9 @@ impl SweepClock {
         })
     }
     /// Reads the time (ns since the clock's start) for the sweep about to begin.
-    pub fn tick(&self) -> u64 {
+    pub fn tick(&self) {
         let t = self.start.elapsed().as_nanos() as u64;
         self.now_ns.store(t, Ordering::Relaxed);
-        t
     }
     /// The time of the current sweep.
     pub fn now_ns(&self) -> u64 {
