@@ -846,7 +846,7 @@ fn run_worker<T: WireReal + 'static, E: ElementRecord<T> + 'static>(
             cuboid_ends: counts.cuboid_batch_ends,
         };
         let k = if ctx.batched {
-            BoardBatches::build(&board, Isa::detect())
+            BoardBatches::build(&board, Isa::detect_narrow())
         } else {
             Ok(BoardBatches::scalar())
         };

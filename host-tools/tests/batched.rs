@@ -151,11 +151,11 @@ fn case<T: Real>(general: usize, boxes: usize, full: bool, seed: u64) -> Case<T>
     }
 }
 
+/// Every instruction set this CPU runs (the portable lanes, AVX, AVX-512).
 fn isas() -> Vec<Isa> {
-    let mut v = vec![Isa::Portable];
-    if Isa::detect() != Isa::Portable {
-        v.push(Isa::detect());
-    }
+    let v = Isa::available();
+    assert_eq!(v.first(), Some(&Isa::Portable), "{v:?}");
+    assert_eq!(v.last(), Some(&Isa::detect()), "{v:?}");
     v
 }
 
@@ -468,48 +468,56 @@ fn the_parallel_plan_checks_owners_only_where_blocks_meet() {
         let p = Problem::from_scene(&scene, std::path::Path::new(".")).expect("problem");
         let elements = Elements::<f64>::build(&p);
         let laws: Vec<MaterialLaw<f64>> = p.laws.iter().map(|l| l.cast::<f64>()).collect();
-        let b = Batched::build(&elements, &laws, Isa::detect()).expect("packs");
-        let lanes = if b.describe().starts_with("f64x4") {
-            4
-        } else {
-            0
-        };
-        assert_eq!(lanes, 4, "f64 packs 4 lanes: {}", b.describe());
-        let count = p.mesh.cells.len();
-        let packs = count.div_ceil(lanes);
-        for parts in [1, 2, 4, 6] {
-            let plan = b
-                .element_loop()
-                .plan(parts, p.mesh.nodes.len())
-                .expect("plan");
-            assert_eq!(plan.blocks(), parts, "{count} cells: blocks");
-            let block_of = |pack: usize| {
-                (0..parts)
-                    .rev()
-                    .find(|&b| pack * lanes * parts >= b * count)
-                    .unwrap_or(0)
+        for isa in isas() {
+            let b = Batched::build(&elements, &laws, isa).expect("packs");
+            let lanes = if b.describe().starts_with("f64x4") {
+                4
+            } else if b.describe().starts_with("f64x8") {
+                8
+            } else {
+                0
             };
-            let mut first = vec![usize::MAX; p.mesh.nodes.len()];
-            for (c, nodes) in p.mesh.cells.iter().enumerate() {
-                for &n in nodes {
-                    first[n as usize] = first[n as usize].min(block_of(c / lanes));
+            assert!(
+                lanes == 4 || lanes == 8,
+                "f64 packs 4 or 8 lanes: {}",
+                b.describe()
+            );
+            let count = p.mesh.cells.len();
+            let packs = count.div_ceil(lanes);
+            for parts in [1, 2, 4, 6] {
+                let plan = b
+                    .element_loop()
+                    .plan(parts, p.mesh.nodes.len())
+                    .expect("plan");
+                assert_eq!(plan.blocks(), parts, "{count} cells: blocks");
+                let block_of = |pack: usize| {
+                    (0..parts)
+                        .rev()
+                        .find(|&b| pack * lanes * parts >= b * count)
+                        .unwrap_or(0)
+                };
+                let mut first = vec![usize::MAX; p.mesh.nodes.len()];
+                for (c, nodes) in p.mesh.cells.iter().enumerate() {
+                    for &n in nodes {
+                        first[n as usize] = first[n as usize].min(block_of(c / lanes));
+                    }
                 }
-            }
-            let checked = (0..packs)
-                .filter(|&k| {
-                    let cells = &p.mesh.cells[k * lanes..((k + 1) * lanes).min(count)];
-                    cells
-                        .iter()
-                        .flatten()
-                        .any(|&n| first[n as usize] < block_of(k))
-                })
-                .count();
-            let what = format!("{count} cells, {parts} blocks");
-            assert_eq!(plan.checked_packs(), (checked, packs), "{what}");
-            assert_eq!(checked == 0, parts == 1, "{what}: {checked} checked");
-            if count > 20000 && parts <= 4 {
-                // (parts - 1) cuts, each one layer of 44 x 22 cells: 14% at 4 blocks.
-                assert!(checked * 100 <= 15 * packs, "{what}: {checked} of {packs}");
+                let checked = (0..packs)
+                    .filter(|&k| {
+                        let cells = &p.mesh.cells[k * lanes..((k + 1) * lanes).min(count)];
+                        cells
+                            .iter()
+                            .flatten()
+                            .any(|&n| first[n as usize] < block_of(k))
+                    })
+                    .count();
+                let what = format!("{count} cells, {parts} blocks, {}", b.describe());
+                assert_eq!(plan.checked_packs(), (checked, packs), "{what}");
+                assert_eq!(checked == 0, parts == 1, "{what}: {checked} checked");
+                if count > 20000 && parts <= 4 {
+                    // (parts - 1) cuts, each one layer of 44 x 22 cells: 14% at 4 blocks.
+                    assert!(checked * 100 <= 15 * packs, "{what}: {checked} of {packs}");
+                }
             }
         }
     }

@@ -1,4 +1,5 @@
-//! Lane types over AVX registers (x86-64): 4 f64 in a `__m256d`, 8 f32 in a `__m256`, as
+//! Lane types over AVX registers (x86-64): 4 f64 in a `__m256d`, 8 f32 in a `__m256`, and
+//! over AVX-512 registers 8 f64 in a `__m512d`, 16 f32 in a `__m512`, as
 //! [`Real`]s whose every operation is one IEEE 754 instruction per lane (add, sub, mul,
 //! div, sqrt: correctly rounded, the scalar's bits) or the scalar function per lane
 //! (`cbrt`). `ln` is the scalar's [`Real::ln`] in the registers: the series
@@ -9,10 +10,12 @@
 //! scalar per lane when a lane is not a positive normal number. Tests hold it to the scalar
 //! on inputs across the whole range. No fused multiply-add is used.
 //!
-//! Safety: the methods call AVX intrinsics. They are only executed inside functions
-//! compiled with `#[target_feature(enable = "avx")]` and reached after
-//! `is_x86_feature_detected!("avx")` (see [`super::Batched::build`]); a value of these types is
-//! only ever built there, so no AVX instruction runs on a CPU without AVX.
+//! Safety: the methods call AVX (AVX-512F and DQ for the 512-bit types) intrinsics. They
+//! are only executed inside functions compiled with `#[target_feature(enable = "avx")]`
+//! (`"avx512f,avx512dq"`) and reached after `is_x86_feature_detected!` found those features
+//! (see [`super::Isa::detect`] and [`super::Batched::build`]); a value of these types is
+//! only ever built there, so no AVX (AVX-512) instruction runs on a CPU without it. "AVX is
+//! present" in the comments below means the type's instruction set.
 
 use core::arch::x86_64::*;
 use core::cmp::Ordering;
@@ -290,6 +293,77 @@ avx_lanes!(
     LN_SERIES_TERMS_F32
 );
 
+/// AVX-512 mask helpers in the shape the lane macro expects of `movemask` and `blendv`:
+/// the comparison already gives a lane mask, and the blend takes it first.
+///
+/// # Safety
+/// None needed (unsafe only as the AVX `movemask`s it stands for).
+#[inline(always)]
+unsafe fn kmask8_bits(m: __mmask8) -> i32 {
+    m as i32
+}
+/// # Safety
+/// None needed (as [`kmask8_bits`]).
+#[inline(always)]
+unsafe fn kmask16_bits(m: __mmask16) -> i32 {
+    m as i32
+}
+/// # Safety
+/// The CPU has AVX-512F.
+#[inline(always)]
+unsafe fn blend512_pd(a: __m512d, b: __m512d, m: __mmask8) -> __m512d {
+    // SAFETY: AVX-512F is present (module doc).
+    unsafe { _mm512_mask_blend_pd(m, a, b) }
+}
+/// # Safety
+/// The CPU has AVX-512F.
+#[inline(always)]
+unsafe fn blend512_ps(a: __m512, b: __m512, m: __mmask16) -> __m512 {
+    // SAFETY: AVX-512F is present (module doc).
+    unsafe { _mm512_mask_blend_ps(m, a, b) }
+}
+
+avx_lanes!(
+    F64x8,
+    __m512d,
+    f64,
+    8,
+    _mm512_add_pd,
+    _mm512_sub_pd,
+    _mm512_mul_pd,
+    _mm512_div_pd,
+    _mm512_sqrt_pd,
+    _mm512_xor_pd,
+    _mm512_andnot_pd,
+    _mm512_set1_pd,
+    _mm512_loadu_pd,
+    _mm512_storeu_pd,
+    _mm512_cmp_pd_mask,
+    kmask8_bits,
+    blend512_pd,
+    LN_SERIES_TERMS_F64
+);
+avx_lanes!(
+    F32x16,
+    __m512,
+    f32,
+    16,
+    _mm512_add_ps,
+    _mm512_sub_ps,
+    _mm512_mul_ps,
+    _mm512_div_ps,
+    _mm512_sqrt_ps,
+    _mm512_xor_ps,
+    _mm512_andnot_ps,
+    _mm512_set1_ps,
+    _mm512_loadu_ps,
+    _mm512_storeu_ps,
+    _mm512_cmp_ps_mask,
+    kmask16_bits,
+    blend512_ps,
+    LN_SERIES_TERMS_F32
+);
+
 /// The gather of the corners' displacements, for both lane types: each lane's 3-vector
 /// loaded whole into a register (`f64`: two loads; `f32`: one masked load, lanes `l` and
 /// `l + 4` sharing a register in its two halves) and the lanes transposed by shuffles,
@@ -364,6 +438,62 @@ impl F32x8 {
     }
 }
 
+/// The AVX-512 gathers: the two halves' lanes gathered as the AVX types gather them, then
+/// joined (lanes `0..N/2` low, `N/2..N` high), which only moves bits.
+impl F64x8 {
+    /// # Safety
+    /// Every index in `nodes` is inside `u`.
+    #[inline(always)]
+    unsafe fn corners_in(u: &[[f64; 3]], nodes: &[[u32; 8]; 8]) -> [[Self; 3]; 8] {
+        let lo = [nodes[0], nodes[1], nodes[2], nodes[3]];
+        let hi = [nodes[4], nodes[5], nodes[6], nodes[7]];
+        let mut out = [[Self::ZERO; 3]; 8];
+        // SAFETY: AVX-512F is present (module doc); the indices are inside `u` (the
+        // caller).
+        unsafe {
+            let (lo, hi) = (F64x4::corners_in(u, &lo), F64x4::corners_in(u, &hi));
+            for (o, (l, h)) in out.iter_mut().zip(lo.iter().zip(&hi)) {
+                for i in 0..3 {
+                    o[i] = F64x8(_mm512_insertf64x4::<1>(
+                        _mm512_castpd256_pd512(l[i].0),
+                        h[i].0,
+                    ));
+                }
+            }
+        }
+        out
+    }
+}
+
+impl F32x16 {
+    /// # Safety
+    /// Every index in `nodes` is inside `u`.
+    #[inline(always)]
+    unsafe fn corners_in(u: &[[f32; 3]], nodes: &[[u32; 8]; 16]) -> [[Self; 3]; 8] {
+        let lo = [
+            nodes[0], nodes[1], nodes[2], nodes[3], nodes[4], nodes[5], nodes[6], nodes[7],
+        ];
+        let hi = [
+            nodes[8], nodes[9], nodes[10], nodes[11], nodes[12], nodes[13], nodes[14], nodes[15],
+        ];
+        let mut out = [[Self::ZERO; 3]; 8];
+        // SAFETY: AVX-512F and DQ are present (module doc); the indices are inside `u` (the
+        // caller).
+        unsafe {
+            let (lo, hi) = (F32x8::corners_in(u, &lo), F32x8::corners_in(u, &hi));
+            for (o, (l, h)) in out.iter_mut().zip(lo.iter().zip(&hi)) {
+                for i in 0..3 {
+                    o[i] = F32x16(_mm512_insertf32x8::<1>(
+                        _mm512_castps256_ps512(l[i].0),
+                        h[i].0,
+                    ));
+                }
+            }
+        }
+        out
+    }
+}
+
 /// `libm::log`'s constants (libm 0.2, `log.rs`), the same literals (kept verbatim, digits
 /// beyond the type's precision included, so they are visibly libm's).
 #[allow(clippy::excessive_precision)]
@@ -390,71 +520,83 @@ mod log32 {
     pub const LG4: f32 = 0.24279078841;
 }
 
-impl F64x4 {
-    /// `libm::log` lane by lane, in libm's order of operations (its bits); None when a
-    /// lane is zero, subnormal, negative, infinite or NaN (libm's special paths).
-    #[inline(always)]
-    fn libm_log(self) -> Option<Self> {
-        use log64::*;
-        let x = self.lanes();
-        let (mut reduced, mut dk) = ([0.0f64; 4], [0.0f64; 4]);
-        for l in 0..4 {
-            let ui = x[l].to_bits();
-            let hx = (ui >> 32) as u32;
-            if !(0x0010_0000..0x7ff0_0000).contains(&hx) {
-                return None;
+macro_rules! libm_log64 {
+    ($name:ident, $n:expr) => {
+        impl $name {
+            /// `libm::log` lane by lane, in libm's order of operations (its bits); None when a
+            /// lane is zero, subnormal, negative, infinite or NaN (libm's special paths).
+            #[inline(always)]
+            fn libm_log(self) -> Option<Self> {
+                use log64::*;
+                let x = self.lanes();
+                let (mut reduced, mut dk) = ([0.0f64; $n], [0.0f64; $n]);
+                for l in 0..$n {
+                    let ui = x[l].to_bits();
+                    let hx = (ui >> 32) as u32;
+                    if !(0x0010_0000..0x7ff0_0000).contains(&hx) {
+                        return None;
+                    }
+                    // Reduce x into [sqrt(2)/2, sqrt(2)]: x = 2^k (1 + f).
+                    let hx = hx + (0x3ff0_0000 - 0x3fe6_a09e);
+                    let k = ((hx >> 20) as i32) - 0x3ff;
+                    let hx = (hx & 0x000f_ffff) + 0x3fe6_a09e;
+                    reduced[l] = f64::from_bits(((hx as u64) << 32) | (ui & 0xffff_ffff));
+                    dk[l] = k as f64;
+                }
+                let c = Self::splat;
+                let (x, dk) = (Self::of(reduced), Self::of(dk));
+                let f = x - c(1.0);
+                let hfsq = c(0.5) * f * f;
+                let s = f / (c(2.0) + f);
+                let z = s * s;
+                let w = z * z;
+                let t1 = w * (c(LG2) + w * (c(LG4) + w * c(LG6)));
+                let t2 = z * (c(LG1) + w * (c(LG3) + w * (c(LG5) + w * c(LG7))));
+                let r = t2 + t1;
+                Some(s * (hfsq + r) + dk * c(LN2_LO) - hfsq + f + dk * c(LN2_HI))
             }
-            // Reduce x into [sqrt(2)/2, sqrt(2)]: x = 2^k (1 + f).
-            let hx = hx + (0x3ff0_0000 - 0x3fe6_a09e);
-            let k = ((hx >> 20) as i32) - 0x3ff;
-            let hx = (hx & 0x000f_ffff) + 0x3fe6_a09e;
-            reduced[l] = f64::from_bits(((hx as u64) << 32) | (ui & 0xffff_ffff));
-            dk[l] = k as f64;
         }
-        let c = Self::splat;
-        let (x, dk) = (Self::of(reduced), Self::of(dk));
-        let f = x - c(1.0);
-        let hfsq = c(0.5) * f * f;
-        let s = f / (c(2.0) + f);
-        let z = s * s;
-        let w = z * z;
-        let t1 = w * (c(LG2) + w * (c(LG4) + w * c(LG6)));
-        let t2 = z * (c(LG1) + w * (c(LG3) + w * (c(LG5) + w * c(LG7))));
-        let r = t2 + t1;
-        Some(s * (hfsq + r) + dk * c(LN2_LO) - hfsq + f + dk * c(LN2_HI))
-    }
+    };
 }
+libm_log64!(F64x4, 4);
+libm_log64!(F64x8, 8);
 
-impl F32x8 {
-    /// `libm::logf` lane by lane (as [`F64x4::libm_log`]).
-    #[inline(always)]
-    fn libm_log(self) -> Option<Self> {
-        use log32::*;
-        let x = self.lanes();
-        let (mut reduced, mut dk) = ([0.0f32; 8], [0.0f32; 8]);
-        for l in 0..8 {
-            let ix = x[l].to_bits();
-            if !(0x0080_0000..0x7f80_0000).contains(&ix) {
-                return None;
+macro_rules! libm_log32 {
+    ($name:ident, $n:expr) => {
+        impl $name {
+            /// `libm::logf` lane by lane (as `libm_log64`).
+            #[inline(always)]
+            fn libm_log(self) -> Option<Self> {
+                use log32::*;
+                let x = self.lanes();
+                let (mut reduced, mut dk) = ([0.0f32; $n], [0.0f32; $n]);
+                for l in 0..$n {
+                    let ix = x[l].to_bits();
+                    if !(0x0080_0000..0x7f80_0000).contains(&ix) {
+                        return None;
+                    }
+                    let ix = ix + (0x3f80_0000 - 0x3f35_04f3);
+                    let k = ((ix >> 23) as i32) - 0x7f;
+                    reduced[l] = f32::from_bits((ix & 0x007f_ffff) + 0x3f35_04f3);
+                    dk[l] = k as f32;
+                }
+                let c = Self::splat;
+                let (x, dk) = (Self::of(reduced), Self::of(dk));
+                let f = x - c(1.0);
+                let s = f / (c(2.0) + f);
+                let z = s * s;
+                let w = z * z;
+                let t1 = w * (c(LG2) + w * c(LG4));
+                let t2 = z * (c(LG1) + w * c(LG3));
+                let r = t2 + t1;
+                let hfsq = c(0.5) * f * f;
+                Some(s * (hfsq + r) + dk * c(LN2_LO) - hfsq + f + dk * c(LN2_HI))
             }
-            let ix = ix + (0x3f80_0000 - 0x3f35_04f3);
-            let k = ((ix >> 23) as i32) - 0x7f;
-            reduced[l] = f32::from_bits((ix & 0x007f_ffff) + 0x3f35_04f3);
-            dk[l] = k as f32;
         }
-        let c = Self::splat;
-        let (x, dk) = (Self::of(reduced), Self::of(dk));
-        let f = x - c(1.0);
-        let s = f / (c(2.0) + f);
-        let z = s * s;
-        let w = z * z;
-        let t1 = w * (c(LG2) + w * c(LG4));
-        let t2 = z * (c(LG1) + w * c(LG3));
-        let r = t2 + t1;
-        let hfsq = c(0.5) * f * f;
-        Some(s * (hfsq + r) + dk * c(LN2_LO) - hfsq + f + dk * c(LN2_HI))
-    }
+    };
 }
+libm_log32!(F32x8, 8);
+libm_log32!(F32x16, 16);
 
 #[cfg(test)]
 mod tests {
@@ -496,21 +638,17 @@ mod tests {
         v
     }
 
-    #[test]
-    fn lane_ln_is_the_scalar_ln_bit_for_bit() {
-        if !std::arch::is_x86_feature_detected!("avx") {
-            return;
-        }
-        let xs = inputs64();
+    /// `ln` lane by lane against the scalar on `xs` in packs of `N`; the lanes checked.
+    fn ln64_matches<const N: usize>(xs: &[f64], ln: impl Fn([f64; N]) -> [f64; N]) -> usize {
         let mut checked = 0;
-        for chunk in xs.chunks_exact(4) {
-            let x: [f64; 4] = [chunk[0], chunk[1], chunk[2], chunk[3]];
-            let got = F64x4::of(x).ln().lanes();
-            for l in 0..4 {
+        for chunk in xs.chunks_exact(N) {
+            let x: [f64; N] = core::array::from_fn(|l| chunk[l]);
+            let got = ln(x);
+            for l in 0..N {
                 let want = <f64 as Real>::ln(x[l]);
                 assert!(
                     got[l].to_bits() == want.to_bits() || (got[l].is_nan() && want.is_nan()),
-                    "log({:e}) = {:e}, scalar {:e}",
+                    "log({:e}) = {:e}, scalar {:e} ({N} lanes)",
                     x[l],
                     got[l],
                     want
@@ -518,41 +656,62 @@ mod tests {
                 checked += 1;
             }
         }
-        assert!(checked >= 800_000);
-        let mut checked32 = 0;
-        for chunk in xs.chunks_exact(8) {
-            let x: [f32; 8] = core::array::from_fn(|l| {
-                // Both f32 bit patterns (random) and values near 1.
+        checked
+    }
+
+    /// As [`ln64_matches`] in f32: both f32 bit patterns (random) and values near 1.
+    fn ln32_matches<const N: usize>(xs: &[f64], ln: impl Fn([f32; N]) -> [f32; N]) -> usize {
+        let mut checked = 0;
+        for chunk in xs.chunks_exact(N) {
+            let x: [f32; N] = core::array::from_fn(|l| {
                 if l % 2 == 0 {
                     f32::from_bits(chunk[l].to_bits() as u32)
                 } else {
                     chunk[l] as f32
                 }
             });
-            let got = F32x8::of(x).ln().lanes();
-            for l in 0..8 {
+            let got = ln(x);
+            for l in 0..N {
                 let want = <f32 as Real>::ln(x[l]);
                 assert!(
                     got[l].to_bits() == want.to_bits() || (got[l].is_nan() && want.is_nan()),
-                    "logf({:e}) = {:e}, scalar {:e}",
+                    "logf({:e}) = {:e}, scalar {:e} ({N} lanes)",
                     x[l],
                     got[l],
                     want
                 );
-                checked32 += 1;
+                checked += 1;
             }
         }
-        assert!(checked32 >= 800_000);
+        checked
+    }
+
+    fn has_avx512() -> bool {
+        std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512dq")
+    }
+
+    #[test]
+    fn lane_ln_is_the_scalar_ln_bit_for_bit() {
+        if !std::arch::is_x86_feature_detected!("avx") {
+            return;
+        }
+        let xs = inputs64();
+        assert!(ln64_matches::<4>(&xs, |x| F64x4::of(x).ln().lanes()) >= 800_000);
+        assert!(ln32_matches::<8>(&xs, |x| F32x8::of(x).ln().lanes()) >= 800_000);
+        if has_avx512() {
+            assert!(ln64_matches::<8>(&xs, |x| F64x8::of(x).ln().lanes()) >= 800_000);
+            assert!(ln32_matches::<16>(&xs, |x| F32x16::of(x).ln().lanes()) >= 800_000);
+        }
     }
 
     /// Whole packs inside the series range take the vector series, packs with one lane
     /// outside take the scalar per lane: both give the scalar's bits. Far from trivial:
     /// the values span the range, so their logarithms span [ln 0.8, ln 1.25].
-    #[test]
-    fn lane_ln_takes_the_series_where_the_scalar_does() {
-        if !std::arch::is_x86_feature_detected!("avx") {
-            return;
-        }
+    fn ln_series_packs<const N: usize, const M: usize>(
+        ln64: impl Fn([f64; N]) -> [f64; N],
+        ln32: impl Fn([f32; M]) -> [f32; M],
+    ) {
         let n = 400_000;
         let r = LN_SERIES_RADIUS;
         let xs: Vec<f64> = (0..=n)
@@ -561,14 +720,14 @@ mod tests {
         assert_eq!(xs.first(), Some(&(1.0 - r)));
         assert_eq!(xs.last(), Some(&(1.0 + r)));
         let (mut lo, mut hi) = (0.0f64, 0.0f64);
-        for (c, chunk) in xs.chunks_exact(4).enumerate() {
-            let mut x: [f64; 4] = [chunk[0], chunk[1], chunk[2], chunk[3]];
+        for (c, chunk) in xs.chunks_exact(N).enumerate() {
+            let mut x: [f64; N] = core::array::from_fn(|l| chunk[l]);
             // Every seventh pack has a lane just outside the range.
             if c % 7 == 0 {
-                x[c % 4] = if c % 2 == 0 { 0.87 } else { 1.13 };
+                x[c % N] = if c % 2 == 0 { 0.87 } else { 1.13 };
             }
-            let got = F64x4::of(x).ln().lanes();
-            for l in 0..4 {
+            let got = ln64(x);
+            for l in 0..N {
                 let want = <f64 as Real>::ln(x[l]);
                 assert_eq!(got[l].to_bits(), want.to_bits(), "log({:e})", x[l]);
                 (lo, hi) = (lo.min(got[l]), hi.max(got[l]));
@@ -576,18 +735,32 @@ mod tests {
         }
         assert!(lo < -0.13 && hi > 0.11, "logarithms span [{lo}, {hi}]");
         let (mut lo, mut hi) = (0.0f32, 0.0f32);
-        for (c, chunk) in xs.chunks_exact(8).enumerate() {
-            let mut x: [f32; 8] = core::array::from_fn(|l| chunk[l] as f32);
+        for (c, chunk) in xs.chunks_exact(M).enumerate() {
+            let mut x: [f32; M] = core::array::from_fn(|l| chunk[l] as f32);
             if c % 7 == 0 {
-                x[c % 8] = if c % 2 == 0 { 0.87 } else { 1.13 };
+                x[c % M] = if c % 2 == 0 { 0.87 } else { 1.13 };
             }
-            let got = F32x8::of(x).ln().lanes();
-            for l in 0..8 {
+            let got = ln32(x);
+            for l in 0..M {
                 let want = <f32 as Real>::ln(x[l]);
                 assert_eq!(got[l].to_bits(), want.to_bits(), "logf({:e})", x[l]);
                 (lo, hi) = (lo.min(got[l]), hi.max(got[l]));
             }
         }
         assert!(lo < -0.13 && hi > 0.11, "logarithms span [{lo}, {hi}]");
+    }
+
+    #[test]
+    fn lane_ln_takes_the_series_where_the_scalar_does() {
+        if !std::arch::is_x86_feature_detected!("avx") {
+            return;
+        }
+        ln_series_packs::<4, 8>(|x| F64x4::of(x).ln().lanes(), |x| F32x8::of(x).ln().lanes());
+        if has_avx512() {
+            ln_series_packs::<8, 16>(
+                |x| F64x8::of(x).ln().lanes(),
+                |x| F32x16::of(x).ln().lanes(),
+            );
+        }
     }
 }

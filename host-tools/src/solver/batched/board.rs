@@ -9,12 +9,12 @@ use std::any::Any;
 use std::ops::Range;
 
 use pe_firmware::physics::{
-    HexBox, HexCuboid, HexElement, HexFull, HexReduced, LaneKernel, LaneReal, Lanes, MaterialLaw,
-    Pack, PhysicsError, Real,
+    HexBox, HexCuboid, HexElement, HexFull, HexReduced, LaneKernel, Lanes, MaterialLaw, Pack,
+    PhysicsError, Real,
 };
 use pe_firmware::runtime::{batch_range, BatchForces, BatchSlices, ScalarBatches};
 
-use super::{pack, run, Batch, Isa};
+use super::{pack, run, Batch, HostLanes, Isa};
 
 /// Packs per batch of one kernel list.
 type PerBatch<K, L, const N: usize> = Vec<Vec<Batch<K, L, N>>>;
@@ -33,7 +33,6 @@ struct Packed<K, L, const N: usize> {
     cuboids: PerBatch<HexCuboid<L>, L, N>,
     /// Elements of each batch the packs hold (general, parallelepipeds, cuboids).
     counts: Vec<(usize, usize, usize)>,
-    isa: Isa,
 }
 
 impl<S, E, K, L, const N: usize> BatchForces<S, E> for Packed<K, L, N>
@@ -43,7 +42,7 @@ where
     K: LaneKernel<S, L, N>,
     HexBox<L>: LaneKernel<S, L, N>,
     HexCuboid<L>: LaneKernel<S, L, N>,
-    L: LaneReal<S, N>,
+    L: HostLanes<S, N>,
 {
     fn batch_forces(
         &self,
@@ -65,10 +64,9 @@ where
             // Not the batch these packs were made from: the scalar loop.
             return ScalarBatches.batch_forces(b, laws, u, f);
         }
-        let isa = self.isa;
-        run(g, b.general, b.first_general as usize, laws, u, f, isa)
-            .and_then(|()| run(x, b.boxes, b.first_box as usize, laws, u, f, isa))
-            .and_then(|()| run(c, b.cuboids, b.first_cuboid as usize, laws, u, f, isa))
+        run(g, b.general, b.first_general as usize, laws, u, f)
+            .and_then(|()| run(x, b.boxes, b.first_box as usize, laws, u, f))
+            .and_then(|()| run(c, b.cuboids, b.first_cuboid as usize, laws, u, f))
     }
 }
 
@@ -125,7 +123,6 @@ impl<T: Real, E> BoardElements<'_, T, E> {
 /// Packs a board's batches with lane type `L` when `T` is `S` and `E` is `ES`.
 fn packed<T, E, S, ES, L, const N: usize>(
     board: &BoardElements<'_, T, E>,
-    isa: Isa,
 ) -> Option<Result<BoardBatches<T, E>, PhysicsError>>
 where
     T: Real + 'static,
@@ -139,7 +136,7 @@ where
     HexCuboid<L>: LaneKernel<S, L, N> + Send + Sync,
     MaterialLaw<S>: Pack<S, L, N, Packed = MaterialLaw<L>>,
     MaterialLaw<L>: Send + Sync,
-    L: LaneReal<S, N> + Send + Sync + 'static,
+    L: HostLanes<S, N> + Send + Sync + 'static,
 {
     let general = board.general.to_vec();
     let boxes = board.boxes.to_vec();
@@ -157,7 +154,6 @@ where
         boxes: Vec::new(),
         cuboids: Vec::new(),
         counts: Vec::new(),
-        isa,
     };
     let (general_count, box_count) = (general.len() as u32, boxes.len() as u32);
     for [g, b, c] in ranges {
@@ -185,33 +181,39 @@ where
         .ok()?;
     Some(Ok(BoardBatches {
         lanes: Some(*lanes),
-        describe: isa.describe_lanes::<S, N>(),
+        describe: L::ISA.describe_lanes::<S, N>(),
     }))
 }
 
 impl<T: Real + 'static, E: HexElement<T> + Copy + 'static> BoardBatches<T, E> {
     /// Packs `board`'s batches for `isa` ([`Isa::detect`] for the best): 4 lanes in f64,
-    /// 8 in f32, reduced (general, parallelepiped and cuboid kernels) or full integration; any
+    /// 8 in f32 (8 and 16 on AVX-512), reduced (general, parallelepiped and cuboid kernels) or full integration; any
     /// other scalar or element type runs the scalar loop.
     pub fn build(board: &BoardElements<'_, T, E>, isa: Isa) -> Result<Self, PhysicsError> {
         type Red<S> = HexReduced<S>;
         type Full<S> = HexFull<S>;
+        let isa = isa.or_portable();
         let found = match isa {
             #[cfg(target_arch = "x86_64")]
             Isa::Avx => {
                 use super::avx::{F32x8, F64x4};
-                packed::<T, E, f64, Red<f64>, F64x4, 4>(board, isa)
-                    .or_else(|| packed::<T, E, f64, Full<f64>, F64x4, 4>(board, isa))
-                    .or_else(|| packed::<T, E, f32, Red<f32>, F32x8, 8>(board, isa))
-                    .or_else(|| packed::<T, E, f32, Full<f32>, F32x8, 8>(board, isa))
+                packed::<T, E, f64, Red<f64>, F64x4, 4>(board)
+                    .or_else(|| packed::<T, E, f64, Full<f64>, F64x4, 4>(board))
+                    .or_else(|| packed::<T, E, f32, Red<f32>, F32x8, 8>(board))
+                    .or_else(|| packed::<T, E, f32, Full<f32>, F32x8, 8>(board))
             }
-            _ => {
-                let isa = Isa::Portable;
-                packed::<T, E, f64, Red<f64>, Lanes<f64, 4>, 4>(board, isa)
-                    .or_else(|| packed::<T, E, f64, Full<f64>, Lanes<f64, 4>, 4>(board, isa))
-                    .or_else(|| packed::<T, E, f32, Red<f32>, Lanes<f32, 8>, 8>(board, isa))
-                    .or_else(|| packed::<T, E, f32, Full<f32>, Lanes<f32, 8>, 8>(board, isa))
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => {
+                use super::avx::{F32x16, F64x8};
+                packed::<T, E, f64, Red<f64>, F64x8, 8>(board)
+                    .or_else(|| packed::<T, E, f64, Full<f64>, F64x8, 8>(board))
+                    .or_else(|| packed::<T, E, f32, Red<f32>, F32x16, 16>(board))
+                    .or_else(|| packed::<T, E, f32, Full<f32>, F32x16, 16>(board))
             }
+            _ => packed::<T, E, f64, Red<f64>, Lanes<f64, 4>, 4>(board)
+                .or_else(|| packed::<T, E, f64, Full<f64>, Lanes<f64, 4>, 4>(board))
+                .or_else(|| packed::<T, E, f32, Red<f32>, Lanes<f32, 8>, 8>(board))
+                .or_else(|| packed::<T, E, f32, Full<f32>, Lanes<f32, 8>, 8>(board)),
         };
         found.unwrap_or_else(|| Ok(Self::scalar()))
     }

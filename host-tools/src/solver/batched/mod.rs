@@ -1,7 +1,9 @@
 //! The host's element loop, batched: the scalar elements ([`Elements`]) packed `N` at a
-//! time into [`Lanes`] (4 lanes in f64, 8 in f32), each pack run by the firmware's own
-//! kernel code ([`LaneKernel`]), compiled for the best instruction set the CPU has
-//! (AVX-512, AVX2, AVX, NEON, or the baseline) and chosen at run time.
+//! time into lanes, each pack run by the firmware's own kernel code ([`LaneKernel`]). The
+//! lanes are chosen at run time ([`Isa::detect`]): AVX-512 registers (8 f64, 16 f32) where
+//! the CPU has AVX-512F and DQ, else AVX registers (4 f64, 8 f32), else [`Lanes`] arrays
+//! (4 f64, 8 f32) compiled for the best instruction set the CPU has (AVX-512, AVX2, AVX,
+//! NEON, or the baseline).
 //!
 //! Bits: every lane performs the scalar kernel's operations in the same order (the kernels
 //! are generic over [`pe_firmware::physics::Real`]), and the forces of a batch are added
@@ -249,6 +251,9 @@ impl<T: Real> SharedForces<T> {
 pub enum Isa {
     /// 256-bit AVX registers (x86-64 with AVX, detected at run time).
     Avx,
+    /// 512-bit AVX-512 registers, 8 f64 or 16 f32 lanes (x86-64 with AVX-512F and DQ,
+    /// detected at run time).
+    Avx512,
     /// Plain arrays of lanes, compiled for the best SIMD the CPU has (AVX-512, AVX2,
     /// AVX, NEON, baseline) and chosen at run time; any target.
     Portable,
@@ -259,18 +264,50 @@ impl Isa {
     fn describe_lanes<S: Real, const N: usize>(self) -> String {
         let isa = match self {
             Isa::Avx => "avx",
+            Isa::Avx512 => "avx512",
             Isa::Portable => "portable",
         };
         format!("{}x{N} {isa}", S::NAME)
     }
 
-    /// The best this CPU runs.
+    /// The best this CPU runs: the widest registers it has.
     pub fn detect() -> Isa {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx") {
-            return Isa::Avx;
+        Isa::available().last().copied().unwrap_or(Isa::Portable)
+    }
+
+    /// The best this CPU runs with registers of at most 256 bits (AVX, else the portable
+    /// lanes): for loops over small batches, such as a board's (the built-in scene on
+    /// 4x4x4 boards gives each board about 31 elements, cut into up to twelve lists by
+    /// batch and kernel), where the 8 f64 or 16 f32 lanes of AVX-512 would mostly be the
+    /// padding a short pack repeats.
+    pub fn detect_narrow() -> Isa {
+        Isa::Avx.or_portable()
+    }
+
+    /// `self` if this CPU runs it, else [`Isa::Portable`]: the lane types of an instruction
+    /// set are only ever built after this check (the `avx` module's safety).
+    pub fn or_portable(self) -> Isa {
+        if Isa::available().contains(&self) {
+            self
+        } else {
+            Isa::Portable
         }
-        Isa::Portable
+    }
+
+    /// Every instruction set this CPU runs, narrowest first (the portable lanes always).
+    pub fn available() -> Vec<Isa> {
+        let mut v = vec![Isa::Portable];
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::is_x86_feature_detected as has;
+            if has!("avx") {
+                v.push(Isa::Avx);
+            }
+            if has!("avx") && has!("avx512f") && has!("avx512dq") {
+                v.push(Isa::Avx512);
+            }
+        }
+        v
     }
 }
 
@@ -279,12 +316,13 @@ pub struct Batched<T: Real>(Box<dyn ElementLoop<T>>);
 
 struct Loop<L, const N: usize> {
     packs: Packs<L, N>,
-    isa: Isa,
 }
 
 impl<T: Real> Batched<T> {
-    /// Packs the elements for `isa` ([`Isa::detect`] for the best), 4 lanes in f64 and 8
-    /// in f32 (one 256-bit register); any other scalar type runs the scalar loop.
+    /// Packs the elements for `isa` ([`Isa::detect`] for the best): 4 lanes in f64 and 8
+    /// in f32 (one 256-bit register or the portable arrays), 8 and 16 on AVX-512; any other
+    /// scalar type runs the scalar loop. An `isa` this CPU does not run
+    /// ([`Isa::available`]) takes the portable lanes.
     pub fn build(
         elements: &Elements<T>,
         laws: &[MaterialLaw<T>],
@@ -293,7 +331,6 @@ impl<T: Real> Batched<T> {
         fn boxed<T: Real, S: Real, L: LaneReal<S, N>, const N: usize>(
             elements: &dyn Any,
             laws: &dyn Any,
-            isa: Isa,
         ) -> Option<Result<Box<dyn ElementLoop<T>>, PhysicsError>>
         where
             Loop<L, N>: ElementLoop<S>,
@@ -301,7 +338,7 @@ impl<T: Real> Batched<T> {
             let e = elements.downcast_ref::<Elements<S>>()?;
             let l = laws.downcast_ref::<Vec<MaterialLaw<S>>>()?;
             let b: Box<dyn ElementLoop<S>> = match Packs::<L, N>::build(e, l) {
-                Ok(packs) => Box::new(Loop { packs, isa }),
+                Ok(packs) => Box::new(Loop { packs }),
                 Err(err) => return Some(Err(err)),
             };
             // S is T here: the downcasts above succeeded.
@@ -312,12 +349,16 @@ impl<T: Real> Batched<T> {
         }
         let laws = laws.to_vec();
         let (e, l): (&dyn Any, &dyn Any) = (elements, &laws);
+        let isa = isa.or_portable();
         let found = match isa {
             #[cfg(target_arch = "x86_64")]
-            Isa::Avx => boxed::<T, f64, avx::F64x4, 4>(e, l, isa)
-                .or_else(|| boxed::<T, f32, avx::F32x8, 8>(e, l, isa)),
-            _ => boxed::<T, f64, Lanes<f64, 4>, 4>(e, l, Isa::Portable)
-                .or_else(|| boxed::<T, f32, Lanes<f32, 8>, 8>(e, l, Isa::Portable)),
+            Isa::Avx => boxed::<T, f64, avx::F64x4, 4>(e, l)
+                .or_else(|| boxed::<T, f32, avx::F32x8, 8>(e, l)),
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => boxed::<T, f64, avx::F64x8, 8>(e, l)
+                .or_else(|| boxed::<T, f32, avx::F32x16, 16>(e, l)),
+            _ => boxed::<T, f64, Lanes<f64, 4>, 4>(e, l)
+                .or_else(|| boxed::<T, f32, Lanes<f32, 8>, 8>(e, l)),
         };
         match found {
             Some(b) => Ok(Batched(b?)),
@@ -362,7 +403,7 @@ impl<T: Real> ElementLoop<T> for ScalarLoop {
     }
 }
 
-impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
+impl<S: Real, L: HostLanes<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
     fn internal_forces(
         &self,
         elements: &Elements<S>,
@@ -370,7 +411,6 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
         u: &[[S; 3]],
         f: &mut [[S; 3]],
     ) -> Result<(), PhysicsError> {
-        let isa = self.isa;
         let r = match (&self.packs, elements) {
             (
                 Packs::Reduced {
@@ -384,16 +424,16 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
                     cuboids: c,
                     ..
                 },
-            ) => run(general, g, 0, laws, u, f, isa)
-                .and_then(|()| run(boxes, b, g.len(), laws, u, f, isa))
-                .and_then(|()| run(cuboids, c, g.len() + b.len(), laws, u, f, isa)),
-            (Packs::Full(p), Elements::Full(v)) => run(p, v, 0, laws, u, f, isa),
+            ) => run(general, g, 0, laws, u, f)
+                .and_then(|()| run(boxes, b, g.len(), laws, u, f))
+                .and_then(|()| run(cuboids, c, g.len() + b.len(), laws, u, f)),
+            (Packs::Full(p), Elements::Full(v)) => run(p, v, 0, laws, u, f),
             _ => return elements.internal_forces(laws, u, f),
         };
         r.map_err(|e| elements.in_mesh(e))
     }
     fn describe(&self) -> String {
-        self.isa.describe_lanes::<S, N>()
+        L::ISA.describe_lanes::<S, N>()
     }
     fn plan(&self, parts: usize, node_count: usize) -> Option<Plan> {
         let lists: [Vec<([[u32; 8]; N], usize)>; 3] = match &self.packs {
@@ -469,7 +509,6 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
             return false;
         }
         let shared = SharedForces(f.as_mut_ptr(), f.len());
-        let isa = self.isa;
         let ok = pool.install(|| {
             plan.blocks
                 .par_iter()
@@ -500,11 +539,11 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> {
                             boxes,
                             cuboids,
                         } => {
-                            run_runs(general, &runs[0], u, &mut checked, &mut owned, isa)
-                                && run_runs(boxes, &runs[1], u, &mut checked, &mut owned, isa)
-                                && run_runs(cuboids, &runs[2], u, &mut checked, &mut owned, isa)
+                            run_runs(general, &runs[0], u, &mut checked, &mut owned)
+                                && run_runs(boxes, &runs[1], u, &mut checked, &mut owned)
+                                && run_runs(cuboids, &runs[2], u, &mut checked, &mut owned)
                         }
-                        Packs::Full(p) => run_runs(p, &runs[0], u, &mut checked, &mut owned, isa),
+                        Packs::Full(p) => run_runs(p, &runs[0], u, &mut checked, &mut owned),
                     }
                 })
                 .collect::<Vec<bool>>()
@@ -550,21 +589,20 @@ fn run_runs<K, S, L, const N: usize>(
     u: &[[S; 3]],
     checked: &mut impl FnMut(usize, [S; 3]),
     owned: &mut impl FnMut(usize, [S; 3]),
-    isa: Isa,
 ) -> bool
 where
     K: LaneKernel<S, L, N>,
     S: Real,
-    L: LaneReal<S, N>,
+    L: HostLanes<S, N>,
 {
     runs.iter().all(|(r, shared)| {
         let Some(p) = packs.get(r.clone()) else {
             return false;
         };
         if *shared {
-            run_with(p, u, checked, isa).is_none()
+            run_with(p, u, checked).is_none()
         } else {
-            run_with(p, u, owned, isa).is_none()
+            run_with(p, u, owned).is_none()
         }
     })
 }
@@ -582,25 +620,91 @@ where
         .collect()
 }
 
-/// [`run_packs_body`] on the instruction set `isa`.
+/// [`run_packs_body`] on the lane type's instruction set ([`HostLanes::run_packs`]).
+#[inline(always)]
 fn run_with<K, S, L, const N: usize>(
     packs: &[Batch<K, L, N>],
     u: &[[S; 3]],
     scatter: &mut impl FnMut(usize, [S; 3]),
-    isa: Isa,
 ) -> Option<usize>
 where
     K: LaneKernel<S, L, N>,
     S: Real,
-    L: LaneReal<S, N>,
+    L: HostLanes<S, N>,
 {
-    match isa {
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: `Isa::Avx` is only chosen where the CPU has AVX (`Isa::detect`).
-        Isa::Avx => unsafe { run_packs_avx(packs, u, scatter) },
-        _ => run_packs(packs, u, scatter),
+    L::run_packs(packs, u, scatter)
+}
+
+/// A lane type of the host's loops: its instruction set, and [`run_packs_body`] compiled
+/// for it. Each lane type names its own function, so no loop is compiled for lanes wider
+/// than its instruction set (whose operations would then be calls).
+pub trait HostLanes<S: Real, const N: usize>: LaneReal<S, N> {
+    /// The instruction set these lanes run on.
+    const ISA: Isa;
+    /// [`run_packs_body`] on [`Self::ISA`].
+    fn run_packs<K: LaneKernel<S, Self, N>>(
+        packs: &[Batch<K, Self, N>],
+        u: &[[S; 3]],
+        scatter: &mut impl FnMut(usize, [S; 3]),
+    ) -> Option<usize>;
+}
+
+impl<S: Real, const N: usize> HostLanes<S, N> for Lanes<S, N>
+where
+    Lanes<S, N>: LaneReal<S, N>,
+{
+    const ISA: Isa = Isa::Portable;
+    #[inline(always)]
+    fn run_packs<K: LaneKernel<S, Self, N>>(
+        packs: &[Batch<K, Self, N>],
+        u: &[[S; 3]],
+        scatter: &mut impl FnMut(usize, [S; 3]),
+    ) -> Option<usize> {
+        run_packs(packs, u, scatter)
     }
 }
+
+/// The AVX (`avx`) and AVX-512 (`avx512`) lane types on their functions.
+#[cfg(target_arch = "x86_64")]
+macro_rules! host_lanes {
+    ($lanes:ty, $s:ty, $n:expr, $isa:expr, $run:ident, $why:literal) => {
+        impl HostLanes<$s, $n> for $lanes {
+            const ISA: Isa = $isa;
+            #[inline(always)]
+            fn run_packs<K: LaneKernel<$s, Self, $n>>(
+                packs: &[Batch<K, Self, $n>],
+                u: &[[$s; 3]],
+                scatter: &mut impl FnMut(usize, [$s; 3]),
+            ) -> Option<usize> {
+                // SAFETY: a value of this lane type is only built where the CPU has
+                // the instruction set (the `avx` module doc): $why.
+                unsafe { $run(packs, u, scatter) }
+            }
+        }
+    };
+}
+#[cfg(target_arch = "x86_64")]
+host_lanes!(avx::F64x4, f64, 4, Isa::Avx, run_packs_avx, "AVX");
+#[cfg(target_arch = "x86_64")]
+host_lanes!(avx::F32x8, f32, 8, Isa::Avx, run_packs_avx, "AVX");
+#[cfg(target_arch = "x86_64")]
+host_lanes!(
+    avx::F64x8,
+    f64,
+    8,
+    Isa::Avx512,
+    run_packs_avx512,
+    "AVX-512F and DQ"
+);
+#[cfg(target_arch = "x86_64")]
+host_lanes!(
+    avx::F32x16,
+    f32,
+    16,
+    Isa::Avx512,
+    run_packs_avx512,
+    "AVX-512F and DQ"
+);
 
 /// Runs one kernel's packs in order, adding each lane's forces; a failed pack is rerun by
 /// the scalar kernel (kernel-order elements from `offset`) for its error.
@@ -611,13 +715,12 @@ fn run<K, E, S, L, const N: usize>(
     laws: &[MaterialLaw<S>],
     u: &[[S; 3]],
     f: &mut [[S; 3]],
-    isa: Isa,
 ) -> Result<(), PhysicsError>
 where
     K: LaneKernel<S, L, N>,
     E: HexElement<S>,
     S: Real,
-    L: LaneReal<S, N>,
+    L: HostLanes<S, N>,
 {
     if u.len() != f.len() {
         return Err(PhysicsError::BadIndex {
@@ -634,7 +737,7 @@ where
                 }
             }
         };
-        let failed = run_with(rest, u, &mut add, isa);
+        let failed = run_with(rest, u, &mut add);
         let Some(j) = failed else { return Ok(()) };
         // The scalar kernel on the failed pack's elements: the error, named as the scalar
         // loop names it (or, should the scalar kernel pass, the pack's forces).
@@ -683,6 +786,25 @@ where
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
 unsafe fn run_packs_avx<K, S, L, const N: usize>(
+    packs: &[Batch<K, L, N>],
+    u: &[[S; 3]],
+    scatter: &mut impl FnMut(usize, [S; 3]),
+) -> Option<usize>
+where
+    K: LaneKernel<S, L, N>,
+    S: Real,
+    L: LaneReal<S, N>,
+{
+    run_packs_body(packs, u, scatter)
+}
+
+/// [`run_packs_body`] compiled with AVX-512.
+///
+/// # Safety
+/// The CPU must have AVX-512F and AVX-512DQ.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx,avx2,avx512f,avx512dq")]
+unsafe fn run_packs_avx512<K, S, L, const N: usize>(
     packs: &[Batch<K, L, N>],
     u: &[[S; 3]],
     scatter: &mut impl FnMut(usize, [S; 3]),
