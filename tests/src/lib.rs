@@ -24,12 +24,40 @@ pub fn scenes_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes")
 }
 
+/// A test's scratch directory (images, manifests, reports): removed when dropped, unless
+/// the test is failing, whose files are kept for inspection and their path printed. A run
+/// of the suite leaves nothing behind (its compiled images were about 15 MB a run).
+pub struct TempDir(PathBuf);
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for TempDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            eprintln!("kept {} (the test failed)", self.0.display());
+        } else {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+}
+
 /// A fresh temporary directory for one test.
-pub fn temp_dir(name: &str) -> PathBuf {
+pub fn temp_dir(name: &str) -> TempDir {
     let d = std::env::temp_dir().join(format!("pe-systest-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).expect("temp dir");
-    d
+    TempDir(d)
 }
 
 /// The built-in scene at `level`, cut to `steps`.
@@ -64,7 +92,7 @@ pub fn repo_scene(name: &str) -> Problem {
 /// 1024 nodes a board, so the test scenes fit one or two boards); larger ones, whose middle
 /// boards link five or six faces, for the PE board (512 nodes a board in its AXI SRAM,
 /// six links). The profiles' own limits are tested in `capacity.rs` and `schedule.rs`.
-pub fn compile(problem: &Problem, source: &str, machine: &str, name: &str) -> PathBuf {
+pub fn compile(problem: &Problem, source: &str, machine: &str, name: &str) -> TempDir {
     let dir = temp_dir(name);
     let m = Machine::parse(machine).expect("machine");
     let profile = if m.dims.iter().all(|&d| d <= 2) {

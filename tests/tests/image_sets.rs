@@ -29,7 +29,7 @@ fn coarse(steps: u64, scale: f64) -> Problem {
 }
 
 /// A copy of the compiled set in `from` as a fresh directory.
-fn copy_set(from: &Path, name: &str) -> PathBuf {
+fn copy_set(from: &Path, name: &str) -> TempDir {
     let d = temp_dir(name);
     for e in std::fs::read_dir(from).expect("set dir") {
         let e = e.expect("entry");

@@ -358,7 +358,7 @@ fn pruning_never_removes_what_tools_contacts_loads_or_prescribed_motions_touch()
     let path = loaded_uterus(&dir, true);
     let uterus = Scene::from_file(&path).expect("scene");
     let builtin = builtin_scene("coarse").expect("builtin");
-    for (scene, sdir) in [(uterus, dir.clone()), (builtin, PathBuf::from("."))] {
+    for (scene, sdir) in [(uterus, dir.to_path_buf()), (builtin, PathBuf::from("."))] {
         let mut scene = scene;
         scene.solver.duration = None;
         scene.solver.steps = Some(1500);
