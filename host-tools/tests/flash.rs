@@ -7,15 +7,14 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+mod common;
+
 use pe_firmware::image::blob;
 
 const PE: &str = env!("CARGO_BIN_EXE_pe");
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("pe-flash-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn temp_dir(tag: &str) -> common::TempDir {
+    common::temp_dir(&format!("flash-{tag}"))
 }
 
 /// A 32-bit little-endian ELF with one loaded section at 0x0800_1000 holding the firmware's
@@ -98,7 +97,7 @@ else:
 "#;
 
 struct Setup {
-    dir: PathBuf,
+    dir: common::TempDir,
     images: PathBuf,
     probe_rs: PathBuf,
     state: PathBuf,

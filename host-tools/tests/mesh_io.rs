@@ -5,8 +5,10 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
+mod common;
+
+use common::TempDir;
 use host_tools::mesh::io::{generate_box, load_mesh};
 use host_tools::mesh::{Mesh, MeshError};
 use host_tools::output::vtk::{self, PointField, VtkSeriesWriter};
@@ -35,33 +37,9 @@ fn load_shared(name: &str) -> Mesh {
     }
 }
 
-/// A fresh, empty directory under the system temp dir, unique per test and process, removed
-/// when dropped.
-struct TempDir(PathBuf);
-
-impl std::ops::Deref for TempDir {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
+/// A fresh, empty directory for one test, removed when dropped ([`common::temp_dir`]).
 fn temp_dir(tag: &str) -> TempDir {
-    static N: AtomicUsize = AtomicUsize::new(0);
-    let dir = std::env::temp_dir().join(format!(
-        "host-tools-mesh-io-{}-{}-{tag}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::Relaxed)
-    ));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    TempDir(dir)
+    common::temp_dir(&format!("mesh-io-{tag}"))
 }
 
 /// Write `text` to `file` in a fresh temp dir; keep the returned guard alive while using it.

@@ -2,13 +2,13 @@
 
 use std::path::PathBuf;
 
+mod common;
+
 use host_tools::problem::Problem;
 use host_tools::scene::Scene;
 
-fn tmp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("pe-scene-errors-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn tmp_dir(name: &str) -> common::TempDir {
+    common::temp_dir(&format!("scene-errors-{name}"))
 }
 
 fn resolve(dir: &std::path::Path, text: &str) -> anyhow::Result<Problem> {
