@@ -24,40 +24,15 @@ pub fn scenes_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes")
 }
 
-/// A test's scratch directory (images, manifests, reports): removed when dropped, unless
-/// the test is failing, whose files are kept for inspection and their path printed. A run
-/// of the suite leaves nothing behind (its compiled images were about 15 MB a run).
-pub struct TempDir(PathBuf);
-
-impl std::ops::Deref for TempDir {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl AsRef<Path> for TempDir {
-    fn as_ref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        if std::thread::panicking() {
-            eprintln!("kept {} (the test failed)", self.0.display());
-        } else {
-            let _ = std::fs::remove_dir_all(&self.0);
-        }
-    }
-}
+/// A test's scratch directory (images, manifests, reports), removed when the test ends
+/// unless it fails: host-tools' test helper, the one home of it.
+#[path = "../../host-tools/tests/common/scratch.rs"]
+mod scratch;
+pub use scratch::TempDir;
 
 /// A fresh temporary directory for one test.
 pub fn temp_dir(name: &str) -> TempDir {
-    let d = std::env::temp_dir().join(format!("pe-systest-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    TempDir(d)
+    TempDir::fresh(&format!("pe-systest-{}-{name}", std::process::id()))
 }
 
 /// The built-in scene at `level`, cut to `steps`.

@@ -4,6 +4,9 @@
 use host_tools::problem::Problem;
 use host_tools::scene::Scene;
 
+mod scratch;
+pub use scratch::TempDir;
+
 /// A box scene with a neo-Hookean material, clamped at x = 0; `extra` is appended TOML
 /// (more tables, e.g. [gravity] or [[load]]) and `solver` goes into [solver].
 pub fn box_scene(
@@ -52,38 +55,14 @@ pub fn node_near(p: &Problem, x: [f64; 3]) -> usize {
         .expect("mesh has nodes")
 }
 
-/// A test's scratch directory: removed when dropped, unless the test is failing, whose
-/// files are kept for inspection and their path printed. Keep it alive while using it.
-pub struct TempDir(std::path::PathBuf);
-
-impl std::ops::Deref for TempDir {
-    type Target = std::path::Path;
-    fn deref(&self) -> &std::path::Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        if std::thread::panicking() {
-            eprintln!("kept {} (the test failed)", self.0.display());
-        } else {
-            let _ = std::fs::remove_dir_all(&self.0);
-        }
-    }
-}
-
 /// A fresh, empty directory `<temp>/host-tools-<name>-<process>-<n>` (`n` counts this
 /// process's directories, so parallel tests never share one).
 pub fn temp_dir(name: &str) -> TempDir {
     use std::sync::atomic::{AtomicUsize, Ordering};
     static N: AtomicUsize = AtomicUsize::new(0);
-    let dir = std::env::temp_dir().join(format!(
+    TempDir::fresh(&format!(
         "host-tools-{name}-{}-{}",
         std::process::id(),
         N.fetch_add(1, Ordering::Relaxed)
-    ));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("a temporary directory");
-    TempDir(dir)
+    ))
 }
