@@ -8,7 +8,7 @@
 //! runs) by central differences, probing all nodes of one colour of a distance-2 colouring
 //! at once, and solved with a banded Cholesky factorisation (Newton iterations for the
 //! large-strain block). The linear cases are the small-load limit of the solver's static
-//! equilibrium, the state a damped explicit run settles to; `tests/hourglass.rs` checks
+//! equilibrium, the state a damped explicit run settles to; `tests/solver/hourglass.rs` checks
 //! one against a damped explicit run.
 //!
 //! `pe hourglass-study` prints the study's tables (`docs/measurements/hourglass-calibration.md`).

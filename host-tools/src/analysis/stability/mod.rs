@@ -1,4 +1,4 @@
-//! The stability suite (`pe stability`, `host-tools/tests/stability.rs`): the solver at the
+//! The stability suite (`pe stability`, `host-tools/tests/solver/stability.rs`): the solver at the
 //! extremes of material, deformation, mesh quality, time step and run length. Every case
 //! states its expected outcome, measures, and checks each figure against a bound whose reason
 //! is given beside it; the tests assert [`Case::passed`], the report prints the same checks.

@@ -1,8 +1,7 @@
 //! Serial solver tests: conservation, convergence to closed forms, stability limits.
 #![allow(clippy::needless_range_loop)]
 
-mod common;
-use common::*;
+use crate::common::*;
 use host_tools::problem::Problem;
 use host_tools::solver::{self, Model};
 

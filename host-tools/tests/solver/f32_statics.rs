@@ -4,7 +4,7 @@
 //! `u⁺ = u + du⁺`); in the `A u − B u⁻` form the f32 tip was 0.4% (E = 5 kPa) and 1.9%
 //! (E = 30 kPa) off f64 (`docs/measurements/f32-statics.md`).
 
-mod common;
+use crate::common;
 
 use host_tools::problem::Problem;
 use host_tools::solver::{self, RunOutput};

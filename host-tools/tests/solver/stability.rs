@@ -4,7 +4,7 @@
 //! figures and every bound with its reason are written down; `pe stability` prints the same
 //! cases as a report. A test here runs one case and asserts that every check held.
 //! The 1e7-step run is `#[ignore]` (about 90 s): `cargo test --release -p host-tools --test
-//! stability -- --ignored` or `pe stability --long`.
+//! solver stability:: -- --ignored` or `pe stability --long`.
 
 use host_tools::analysis::stability;
 

@@ -7,12 +7,10 @@
 //! checks below compare every reader's result with that geometry, not with another reader.
 #![allow(clippy::needless_range_loop)]
 
-mod common;
-
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use common::*;
+use crate::common::*;
 use host_tools::mesh::io::{generate_box, load_mesh};
 use host_tools::mesh::{is_prism, prism_as_hexahedron, Mesh};
 use host_tools::problem::{NodeKind, Problem};
