@@ -6,7 +6,6 @@
 //! about 32 CPU-minutes, half of CI's build. One binary compiles that code once. Run one
 //! module with a filter: `cargo test --release -p host-tools --test solver stability::`.
 
-// Dead code: each module uses its own part of the shared helpers.
 #[path = "../common/mod.rs"]
 mod common;
 
