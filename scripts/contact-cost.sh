@@ -9,7 +9,9 @@
 # step, which also builds the candidates) are printed beside what the compile report
 # charges it (pe_firmware::profile::FirmwareCost::charged_contact_nodes: the whole contact
 # table x instructions per contact node on a board that owns a contact node, nothing on
-# one that owns none).
+# one that owns none), and the median of each stage of the evaluation: positions, the
+# check step's candidate search, travel check, tool tests, pair tests (the marks in
+# pe-firmware/src/runtime/marks.rs).
 #
 # Slow: the plugin counts every instruction of every board (about 4 minutes for 2x2x2 at
 # the default STEPS on 2 cores). Not run by CI; a measurement to rerun when the contact
@@ -60,17 +62,23 @@ d = sys.argv[1]
 rep = json.load(open(os.path.join(d, "compiled", "report.json")))
 per_node = rep["capacity"]["instructions_per_contact_node"]
 table = rep["contact"]["contact_nodes"]
-print(f"{'board':>13} {'contact nodes':>14} {'owned':>6} {'median':>9} {'mean':>9} {'largest':>9} {'report charges':>15}")
+stages = ["positions", "search", "travel", "tools", "pairs"]
+print(f"{'board':>13} {'contact nodes':>14} {'owned':>6} {'median':>9} {'mean':>9} {'largest':>9} "
+      f"{'report charges':>15}   median per stage: " + " ".join(f"{s:>9}" for s in stages))
 for b in rep["boards"]:
     name = "board-%d-%d-%d" % tuple(b["board"])
     text = open(os.path.join(d, "logs", name + ".log")).read()
-    # Marks 0 and 1 bracket the evaluation: the odd marks' deltas are its cost.
-    cost = [int(m.group(2)) for m in re.finditer(r"mark (\d+) at \d+ \(delta (\d+)\)", text)
-            if int(m.group(1)) % 2 == 1]
-    if not cost:
-        sys.exit(f"contact-cost: no marks in {name}'s log")
+    # Six marks a step (pe-firmware/src/runtime/marks.rs): 0, then 2 to 5 between the
+    # stages, then 1; the deltas of the five after mark 0 are the stages' costs.
+    deltas = [int(m.group(2)) for m in re.finditer(r"mark \d+ at \d+ \(delta (\d+)\)", text)]
+    if not deltas or len(deltas) % 6:
+        sys.exit(f"contact-cost: {len(deltas)} marks in {name}'s log, not six a step")
+    steps = [deltas[k + 1:k + 6] for k in range(0, len(deltas), 6)]
+    cost = [sum(s) for s in steps]
     n, owned = b["contact_nodes"], b["owned_contact_nodes"]
+    per_stage = " ".join(f"{statistics.median(s[j] for s in steps):>9.0f}" for j in range(5))
     print(f"{name:>13} {n:>14} {owned:>6} {statistics.median(cost):>9.0f} "
-          f"{statistics.mean(cost):>9.0f} {max(cost):>9} {(table if owned else 0) * per_node:>15}")
+          f"{statistics.mean(cost):>9.0f} {max(cost):>9} {(table if owned else 0) * per_node:>15}"
+          f"                     {per_stage}")
 PY
 done

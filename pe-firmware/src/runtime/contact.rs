@@ -508,6 +508,10 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             // them.
             state.tool_force = [[0.0; 3]; TOOLS_MAX];
             state.stats = ContactStats::default();
+            // The stage marks all the same, so that every step has the same marks.
+            for id in 2..=5 {
+                cost_mark(id);
+            }
             return Ok(());
         }
         let mut capsules = [Capsule {
@@ -550,6 +554,7 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             *x = positions.at(k);
         }
         let at_step = &*at_step;
+        cost_mark(2);
         let pos = |k: usize| at_step.get(k).copied().flatten();
         let own = |k: usize| places.get(k).is_some_and(|p| p.owned);
         if check {
@@ -574,10 +579,12 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             self.port.stats.checks += 1;
             self.port.stats.candidates_max = self.port.stats.candidates_max.max(n as u32);
         }
+        cost_mark(3);
         let physics = |e| fault(FaultKind::Physics(e));
         let at_check = &at_check[..nc];
         check_travel(&model, pos, at_check, own, p.pair_surfaces, p.travel_max_m)
             .map_err(physics)?;
+        cost_mark(4);
         let force = &mut force[..nc];
         force.fill([0.0; 3]);
         let mut tool_force = [[0.0; 3]; TOOLS_MAX];
@@ -595,6 +602,7 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             &mut stats,
         )
         .map_err(physics)?;
+        cost_mark(5);
         let cand = if c.pairs > 0 && state.slot.is_some() {
             &candidates[..state.candidates_len.min(candidates.len())]
         } else {

@@ -6,7 +6,11 @@
 //! bench cannot see). Without the feature a mark is nothing, so the firmware measured by
 //! `scripts/board-cost.sh` and flashed on a board has none.
 //!
-//! Marks: 0 before and 1 after `evaluate_contact`.
+//! Marks, in the order every step passes them: 0 before `evaluate_contact`; inside it 2
+//! after the positions, 3 after the check step's candidate search (nothing on other steps),
+//! 4 after the travel check, 5 after the tool tests; 1 after the pair tests, at its end. A
+//! board that owns no contact node passes 2 to 5 at once (it skips the evaluation), so
+//! every step gives the plugin six marks.
 
 /// The marker the plugin watches (never inlined, never removed).
 #[cfg(feature = "cost-marks")]
