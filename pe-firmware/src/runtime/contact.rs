@@ -16,8 +16,8 @@ use super::storage::{ContactStorage, RemoteSlot};
 use super::{Fault, FaultKind, Runtime, WireReal};
 use crate::image::{path_value, ContactNode, ContactNodePlace, ContactPair, ElementRecord, Tool};
 use crate::physics::contact::{
-    build_candidates, check_travel, evaluate_pairs, evaluate_tools, keep_applied_groups, Capsule,
-    ContactModel, ContactStats,
+    build_candidates, check_travel, evaluate_pairs_bounded, evaluate_tools, keep_applied_groups,
+    Capsule, ContactModel, ContactStats,
 };
 use crate::physics::Real;
 
@@ -527,6 +527,7 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             nodes,
             places,
             faces,
+            face_bounds,
             at_check,
             force,
             at_step,
@@ -608,7 +609,20 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
         } else {
             &[]
         };
-        evaluate_pairs(&model, cand, pos, own, tol, force, &mut stats).map_err(physics)?;
+        // Each face's bounds once per step, not once per candidate that names it (a face is
+        // a candidate of several slaves, most of them outside its bounds at a step).
+        let bounds = if cand.is_empty() {
+            &mut face_bounds[..0]
+        } else {
+            let nf = model.faces.len().min(face_bounds.len());
+            let bounds = &mut face_bounds[..nf];
+            for (f, b) in bounds.iter_mut().enumerate() {
+                *b = model.face_bounds(f, &pos).map_err(physics)?;
+            }
+            bounds
+        };
+        evaluate_pairs_bounded(&model, cand, pos, bounds, own, tol, force, &mut stats)
+            .map_err(physics)?;
         state.tool_force = tool_force;
         state.stats = stats;
         Ok(())

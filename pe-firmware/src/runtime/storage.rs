@@ -14,7 +14,7 @@ use crate::image::{
     LoadRecord, NodeRecord, PathPoint, RecvEntry,
 };
 use crate::image::{ElementRecord, Integration};
-use crate::physics::contact::Candidate;
+use crate::physics::contact::{Candidate, QuadBounds};
 use crate::physics::{HexBox, HexCuboid, MaterialLaw};
 use crate::profile::BoardProfile;
 
@@ -142,7 +142,7 @@ impl Capacities {
                     + 2 * size_of::<[f64; 3]>()
                     + size_of::<Option<[f64; 3]>>()
                     + size_of::<RemoteSlot>())
-            + self.contact_faces * size_of::<ContactFace>()
+            + self.contact_faces * (size_of::<ContactFace>() + size_of::<QuadBounds>())
             + self.contact_candidates * size_of::<Candidate>()
             + self.contact_sends * size_of::<u32>()
             + self.graphics_nodes * size_of::<u16>()
@@ -214,6 +214,9 @@ pub struct ContactStorage<'a> {
     pub nodes: &'a mut [ContactNode],
     pub places: &'a mut [ContactNodePlace],
     pub faces: &'a mut [ContactFace],
+    /// Per contact face: its bounds this step, computed once per step for the pair tests
+    /// ([`crate::physics::contact::evaluate_pairs_bounded`]).
+    pub face_bounds: &'a mut [QuadBounds],
     /// Per contact node: position at the last check, and contact force this step (f64).
     pub at_check: &'a mut [[f64; 3]],
     pub force: &'a mut [[f64; 3]],
@@ -324,6 +327,7 @@ pub struct StorageBuf<
     contact_nodes: S::Of<ContactNode, NC>,
     places: S::Of<ContactNodePlace, NC>,
     faces: S::Of<ContactFace, NF>,
+    face_bounds: S::Of<QuadBounds, NF>,
     at_check: S::Of<[f64; 3], NC>,
     contact_force: S::Of<[f64; 3], NC>,
     at_step: S::Of<Option<[f64; 3]>, NC>,
@@ -373,6 +377,7 @@ impl<
             contact_nodes: S::empty(),
             places: S::empty(),
             faces: S::empty(),
+            face_bounds: S::empty(),
             at_check: S::empty(),
             contact_force: S::empty(),
             at_step: S::empty(),
@@ -412,6 +417,7 @@ impl<
         put::<S, _, NC>(&mut self.contact_nodes, caps.contact_nodes)?;
         put::<S, _, NC>(&mut self.places, caps.contact_nodes)?;
         put::<S, _, NF>(&mut self.faces, caps.contact_faces)?;
+        put::<S, _, NF>(&mut self.face_bounds, caps.contact_faces)?;
         put::<S, _, NC>(&mut self.at_check, caps.contact_nodes)?;
         put::<S, _, NC>(&mut self.contact_force, caps.contact_nodes)?;
         put::<S, _, NC>(&mut self.at_step, caps.contact_nodes)?;
@@ -440,6 +446,7 @@ impl<
                 nodes: &mut self.contact_nodes,
                 places: &mut self.places,
                 faces: &mut self.faces,
+                face_bounds: &mut self.face_bounds,
                 at_check: &mut self.at_check,
                 force: &mut self.contact_force,
                 at_step: &mut self.at_step,
