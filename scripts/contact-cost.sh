@@ -32,7 +32,9 @@ ELF=$(build_firmware qemu,cost-marks)
 NM=nm
 command -v llvm-nm >/dev/null 2>&1 && NM=llvm-nm
 # The crate forbids no_mangle: the marker is found by the name inside its mangled symbol.
-MARK=0x$("$NM" "$ELF" | awk '/pe_cost_mark/ { print $1; exit }')
+# (awk reads to the end: an early exit makes llvm-nm fail on the closed pipe, and pipefail
+# stop the script.)
+MARK=0x$("$NM" "$ELF" | awk '/pe_cost_mark/ && m == "" { m = $1 } END { print m }')
 [ "$MARK" != 0x ] || { echo "contact-cost: no pe_cost_mark in $ELF" >&2; exit 1; }
 
 # board-sim starts QEMU through this wrapper: the plugin, one log per board.
@@ -70,7 +72,7 @@ for b in rep["boards"]:
     text = open(os.path.join(d, "logs", name + ".log")).read()
     # Six marks a step (pe-firmware/src/runtime/marks.rs): 0, then 2 to 5 between the
     # stages, then 1; the deltas of the five after mark 0 are the stages' costs.
-    deltas = [int(m.group(2)) for m in re.finditer(r"mark \d+ at \d+ \(delta (\d+)\)", text)]
+    deltas = [int(m.group(1)) for m in re.finditer(r"mark \d+ at \d+ \(delta (\d+)\)", text)]
     if not deltas or len(deltas) % 6:
         sys.exit(f"contact-cost: {len(deltas)} marks in {name}'s log, not six a step")
     steps = [deltas[k + 1:k + 6] for k in range(0, len(deltas), 6)]
