@@ -99,7 +99,7 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
     image_origin: 0x0810_0000,
     probe_chip: "STM32H743ZITx",
     // Contact tables (the whole scene's, on every board): some 190 bytes per contact node
-    // and 68 per face (with the face's bounds for a step). 384 each, twice the built-in
+    // and 76 per face (with the face's bounds for a step). 384 each, twice the built-in
     // medium scene's 178 nodes and 160 faces, leave the elements more of the RAM than 512
     // did before the face bounds.
     contact_nodes_max: 384,
@@ -332,8 +332,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 464,
             cuboid_per_element_step: 539,
             per_node_update: 76,
-            per_contact_node: 276,
-            step_per_element: 1206,
+            per_contact_node: 263,
+            step_per_element: 1201,
         },
         FirmwareCost {
             precision: F64,
@@ -345,8 +345,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 0,
             cuboid_per_element_step: 0,
             per_node_update: 76,
-            per_contact_node: 276,
-            step_per_element: 4358,
+            per_contact_node: 263,
+            step_per_element: 4353,
         },
         FirmwareCost {
             precision: F32,
@@ -358,8 +358,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 375,
             cuboid_per_element_step: 493,
             per_node_update: 87,
-            per_contact_node: 263,
-            step_per_element: 1079,
+            per_contact_node: 250,
+            step_per_element: 1074,
         },
         FirmwareCost {
             precision: F32,
@@ -371,8 +371,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 0,
             cuboid_per_element_step: 0,
             per_node_update: 87,
-            per_contact_node: 263,
-            step_per_element: 3613,
+            per_contact_node: 244,
+            step_per_element: 3609,
         },
     ]
 };

@@ -3,7 +3,7 @@
 //! three, naming the same table and figures: `pe compile`'s fit check, board-sim with
 //! board-sized storage, and the firmware's own storage type (`pe-board`'s `BoardStorage`
 //! for that profile: fixed-capacity vectors sized by `Capacities::for_board`) loading the
-//! image with the firmware's loader. Elements are checked on the PE board in f64 full (142
+//! image with the firmware's loader. Elements are checked on the PE board in f64 full (140
 //! at this writing: on the emulated board the node table binds first). The exchange tables
 //! (4096 entries) are not reachable: a board's 1024 nodes bound its exchange lists first.
 

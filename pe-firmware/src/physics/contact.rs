@@ -264,13 +264,16 @@ fn quad_result(
     }
 }
 
-/// A quad's axis-aligned bounds: per axis the least and greatest corner coordinate. A
-/// board keeps one per contact face for a step ([`evaluate_pairs_bounded`]; hence the
-/// serde derives, for its storage's zeroed records).
+/// A quad's axis-aligned bounds: per axis the least and greatest corner coordinate, and
+/// the edge tolerance's share of [`clearly_outside`]'s growth, `2 EDGE_TOLERANCE e` with `e`
+/// the largest extent (computed once with the bounds, not once per point tested). A board
+/// keeps one per contact face for a step ([`evaluate_pairs_bounded`]; hence the serde
+/// derives, for its storage's zeroed records).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct QuadBounds {
     lo: V3,
     hi: V3,
+    edge_slack: f64,
 }
 
 impl QuadBounds {
@@ -280,18 +283,24 @@ impl QuadBounds {
     pub const UNKNOWN: QuadBounds = QuadBounds {
         lo: [f64::NAN; 3],
         hi: [f64::NAN; 3],
+        edge_slack: f64::NAN,
     };
 
     #[inline(always)]
     fn new(q: &[V3; 4]) -> QuadBounds {
-        let mut b = QuadBounds { lo: q[0], hi: q[0] };
+        let (mut lo, mut hi) = (q[0], q[0]);
         for p in &q[1..] {
             for i in 0..3 {
-                b.lo[i] = b.lo[i].min(p[i]);
-                b.hi[i] = b.hi[i].max(p[i]);
+                lo[i] = lo[i].min(p[i]);
+                hi[i] = hi[i].max(p[i]);
             }
         }
-        b
+        let e = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(hi[2] - lo[2]);
+        QuadBounds {
+            lo,
+            hi,
+            edge_slack: 2.0 * EDGE_TOLERANCE * e,
+        }
     }
 }
 
@@ -310,10 +319,7 @@ impl QuadBounds {
 /// anywhere is never rejected (it takes the full test).
 #[inline(always)]
 fn clearly_outside(x: V3, b: &QuadBounds, depth_max: f64) -> bool {
-    let e = (b.hi[0] - b.lo[0])
-        .max(b.hi[1] - b.lo[1])
-        .max(b.hi[2] - b.lo[2]);
-    let grow = 1.01 * (depth_max + 2.0 * EDGE_TOLERANCE * e);
+    let grow = 1.01 * (depth_max + b.edge_slack);
     (0..3).any(|i| x[i] < b.lo[i] - grow || x[i] > b.hi[i] + grow)
 }
 
@@ -675,8 +681,8 @@ pub fn evaluate_pairs(
 /// the full test). A candidate whose slave lies [`clearly_outside`] its face's bounds is
 /// decided from them, without reading the face's corners; the others take
 /// [`quad_penetration`], which makes the same test on the same values first. So the result
-/// is [`evaluate_pairs`]'s, bit for bit, with 48 bytes per face (not [`FaceGeometry`]'s
-/// 216). What it spares: on the built-in coarse scene a face is a candidate of 4-5 slaves,
+/// is [`evaluate_pairs`]'s, bit for bit, with 56 bytes per face (not [`FaceGeometry`]'s
+/// 224). What it spares: on the built-in coarse scene a face is a candidate of 4-5 slaves,
 /// most of them outside its bounds at a step, and reading a face's four corners and
 /// bounding them for each was most of the pair tests' cost (`scripts/contact-cost.sh`
 /// prints the stages). (Bounds rounded outward to f32, half the bytes, cost 17 000 more
