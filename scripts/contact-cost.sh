@@ -26,16 +26,9 @@ OUT=${OUT:-$TARGET_DIR/contact-cost}
 PLUGIN_SRC=${PLUGIN_SRC:-$ROOT/../shared/tools/insncount/insncount.c}
 rm -rf "$OUT" && mkdir -p "$OUT"
 source scripts/qemu-lib.sh
-command -v gcc >/dev/null 2>&1 || { apt-get update -qq && apt-get install -y -qq gcc libc6-dev >/dev/null; }
-gcc -O2 -shared -fPIC -fvisibility=hidden -o "$OUT/libinsncount.so" "$PLUGIN_SRC"
+build_plugin "$PLUGIN_SRC" "$OUT/libinsncount.so"
 ELF=$(build_firmware qemu,cost-marks)
-NM=nm
-command -v llvm-nm >/dev/null 2>&1 && NM=llvm-nm
-# The crate forbids no_mangle: the marker is found by the name inside its mangled symbol.
-# (awk reads to the end: an early exit makes llvm-nm fail on the closed pipe, and pipefail
-# stop the script.)
-MARK=0x$("$NM" "$ELF" | awk '/pe_cost_mark/ && m == "" { m = $1 } END { print m }')
-[ "$MARK" != 0x ] || { echo "contact-cost: no pe_cost_mark in $ELF" >&2; exit 1; }
+MARK=$(cost_mark_address "$ELF")
 
 # board-sim starts QEMU through this wrapper: the plugin, one log per board.
 cat >"$OUT/qemu.sh" <<EOF

@@ -31,8 +31,7 @@ case "$STAGE" in
 esac
 rm -rf "$OUT" && mkdir -p "$OUT"
 source scripts/qemu-lib.sh
-command -v gcc >/dev/null 2>&1 || { apt-get update -qq && apt-get install -y -qq gcc libc6-dev >/dev/null; }
-gcc -O2 -shared -fPIC -fvisibility=hidden -o "$OUT/libpcprofile.so" scripts/tools/pcprofile.c
+build_plugin scripts/tools/pcprofile.c "$OUT/libpcprofile.so"
 ADDR2LINE=$(command -v llvm-addr2line || true)
 if [ -z "$ADDR2LINE" ]; then
     rustup component add llvm-tools >/dev/null 2>&1 || true
@@ -40,10 +39,7 @@ if [ -z "$ADDR2LINE" ]; then
 fi
 [ -n "$ADDR2LINE" ] || { echo "firmware-profile: no llvm-addr2line (rustup component add llvm-tools)" >&2; exit 1; }
 ELF=$(build_firmware qemu,cost-marks)
-NM=nm
-command -v llvm-nm >/dev/null 2>&1 && NM=llvm-nm
-MARK=0x$("$NM" "$ELF" | awk '/pe_cost_mark/ && m == "" { m = $1 } END { print m }')
-[ "$MARK" != 0x ] || { echo "firmware-profile: no pe_cost_mark in $ELF" >&2; exit 1; }
+MARK=$(cost_mark_address "$ELF")
 cat >"$OUT/qemu.sh" <<WRAP
 #!/usr/bin/env bash
 [ "\${1:-}" = --version ] && exec qemu-system-arm --version

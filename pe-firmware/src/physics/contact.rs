@@ -656,24 +656,8 @@ pub fn evaluate_pairs(
     force: &mut [V3],
     stats: &mut ContactStats,
 ) -> Result<(), PhysicsError> {
-    let face_test = |f: usize, x: V3, depth_max: f64| {
-        let mut q = [[0.0; 3]; 4];
-        Ok(if m.face_points(f, &pos, &mut q)? {
-            quad_penetration(x, &q, depth_max)
-        } else {
-            None
-        })
-    };
-    evaluate_pairs_with(
-        m,
-        candidates,
-        &pos,
-        apply,
-        tolerance_m,
-        force,
-        stats,
-        face_test,
-    )
+    // No bounds held: every candidate takes the full test.
+    evaluate_pairs_bounded(m, candidates, pos, &[], apply, tolerance_m, force, stats)
 }
 
 /// [`evaluate_pairs`] with each master face's bounds at this state computed beforehand:
