@@ -17,6 +17,7 @@ mod monitor;
 mod nodes;
 mod run;
 pub mod stable_step;
+pub mod team;
 
 pub use monitor::{DtChange, DtMonitor, Energies};
 pub use run::{
@@ -68,8 +69,8 @@ pub struct Model<'p, T: Real> {
     pub reaction_fixed: [f64; 3],
     /// Contact state (None: the scene has no contact).
     pub contact: Option<ContactState>,
-    /// Worker threads of the parallel solver ([`Model::set_threads`]); None: one thread.
-    pool: Option<rayon::ThreadPool>,
+    /// Threads of the parallel solver ([`Model::set_threads`]); None: one thread.
+    team: Option<team::Team>,
     /// How the threads share the elements, and each block's forces kept aside.
     plan: Option<batched::Plan>,
     kept: Vec<Vec<[T; 3]>>,
@@ -272,7 +273,7 @@ impl<'p, T: Real> Model<'p, T> {
             reaction_prescribed: [0.0; 3],
             reaction_fixed: [0.0; 3],
             contact: ContactState::new(problem, dt_s),
-            pool: None,
+            team: None,
             plan: None,
             kept: Vec::new(),
         }
@@ -291,13 +292,9 @@ impl<'p, T: Real> Model<'p, T> {
             .plan
             .as_ref()
             .map_or_else(Vec::new, |p| p.kept_buffers());
-        self.pool = if threads > 1 {
-            Some(
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .map_err(|e| anyhow!("starting {threads} solver threads: {e}"))?,
-            )
+        self.team = None;
+        self.team = if threads > 1 {
+            Some(team::Team::new(threads)?)
         } else {
             None
         };
@@ -306,17 +303,17 @@ impl<'p, T: Real> Model<'p, T> {
 
     /// The threads the solver runs on.
     pub fn threads(&self) -> usize {
-        self.pool.as_ref().map_or(1, |p| p.current_num_threads())
+        self.team.as_ref().map_or(1, |t| t.threads())
     }
 
-    /// Internal forces at `u` into `f_int`, on the pool when there is one.
-    fn element_phase(&mut self, pool: Option<&rayon::ThreadPool>) -> Result<(), PhysicsError> {
+    /// Internal forces at `u` into `f_int`, on the team when there is one.
+    fn element_phase(&mut self, team: Option<&team::Team>) -> Result<(), PhysicsError> {
         if !std::mem::replace(&mut self.f_int_zero, false) {
             self.f_int.iter_mut().for_each(|f| *f = [T::ZERO; 3]);
         }
-        if let (Some(pool), Some(b), Some(plan)) = (pool, &self.batched, &self.plan) {
+        if let (Some(team), Some(b), Some(plan)) = (team, &self.batched, &self.plan) {
             let el = b.element_loop();
-            if el.parallel_forces(plan, &mut self.kept, pool, &self.u, &mut self.f_int) {
+            if el.parallel_forces(plan, &mut self.kept, team, &self.u, &mut self.f_int) {
                 return Ok(());
             }
             // A pack failed: the one-thread loop names the element.
@@ -386,26 +383,21 @@ impl<'p, T: Real> Model<'p, T> {
         Ok(())
     }
 
-    /// One central-difference step from `t_n` to `t_{n+1}`.
-    ///
-    /// With threads, the whole step runs inside the pool (one hand-off per step: the
-    /// phases' parallel loops then start on threads already awake).
+    /// One central-difference step from `t_n` to `t_{n+1}`: the element phase and the node
+    /// update on the team's threads when there are several ([`team`]: they wait for the
+    /// next phase awake).
     pub fn advance(&mut self) -> Result<(), StepError> {
-        match self.pool.take() {
-            Some(pool) => {
-                let r = pool.install(|| self.advance_inner(Some(&pool)));
-                self.pool = Some(pool);
-                r
-            }
-            None => self.advance_inner(None),
-        }
+        let team = self.team.take();
+        let r = self.advance_inner(team.as_ref());
+        self.team = team;
+        r
     }
 
-    fn advance_inner(&mut self, pool: Option<&rayon::ThreadPool>) -> Result<(), StepError> {
+    fn advance_inner(&mut self, team: Option<&team::Team>) -> Result<(), StepError> {
         let t = self.time_s();
         let t_next = t + self.dt_s;
         let step = self.step;
-        self.element_phase(pool)
+        self.element_phase(team)
             .map_err(|error| StepError { step, error })?;
         self.external_forces(t)
             .map_err(|error| StepError { step, error })?;
@@ -419,23 +411,25 @@ impl<'p, T: Real> Model<'p, T> {
             speed_limit_m_per_s: self.problem.solver.speed_limit,
             t_next_s: t_next,
         };
-        let parts = self
+        let mut parts: Vec<_> = self
             .u
             .chunks_mut(NODE_BLOCK)
             .zip(self.du.chunks_mut(NODE_BLOCK))
             .zip(self.f_int.chunks_mut(NODE_BLOCK))
             .enumerate()
-            .map(|(k, ((u, du), f_int))| (k * NODE_BLOCK, u, du, f_int));
-        let block = |(first, u, du, f_int): (usize, &mut [[T; 3]], &mut _, &mut _)| {
-            nodes.block(first, u, du, f_int)
-        };
-        let sums: Vec<nodes::BlockSums> = match pool {
-            Some(pool) => {
-                use rayon::prelude::*;
-                let parts: Vec<_> = parts.collect();
-                pool.install(|| parts.into_par_iter().map(block).collect())
-            }
-            None => parts.map(block).collect(),
+            .map(|(k, ((u, du), f_int))| (k * NODE_BLOCK, u, du, f_int))
+            .collect();
+        let block =
+            |_: usize, (first, u, du, f_int): &mut (usize, &mut [[T; 3]], &mut _, &mut _)| {
+                nodes.block(*first, u, du, f_int)
+            };
+        let sums: Vec<nodes::BlockSums> = match team {
+            Some(team) => team.map_mut(&mut parts, block),
+            None => parts
+                .iter_mut()
+                .enumerate()
+                .map(|(k, p)| block(k, p))
+                .collect(),
         };
         let (mut ke, mut rp, mut rf) = (0.0, [0.0; 3], [0.0; 3]);
         for s in &sums {

@@ -93,7 +93,7 @@ impl<'p> DtMonitor<'p> {
     /// The element tracker's critical step about the model's state now, if tracking.
     pub fn tracked<T: Real>(&self, model: &Model<'_, T>) -> Option<TrackedStep> {
         let t = self.tracker.as_ref()?;
-        Some(t.bound(&model.u, model.pool.as_ref()))
+        Some(t.bound(&model.u, model.team.as_ref()))
     }
 
     /// The critical step about the model's current state: the element bound

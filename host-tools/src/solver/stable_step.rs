@@ -38,7 +38,6 @@
 
 use pe_firmware::physics::hex::deformation_gradient;
 use pe_firmware::physics::{tensor, MaterialLaw, Real, Volumetric};
-use rayon::prelude::*;
 
 use crate::problem::Problem;
 
@@ -151,8 +150,8 @@ impl<'p> StableStepTracker<'p> {
     }
 
     /// The calibrated critical step about displacements `u` (`κ · 2 / max_e ω_e`), on
-    /// `pool`'s threads when given (the maximum does not depend on the split).
-    pub fn bound<T: Real>(&self, u: &[[T; 3]], pool: Option<&rayon::ThreadPool>) -> TrackedStep {
+    /// `team`'s threads when given (the maximum does not depend on the split).
+    pub fn bound<T: Real>(&self, u: &[[T; 3]], team: Option<&super::team::Team>) -> TrackedStep {
         let chunk_max = |k: usize| {
             let (lo, hi) = (
                 k * CHUNK,
@@ -170,13 +169,8 @@ impl<'p> StableStepTracker<'p> {
                 a
             }
         };
-        let (w2, cell) = match pool {
-            Some(p) if chunks > 1 => p.install(|| {
-                (0..chunks)
-                    .into_par_iter()
-                    .map(chunk_max)
-                    .reduce(|| (0.0, 0), pick)
-            }),
+        let (w2, cell) = match team {
+            Some(t) if chunks > 1 => t.map(chunks, chunk_max).into_iter().fold((0.0, 0), pick),
             _ => (0..chunks).map(chunk_max).fold((0.0, 0), pick),
         };
         let dt = if w2 > 0.0 {

@@ -29,6 +29,7 @@ use pe_firmware::physics::{
     Pack, PhysicsError, Real,
 };
 
+use super::team::Team;
 use crate::problem::elements::Elements;
 
 #[cfg(target_arch = "x86_64")]
@@ -148,14 +149,14 @@ pub trait ElementLoop<T: Real>: Send + Sync {
         None
     }
     /// The internal forces at `u` added into `f` (zero on entry) by the plan's blocks on
-    /// `pool`, with the bits of [`Self::internal_forces`]; false when a pack fails or
+    /// `team`, with the bits of [`Self::internal_forces`]; false when a pack fails or
     /// the plan does not fit (the caller zeroes `f` and runs [`Self::internal_forces`]
     /// for the error). The default, for a loop without a plan, is false.
     fn parallel_forces(
         &self,
         _plan: &Plan,
         _kept: &mut [Vec<[T; 3]>],
-        _pool: &rayon::ThreadPool,
+        _team: &Team,
         _u: &[[T; 3]],
         _f: &mut [[T; 3]],
     ) -> bool {
@@ -500,55 +501,50 @@ impl<S: Real, L: HostLanes<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> 
         &self,
         plan: &Plan,
         kept: &mut [Vec<[S; 3]>],
-        pool: &rayon::ThreadPool,
+        team: &Team,
         u: &[[S; 3]],
         f: &mut [[S; 3]],
     ) -> bool {
-        use rayon::prelude::*;
         if kept.len() != plan.blocks.len() || plan.owner.len() != f.len() || u.len() != f.len() {
             return false;
         }
         let shared = SharedForces(f.as_mut_ptr(), f.len());
-        let ok = pool.install(|| {
-            plan.blocks
-                .par_iter()
-                .zip(kept.par_iter_mut())
-                .enumerate()
-                .map(|(b, (runs, kept))| {
-                    kept.clear();
-                    // Plain copies (not references) in the closures, so the force
-                    // stores, through a raw pointer, do not make the loop reload them.
-                    let (owner, block) = (plan.owner.as_slice(), b as u16);
-                    let (own, mine) = (shared.copy(), shared.copy());
-                    let mut checked = move |n: usize, v: [S; 3]| {
-                        if owner.get(n) == Some(&block) {
-                            // SAFETY: block `b` owns node `n` (see `Plan`).
-                            unsafe { own.add(n, v) }
-                        } else {
-                            kept.push(v);
-                        }
-                    };
-                    let mut owned = move |n: usize, v: [S; 3]| {
-                        // SAFETY: the plan found every node of these packs owned by
-                        // block `b` (a run not marked shared).
-                        unsafe { mine.add(n, v) }
-                    };
-                    match &self.packs {
-                        Packs::Reduced {
-                            general,
-                            boxes,
-                            cuboids,
-                        } => {
-                            run_runs(general, &runs[0], u, &mut checked, &mut owned)
-                                && run_runs(boxes, &runs[1], u, &mut checked, &mut owned)
-                                && run_runs(cuboids, &runs[2], u, &mut checked, &mut owned)
-                        }
-                        Packs::Full(p) => run_runs(p, &runs[0], u, &mut checked, &mut owned),
-                    }
-                })
-                .collect::<Vec<bool>>()
+        let ok = team.map_mut(kept, |b, kept| {
+            kept.clear();
+            let Some(runs) = plan.blocks.get(b) else {
+                return false;
+            };
+            // Plain copies (not references) in the closures, so the force stores, through
+            // a raw pointer, do not make the loop reload them.
+            let (owner, block) = (plan.owner.as_slice(), b as u16);
+            let (own, mine) = (shared.copy(), shared.copy());
+            let mut checked = move |n: usize, v: [S; 3]| {
+                if owner.get(n) == Some(&block) {
+                    // SAFETY: block `b` owns node `n` (see `Plan`).
+                    unsafe { own.add(n, v) }
+                } else {
+                    kept.push(v);
+                }
+            };
+            let mut owned = move |n: usize, v: [S; 3]| {
+                // SAFETY: the plan found every node of these packs owned by block `b` (a
+                // run not marked shared).
+                unsafe { mine.add(n, v) }
+            };
+            match &self.packs {
+                Packs::Reduced {
+                    general,
+                    boxes,
+                    cuboids,
+                } => {
+                    run_runs(general, &runs[0], u, &mut checked, &mut owned)
+                        && run_runs(boxes, &runs[1], u, &mut checked, &mut owned)
+                        && run_runs(cuboids, &runs[2], u, &mut checked, &mut owned)
+                }
+                Packs::Full(p) => run_runs(p, &runs[0], u, &mut checked, &mut owned),
+            }
         });
-        if !ok.iter().all(|&k| k) {
+        if ok.len() != plan.blocks.len() || !ok.iter().all(|&k| k) {
             return false;
         }
         // The forces kept aside, each owner's on its nodes, block by block, each block's
@@ -562,20 +558,18 @@ impl<S: Real, L: HostLanes<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> 
             return false;
         }
         let kept = &*kept;
-        pool.install(|| {
-            plan.aside_by_owner.par_iter().for_each(|list| {
-                for &(b, i) in list {
-                    let (b, i) = (b as usize, i as usize);
-                    let node = plan.aside.get(b).and_then(|a| a.get(i));
-                    let value = kept.get(b).and_then(|k| k.get(i));
-                    if let (Some(&n), Some(&v)) = (node, value) {
-                        // SAFETY: node `n` is owned by this list's block (`Plan::plan`
-                        // files a kept force under its node's owner), and no other list
-                        // holds that block's nodes.
-                        unsafe { shared.add(n as usize, v) }
-                    }
+        team.for_each(plan.aside_by_owner.len(), |o| {
+            for &(b, i) in &plan.aside_by_owner[o] {
+                let (b, i) = (b as usize, i as usize);
+                let node = plan.aside.get(b).and_then(|a| a.get(i));
+                let value = kept.get(b).and_then(|k| k.get(i));
+                if let (Some(&n), Some(&v)) = (node, value) {
+                    // SAFETY: node `n` is owned by this list's block (`Plan::plan` files a
+                    // kept force under its node's owner), and no other list holds that
+                    // block's nodes.
+                    unsafe { shared.add(n as usize, v) }
                 }
-            })
+            }
         });
         true
     }
