@@ -36,6 +36,10 @@ use anyhow::{anyhow, Result};
 /// short enough that an idle team costs nothing measurable.
 pub const SPIN_WAIT: Duration = Duration::from_micros(200);
 
+/// How many times the caller spins for a worker's last task before it yields the core
+/// instead (a spin-loop hint is about 50 ns here: some tens of µs).
+const ACK_SPINS: u32 = 1 << 10;
+
 /// A call's tasks, the closure's lifetime erased (see [`Team::for_each`] for why that is
 /// sound).
 #[derive(Clone, Copy)]
@@ -218,10 +222,11 @@ impl Team {
             let mut spins = 0u32;
             while d.0.load(Ordering::Acquire) != g {
                 spins = spins.saturating_add(1);
-                if spins < 1 << 16 {
+                if spins < ACK_SPINS {
                     spin_loop();
                 } else {
-                    // The worker is descheduled (a busy machine): let it run.
+                    // The worker is likely descheduled (more threads than cores, as under
+                    // `cargo test`): give it the core rather than spin through its slice.
                     std::thread::yield_now();
                 }
             }
