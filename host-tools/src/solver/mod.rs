@@ -296,6 +296,7 @@ impl<'p, T: Real> Model<'p, T> {
             .plan
             .as_ref()
             .map_or_else(Vec::new, |p| p.kept_buffers());
+        // The old team's threads end (joined on drop) before the new one's start.
         self.team = None;
         self.team = if threads > 1 {
             Some(team::Team::new(threads)?)
@@ -415,25 +416,19 @@ impl<'p, T: Real> Model<'p, T> {
             speed_limit_m_per_s: self.problem.solver.speed_limit,
             t_next_s: t_next,
         };
-        let mut parts: Vec<_> = self
+        let parts = self
             .u
             .chunks_mut(NODE_BLOCK)
             .zip(self.du.chunks_mut(NODE_BLOCK))
             .zip(self.f_int.chunks_mut(NODE_BLOCK))
             .enumerate()
-            .map(|(k, ((u, du), f_int))| (k * NODE_BLOCK, u, du, f_int))
-            .collect();
-        let block =
-            |_: usize, (first, u, du, f_int): &mut (usize, &mut [[T; 3]], &mut _, &mut _)| {
-                nodes.block(*first, u, du, f_int)
-            };
+            .map(|(k, ((u, du), f_int))| (k * NODE_BLOCK, u, du, f_int));
+        let block = |(first, u, du, f_int): &mut (usize, &mut [[T; 3]], &mut _, &mut _)| {
+            nodes.block(*first, u, du, f_int)
+        };
         let sums: Vec<nodes::BlockSums> = match team {
-            Some(team) => team.map_mut(&mut parts, block),
-            None => parts
-                .iter_mut()
-                .enumerate()
-                .map(|(k, p)| block(k, p))
-                .collect(),
+            Some(team) => team.map_mut(&mut parts.collect::<Vec<_>>(), |_, p| block(p)),
+            None => parts.map(|mut p| block(&mut p)).collect(),
         };
         let (mut ke, mut rp, mut rf) = (0.0, [0.0; 3], [0.0; 3]);
         for s in &sums {
