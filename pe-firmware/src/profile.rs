@@ -332,8 +332,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 464,
             cuboid_per_element_step: 539,
             per_node_update: 76,
-            per_contact_node: 263,
-            step_per_element: 1201,
+            per_contact_node: 205,
+            step_per_element: 1182,
         },
         FirmwareCost {
             precision: F64,
@@ -345,8 +345,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 0,
             cuboid_per_element_step: 0,
             per_node_update: 76,
-            per_contact_node: 263,
-            step_per_element: 4353,
+            per_contact_node: 205,
+            step_per_element: 4335,
         },
         FirmwareCost {
             precision: F32,
@@ -358,8 +358,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 375,
             cuboid_per_element_step: 493,
             per_node_update: 87,
-            per_contact_node: 250,
-            step_per_element: 1074,
+            per_contact_node: 199,
+            step_per_element: 1059,
         },
         FirmwareCost {
             precision: F32,
@@ -371,8 +371,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 0,
             cuboid_per_element_step: 0,
             per_node_update: 87,
-            per_contact_node: 244,
-            step_per_element: 3609,
+            per_contact_node: 199,
+            step_per_element: 3593,
         },
     ]
 };

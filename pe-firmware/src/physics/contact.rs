@@ -295,6 +295,12 @@ impl QuadBounds {
                 hi[i] = hi[i].max(p[i]);
             }
         }
+        QuadBounds::from_extent(lo, hi)
+    }
+
+    /// The bounds of corners whose least and greatest coordinates are `lo` and `hi`.
+    #[inline(always)]
+    fn from_extent(lo: V3, hi: V3) -> QuadBounds {
         let e = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(hi[2] - lo[2]);
         QuadBounds {
             lo,
@@ -484,12 +490,28 @@ impl ContactModel<'_> {
         f: usize,
         pos: &impl Fn(usize) -> Option<V3>,
     ) -> Result<QuadBounds, PhysicsError> {
-        let mut q = [[0.0; 3]; 4];
-        Ok(if self.face_points(f, pos, &mut q)? {
-            QuadBounds::new(&q)
-        } else {
-            QuadBounds::UNKNOWN
-        })
+        // `QuadBounds::new` of `face_points`' corners, the same operations in the same
+        // order, folded into the reading of the corners (no array of the four corners
+        // kept: on the board it was spilled and read back, about half of the cost).
+        let face = self.faces.get(f).ok_or(bad(f))?;
+        let (mut lo, mut hi) = ([0.0; 3], [0.0; 3]);
+        for (k, &c) in face.nodes.iter().enumerate() {
+            if c as usize >= self.nodes.len() {
+                return Err(bad(c as usize));
+            }
+            let Some(p) = pos(c as usize) else {
+                return Ok(QuadBounds::UNKNOWN);
+            };
+            if k == 0 {
+                (lo, hi) = (p, p);
+            } else {
+                for i in 0..3 {
+                    lo[i] = lo[i].min(p[i]);
+                    hi[i] = hi[i].max(p[i]);
+                }
+            }
+        }
+        Ok(QuadBounds::from_extent(lo, hi))
     }
 
     /// The positions of face `f`'s nodes into `q`: `Ok(false)` if one is unknown. (Into
@@ -682,6 +704,61 @@ pub fn evaluate_pairs_bounded(
     force: &mut [V3],
     stats: &mut ContactStats,
 ) -> Result<(), PhysicsError> {
+    evaluate_bounded(
+        m,
+        candidates,
+        pos,
+        bounds,
+        apply,
+        tolerance_m,
+        force,
+        stats,
+        false,
+    )
+}
+
+/// [`evaluate_pairs_bounded`] over candidates that [`keep_applied_groups`] kept for the
+/// same `apply`: every group gives a node with `apply` a force and its indices were
+/// checked there, so neither is tested again (a board evaluates its kept list at every step
+/// until the next check; on a board of a partition most slaves are not its own, and the
+/// test read each such group's faces). The same forces and statistics, bit for bit.
+#[allow(clippy::too_many_arguments)]
+pub fn evaluate_kept_pairs_bounded(
+    m: &ContactModel<'_>,
+    candidates: &[Candidate],
+    pos: impl Fn(usize) -> Option<V3>,
+    bounds: &[QuadBounds],
+    apply: impl Fn(usize) -> bool,
+    tolerance_m: f64,
+    force: &mut [V3],
+    stats: &mut ContactStats,
+) -> Result<(), PhysicsError> {
+    evaluate_bounded(
+        m,
+        candidates,
+        pos,
+        bounds,
+        apply,
+        tolerance_m,
+        force,
+        stats,
+        true,
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn evaluate_bounded(
+    m: &ContactModel<'_>,
+    candidates: &[Candidate],
+    pos: impl Fn(usize) -> Option<V3>,
+    bounds: &[QuadBounds],
+    apply: impl Fn(usize) -> bool,
+    tolerance_m: f64,
+    force: &mut [V3],
+    stats: &mut ContactStats,
+    kept: bool,
+) -> Result<(), PhysicsError> {
     let face_test = |f: usize, x: V3, depth_max: f64| {
         if bounds
             .get(f)
@@ -705,6 +782,7 @@ pub fn evaluate_pairs_bounded(
         force,
         stats,
         face_test,
+        kept,
     )
 }
 
@@ -737,11 +815,13 @@ pub fn evaluate_pairs_at(
         force,
         stats,
         face_test,
+        false,
     )
 }
 
 /// The loop of [`evaluate_pairs`], with `face_test(f, x, depth_max)` the penetration of a
-/// slave at `x` into face `f` (`Ok(None)`: none, or the face's position is unknown).
+/// slave at `x` into face `f` (`Ok(None)`: none, or the face's position is unknown);
+/// `kept`: the groups are [`keep_applied_groups`]'s (not tested again).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn evaluate_pairs_with(
@@ -753,6 +833,7 @@ fn evaluate_pairs_with(
     force: &mut [V3],
     stats: &mut ContactStats,
     face_test: impl Fn(usize, V3, f64) -> Result<Option<FacePenetration>, PhysicsError>,
+    kept: bool,
 ) -> Result<(), PhysicsError> {
     let mut i = 0;
     while i < candidates.len() {
@@ -767,7 +848,7 @@ fn evaluate_pairs_with(
         // A group none of whose nodes gets a force here (another board's contact): skipped
         // before the penetration tests, with the same result (nothing added, no statistic)
         // and its indices still checked.
-        if !group_applies(m, s, group, &apply)? {
+        if !kept && !group_applies(m, s, group, &apply)? {
             continue;
         }
         let mut best: Option<(usize, FacePenetration)> = None;
@@ -1149,8 +1230,9 @@ mod tests {
     /// On [`overlapping_grids`], with a board's share of the nodes applied (a third, by
     /// index), the groups [`keep_applied_groups`] keeps give the same forces and
     /// statistics, bit for bit, as the whole list (which [`evaluate_pairs`] filters per
-    /// step); and the check means something: forces are applied, groups are dropped and
-    /// some are kept.
+    /// step), and so does [`evaluate_kept_pairs_bounded`] over them with bounds for only
+    /// the faces they name (as a board computes them); and the check means something:
+    /// forces are applied, groups are dropped and some are kept, some faces are not named.
     #[test]
     fn keeping_the_applied_groups_changes_no_force() {
         let (nodes, faces, pairs) = overlapping_grids();
@@ -1185,6 +1267,48 @@ mod tests {
             assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
         }
         assert_eq!(s_all, s_kept);
+        // The board's way: the kept groups without their test again, with bounds only for
+        // the faces they name. The other faces' bounds hold a box far away that rejects
+        // every slave: were one read, its face's contacts would be lost.
+        let named: Vec<bool> = (0..faces.len())
+            .map(|f| kept.iter().any(|c| c.face as usize == f))
+            .collect();
+        let unnamed = named.iter().filter(|&&u| !u).count();
+        assert!(
+            0 < unnamed && unnamed < faces.len(),
+            "the kept groups name {} of {} faces",
+            faces.len() - unnamed,
+            faces.len()
+        );
+        let far = QuadBounds {
+            lo: [1e9; 3],
+            hi: [1e9; 3],
+            edge_slack: 0.0,
+        };
+        let bounds: Vec<QuadBounds> = (0..faces.len())
+            .map(|f| match named[f] {
+                true => m.face_bounds(f, &pos).expect("valid face"),
+                false => far,
+            })
+            .collect();
+        let mut f_board = vec![[0.0; 3]; nodes.len()];
+        let mut s_board = ContactStats::default();
+        evaluate_kept_pairs_bounded(
+            &m,
+            &kept,
+            pos,
+            &bounds,
+            apply,
+            1.0,
+            &mut f_board,
+            &mut s_board,
+        )
+        .expect("no error");
+        assert_eq!(f_board.len(), f_all.len());
+        for (a, b) in f_all.iter().zip(&f_board) {
+            assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+        }
+        assert_eq!(s_all, s_board);
     }
 
     /// [`evaluate_pairs_bounded`] gives [`evaluate_pairs`]'s forces and statistics, bit for
@@ -1215,6 +1339,35 @@ mod tests {
                 .map(|f| m.face_bounds(f, &pos).expect("valid face"))
                 .collect();
             assert_eq!(bounds.len(), faces.len());
+            // `face_bounds` folds the corners' bounds into their reading: the bounds of the
+            // four corners read first, bit for bit, and unknown where a corner is.
+            let mut known = 0;
+            for (f, b) in bounds.iter().enumerate() {
+                let mut q = [[0.0; 3]; 4];
+                if m.face_points(f, &pos, &mut q).expect("valid face") {
+                    let r = QuadBounds::new(&q);
+                    let bits = |b: &QuadBounds| {
+                        (
+                            b.lo.map(f64::to_bits),
+                            b.hi.map(f64::to_bits),
+                            b.edge_slack.to_bits(),
+                        )
+                    };
+                    assert_eq!(bits(b), bits(&r), "face {f}");
+                    assert!(r.edge_slack > 0.0, "face {f} has an extent");
+                    known += 1;
+                } else {
+                    assert!(b.edge_slack.is_nan(), "face {f} has an unknown corner");
+                }
+            }
+            // Every face when all nodes are known; with every seventh node unknown about
+            // half of them have a corner unknown.
+            let least = if unknown_every == 0 {
+                faces.len()
+            } else {
+                faces.len() / 3
+            };
+            assert!(known >= least, "{known} of {} faces known", faces.len());
             let depth_max = pairs[0].depth_max_m;
             let decided = cands
                 .iter()

@@ -16,8 +16,8 @@ use super::storage::{ContactStorage, RemoteSlot};
 use super::{Fault, FaultKind, Runtime, WireReal};
 use crate::image::{path_value, ContactNode, ContactNodePlace, ContactPair, ElementRecord, Tool};
 use crate::physics::contact::{
-    build_candidates, check_travel, evaluate_pairs_bounded, evaluate_tools, keep_applied_groups,
-    Capsule, ContactModel, ContactStats,
+    build_candidates, check_travel, evaluate_kept_pairs_bounded, evaluate_tools,
+    keep_applied_groups, Capsule, ContactModel, ContactStats,
 };
 use crate::physics::Real;
 
@@ -26,6 +26,10 @@ pub const PAIRS_MAX: usize = 4;
 pub const TOOLS_MAX: usize = 4;
 /// Most boards on the global network.
 pub const BOARDS_MAX: usize = link_proto::BOARD_COUNT;
+/// Contact faces the used-face mask covers ([`ContactState`]); the bounds of a face beyond
+/// it are computed every step whether a candidate names it or not.
+const FACE_MASK_FACES: usize = 1024;
+const FACE_MASK_WORDS: usize = FACE_MASK_FACES / 32;
 
 /// An axis-aligned box (min, max).
 type Aabb = ([f64; 3], [f64; 3]);
@@ -67,6 +71,9 @@ pub struct ContactState {
     /// Per step parity: (step + 1, slots whose last node packet arrived).
     done: [(u32, u64); 2],
     candidates_len: usize,
+    /// The faces the kept candidates name (bit `f % 32` of word `f / 32`), set at each
+    /// check: only their bounds are computed at a step.
+    faces_used: [u32; FACE_MASK_WORDS],
     /// Force of the tissue on each tool from this board's nodes at the last step (N).
     pub(super) tool_force: [[f64; 3]; TOOLS_MAX],
     pub(super) stats: ContactStats,
@@ -99,6 +106,7 @@ impl ContactState {
             send_ranges: [(0, 0); BOARDS_MAX],
             done: [(0, 0); 2],
             candidates_len: 0,
+            faces_used: [0; FACE_MASK_WORDS],
             tool_force: [[0.0; 3]; TOOLS_MAX],
             stats: ContactStats::default(),
         }
@@ -577,6 +585,13 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             let kept = &mut candidates[..n.min(max as usize)];
             state.candidates_len =
                 keep_applied_groups(&model, kept, own).map_err(|e| fault(FaultKind::Physics(e)))?;
+            state.faces_used = [0; FACE_MASK_WORDS];
+            for c in &kept[..state.candidates_len.min(kept.len())] {
+                let f = c.face as usize;
+                if let Some(w) = state.faces_used.get_mut(f / 32) {
+                    *w |= 1 << (f % 32);
+                }
+            }
             self.port.stats.checks += 1;
             self.port.stats.candidates_max = self.port.stats.candidates_max.max(n as u32);
         }
@@ -610,18 +625,27 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             &[]
         };
         // Each face's bounds once per step, not once per candidate that names it (a face is
-        // a candidate of several slaves, most of them outside its bounds at a step).
+        // a candidate of several slaves, most of them outside its bounds at a step), and
+        // only for the faces the kept candidates name (the others' are never read).
         let bounds = if cand.is_empty() {
             &mut face_bounds[..0]
         } else {
             let nf = model.faces.len().min(face_bounds.len());
             let bounds = &mut face_bounds[..nf];
             for (f, b) in bounds.iter_mut().enumerate() {
-                *b = model.face_bounds(f, &pos).map_err(physics)?;
+                let used = state
+                    .faces_used
+                    .get(f / 32)
+                    .is_none_or(|w| w & (1 << (f % 32)) != 0);
+                if used {
+                    *b = model.face_bounds(f, &pos).map_err(physics)?;
+                }
             }
             bounds
         };
-        evaluate_pairs_bounded(&model, cand, pos, bounds, own, tol, force, &mut stats)
+        // The candidates are the groups `keep_applied_groups` kept at the check, for the
+        // same `own` (and their indices checked there).
+        evaluate_kept_pairs_bounded(&model, cand, pos, bounds, own, tol, force, &mut stats)
             .map_err(physics)?;
         state.tool_force = tool_force;
         state.stats = stats;

@@ -214,8 +214,9 @@ pub struct ContactStorage<'a> {
     pub nodes: &'a mut [ContactNode],
     pub places: &'a mut [ContactNodePlace],
     pub faces: &'a mut [ContactFace],
-    /// Per contact face: its bounds this step, computed once per step for the pair tests
-    /// ([`crate::physics::contact::evaluate_pairs_bounded`]).
+    /// Per contact face: its bounds this step, computed once per step for the pair tests,
+    /// for the faces the kept candidates name
+    /// ([`crate::physics::contact::evaluate_kept_pairs_bounded`]).
     pub face_bounds: &'a mut [QuadBounds],
     /// Per contact node: position at the last check, and contact force this step (f64).
     pub at_check: &'a mut [[f64; 3]],
