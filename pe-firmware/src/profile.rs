@@ -237,9 +237,12 @@ pub struct FirmwareCost {
     /// Per node and step: external forces, central-difference update, checks (a node
     /// without contact: measured on the regular box).
     pub per_node_update: u32,
-    /// Extra per contact-surface node and step: the contact search, penalties and the
-    /// exchange of contact nodes (measured on the built-in scene, whose probe presses the
-    /// tube, above its plain node updates).
+    /// Per contact-surface node and step, on a board that evaluates the contact of the
+    /// whole table: a step's contact evaluation (positions, travel check, tool and pair
+    /// tests) over the table's nodes, measured on its own between marks on the built-in
+    /// scene (one board owning every contact node, in the board-cost state). Not in it: a
+    /// check step's candidate search (once per check interval) and the contact-node
+    /// packets a board of a partition sends and receives.
     pub per_contact_node: u32,
     /// A whole step divided by the elements, on the measured scene.
     pub step_per_element: u32,
@@ -332,8 +335,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 464,
             cuboid_per_element_step: 539,
             per_node_update: 76,
-            per_contact_node: 205,
-            step_per_element: 1182,
+            per_contact_node: 277,
+            step_per_element: 1177,
         },
         FirmwareCost {
             precision: F64,
@@ -345,8 +348,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 0,
             cuboid_per_element_step: 0,
             per_node_update: 76,
-            per_contact_node: 205,
-            step_per_element: 4335,
+            per_contact_node: 276,
+            step_per_element: 4329,
         },
         FirmwareCost {
             precision: F32,
@@ -358,8 +361,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 375,
             cuboid_per_element_step: 493,
             per_node_update: 87,
-            per_contact_node: 199,
-            step_per_element: 1059,
+            per_contact_node: 277,
+            step_per_element: 1053,
         },
         FirmwareCost {
             precision: F32,
@@ -371,8 +374,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 0,
             cuboid_per_element_step: 0,
             per_node_update: 87,
-            per_contact_node: 199,
-            step_per_element: 3593,
+            per_contact_node: 277,
+            step_per_element: 3588,
         },
     ]
 };

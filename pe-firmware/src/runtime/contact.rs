@@ -495,14 +495,32 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
         }
     }
 
+    /// The contact evaluation of a step that is not a check step (positions, travel check,
+    /// tool and pair tests) at the current displacements and step index: the contact forces,
+    /// tool forces and statistics that the next step's evaluation computes from the same
+    /// state (nothing else changes). For the cost measurement (`pe-board-bench`, `scripts/board-cost.sh`: what a step's
+    /// contact costs a board that owns contact nodes, the compile report's charge per
+    /// contact node). A board without contact does nothing.
+    pub fn evaluate_contact_again(&mut self) -> Result<(), Fault> {
+        if self.header.counts.contact_nodes == 0 {
+            return Ok(());
+        }
+        self.evaluate_contact_at(false)
+    }
+
     /// Contact forces of the owned nodes at this step (the serial solver's arithmetic, in
     /// its order, restricted to the owned nodes) and this board's share of the tool forces.
     fn evaluate_contact(&mut self) -> Result<(), Fault> {
+        let check = self.has_pairs() && self.is_check_step();
+        self.evaluate_contact_at(check)
+    }
+
+    /// [`Self::evaluate_contact`], with the candidate search if `check`.
+    fn evaluate_contact_at(&mut self, check: bool) -> Result<(), Fault> {
         let c = self.header.counts;
         let (nc, np) = (c.contact_nodes as usize, c.path_points as usize);
         let p = self.header.contact;
         let t = self.step as f64 * self.header.params.dt_s;
-        let check = self.has_pairs() && self.is_check_step();
         let fault = |kind| Fault {
             board: self.header.board,
             step: self.step,

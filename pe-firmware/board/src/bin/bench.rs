@@ -11,7 +11,11 @@
 //! * marks 6→7: one whole step of the runtime (gather, kernel, scatter, external forces,
 //!   update; no exchange on a 1x1x1 machine);
 //! * marks 8→9 and 10→11: as 2→3 and 4→5, for the parallelepipeds;
-//! * marks 12→13 and 14→15: the same for the axis-aligned cuboids (the cheapest kernel).
+//! * marks 12→13 and 14→15: the same for the axis-aligned cuboids (the cheapest kernel);
+//! * marks 16→17: the contact evaluation of a step again, at the state after the measured
+//!   step (`Runtime::evaluate_contact_again`: positions, travel check, tool and pair tests;
+//!   not the check step's search), which the one board owns whole (nothing on a scene
+//!   without contact).
 //!
 //! Marks 2→5 are on the general-kernel elements. Then prints
 //! `bench,VARIANT,ELEMENTS,PARALLELEPIPEDS,CUBOIDS,NODES,CONTACT_NODES,SAMPLES,BOX_SAMPLES,CUBOID_SAMPLES,MAX_ABS_U_M` via
@@ -93,6 +97,12 @@ fn main() -> ! {
     // The plugin numbers marks in call order: these come last.
     let measured_boxes = kernel_and_loop(rt.boxes(), &laws, rt.displacements(), (8, 10));
     let measured_cuboids = kernel_and_loop(rt.cuboids(), &laws, rt.displacements(), (12, 14));
+    bench_mark(16);
+    let r = rt.evaluate_contact_again();
+    bench_mark(17);
+    if r.is_err() {
+        fail("fault in the measured contact evaluation");
+    }
 
     // The largest displacement component, so a measurement on an undeformed state (where
     // the material law's functions take their cheapest paths) is seen and refused.
