@@ -335,8 +335,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 464,
             cuboid_per_element_step: 539,
             per_node_update: 76,
-            per_contact_node: 277,
-            step_per_element: 1177,
+            per_contact_node: 263,
+            step_per_element: 1172,
         },
         FirmwareCost {
             precision: F64,
@@ -348,8 +348,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 0,
             cuboid_per_element_step: 0,
             per_node_update: 76,
-            per_contact_node: 276,
-            step_per_element: 4329,
+            per_contact_node: 262,
+            step_per_element: 4324,
         },
         FirmwareCost {
             precision: F32,
@@ -361,8 +361,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 375,
             cuboid_per_element_step: 493,
             per_node_update: 87,
-            per_contact_node: 277,
-            step_per_element: 1053,
+            per_contact_node: 268,
+            step_per_element: 1050,
         },
         FirmwareCost {
             precision: F32,
@@ -374,8 +374,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 0,
             cuboid_per_element_step: 0,
             per_node_update: 87,
-            per_contact_node: 277,
-            step_per_element: 3588,
+            per_contact_node: 268,
+            step_per_element: 3585,
         },
     ]
 };

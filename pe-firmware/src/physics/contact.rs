@@ -835,28 +835,52 @@ fn evaluate_pairs_with(
     face_test: impl Fn(usize, V3, f64) -> Result<Option<FacePenetration>, PhysicsError>,
     kept: bool,
 ) -> Result<(), PhysicsError> {
+    // The shallowest penetration so far of a slave at `x`, with face `c.face`'s.
+    let closer = |best: &mut Option<(usize, FacePenetration)>,
+                  c: &Candidate,
+                  x: V3,
+                  depth_max: f64|
+     -> Result<(), PhysicsError> {
+        if let Some(p) = face_test(c.face as usize, x, depth_max)? {
+            if best.is_none_or(|(_, b)| shallower(p.depth_m, b.depth_m)) {
+                *best = Some((c.face as usize, p));
+            }
+        }
+        Ok(())
+    };
     let mut i = 0;
     while i < candidates.len() {
         let (direction, slave) = (candidates[i].direction, candidates[i].slave);
-        let j = i + group_len(&candidates[i..]);
-        let group = &candidates[i..j];
-        i = j;
         let s = slave as usize;
         let (_, _, depth_max) = m.roles(direction as usize).ok_or(bad(direction as usize))?;
         let node = m.nodes.get(s).ok_or(bad(s))?;
-        let Some(x) = pos(s) else { continue };
-        // A group none of whose nodes gets a force here (another board's contact): skipped
-        // before the penetration tests, with the same result (nothing added, no statistic)
-        // and its indices still checked.
-        if !kept && !group_applies(m, s, group, &apply)? {
-            continue;
-        }
         let mut best: Option<(usize, FacePenetration)> = None;
-        for c in group {
-            if let Some(p) = face_test(c.face as usize, x, depth_max)? {
-                if best.is_none_or(|(_, b)| shallower(p.depth_m, b.depth_m)) {
-                    best = Some((c.face as usize, p));
+        if kept {
+            let Some(x) = pos(s) else {
+                i += group_len(&candidates[i..]);
+                continue;
+            };
+            // One pass: the group's end is found as its faces are tested.
+            while let Some(c) = candidates.get(i) {
+                if c.direction != direction || c.slave != slave {
+                    break;
                 }
+                closer(&mut best, c, x, depth_max)?;
+                i += 1;
+            }
+        } else {
+            let j = i + group_len(&candidates[i..]);
+            let group = &candidates[i..j];
+            i = j;
+            let Some(x) = pos(s) else { continue };
+            // A group none of whose nodes gets a force here (another board's contact):
+            // skipped before the penetration tests, with the same result (nothing added, no
+            // statistic) and its indices still checked.
+            if !group_applies(m, s, group, &apply)? {
+                continue;
+            }
+            for c in group {
+                closer(&mut best, c, x, depth_max)?;
             }
         }
         let Some((f, p)) = best else { continue };
