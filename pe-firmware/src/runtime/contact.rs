@@ -498,9 +498,10 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
     /// The contact evaluation of a step that is not a check step (positions, travel check,
     /// tool and pair tests) at the current displacements and step index: the contact forces,
     /// tool forces and statistics that the next step's evaluation computes from the same
-    /// state (nothing else changes). For the cost measurement (`pe-board-bench`, `scripts/board-cost.sh`: what a step's
-    /// contact costs a board that owns contact nodes, the compile report's charge per
-    /// contact node). A board without contact does nothing.
+    /// state (nothing else changes). For the cost measurement (`pe-board-bench`,
+    /// `scripts/board-cost.sh`: what a step's contact costs a board that owns contact
+    /// nodes, the compile report's charge per contact node). A board without contact does
+    /// nothing.
     pub fn evaluate_contact_again(&mut self) -> Result<(), Fault> {
         if self.header.counts.contact_nodes == 0 {
             return Ok(());
