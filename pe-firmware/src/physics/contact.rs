@@ -290,12 +290,19 @@ impl QuadBounds {
     fn new(q: &[V3; 4]) -> QuadBounds {
         let (mut lo, mut hi) = (q[0], q[0]);
         for p in &q[1..] {
-            for i in 0..3 {
-                lo[i] = lo[i].min(p[i]);
-                hi[i] = hi[i].max(p[i]);
-            }
+            QuadBounds::include(&mut lo, &mut hi, p);
         }
         QuadBounds::from_extent(lo, hi)
+    }
+
+    /// `lo` and `hi` grown to hold corner `p` (the one fold of the corners: the bounds'
+    /// bits depend on its order, and [`ContactModel::face_bounds`] goes through it too).
+    #[inline(always)]
+    fn include(lo: &mut V3, hi: &mut V3, p: &V3) {
+        for i in 0..3 {
+            lo[i] = lo[i].min(p[i]);
+            hi[i] = hi[i].max(p[i]);
+        }
     }
 
     /// The bounds of corners whose least and greatest coordinates are `lo` and `hi`.
@@ -505,10 +512,7 @@ impl ContactModel<'_> {
             if k == 0 {
                 (lo, hi) = (p, p);
             } else {
-                for i in 0..3 {
-                    lo[i] = lo[i].min(p[i]);
-                    hi[i] = hi[i].max(p[i]);
-                }
+                QuadBounds::include(&mut lo, &mut hi, &p);
             }
         }
         Ok(QuadBounds::from_extent(lo, hi))
