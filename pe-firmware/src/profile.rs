@@ -335,8 +335,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 464,
             cuboid_per_element_step: 539,
             per_node_update: 76,
-            per_contact_node: 263,
-            step_per_element: 1172,
+            per_contact_node: 275,
+            step_per_element: 1176,
         },
         FirmwareCost {
             precision: F64,
@@ -348,8 +348,8 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_kernel_per_element: 0,
             cuboid_per_element_step: 0,
             per_node_update: 76,
-            per_contact_node: 262,
-            step_per_element: 4324,
+            per_contact_node: 274,
+            step_per_element: 4328,
         },
         FirmwareCost {
             precision: F32,

@@ -5,7 +5,7 @@
 use anyhow::{anyhow, Result};
 use pe_firmware::physics::contact::{
     build_candidates, check_travel, evaluate_pairs_at, evaluate_tools, Candidate, ContactModel,
-    ContactStats, FaceGeometry,
+    ContactStats, FaceGeometry, QuadBounds,
 };
 use pe_firmware::physics::{CentralDifference, MaterialLaw, PhysicsError, Real};
 
@@ -89,6 +89,8 @@ pub struct ContactState {
     /// the current step (refreshed every step for those faces).
     faces_used: Vec<u32>,
     geometry: Vec<Option<FaceGeometry>>,
+    /// The candidate search's boxes, one per contact face (`build_candidates`' scratch).
+    search_boxes: Vec<QuadBounds>,
     /// Contact-node positions at the last check.
     pub at_check: Vec<[f64; 3]>,
     /// Contact force per contact node at the last step (N).
@@ -117,6 +119,7 @@ impl ContactState {
             candidates: Vec::new(),
             faces_used: Vec::new(),
             geometry: vec![None; faces],
+            search_boxes: vec![QuadBounds::default(); faces],
             at_check: vec![[0.0; 3]; n],
             force: vec![[0.0; 3]; n],
             tool_force: vec![[0.0; 3]; tools],
@@ -158,12 +161,13 @@ impl ContactState {
                 // when this one needs more.
                 let cap = self.candidates.capacity().max(self.candidates.len());
                 self.candidates.resize(cap, Candidate::default());
-                let n = match build_candidates(&m, pos, p.candidate_margin_m, &mut self.candidates)
-                {
+                let boxes = &mut self.search_boxes;
+                let margin = p.candidate_margin_m;
+                let n = match build_candidates(&m, pos, margin, boxes, &mut self.candidates) {
                     Ok(n) => n,
                     Err(needed) => {
                         self.candidates.resize(needed, Candidate::default());
-                        build_candidates(&m, pos, p.candidate_margin_m, &mut self.candidates)
+                        build_candidates(&m, pos, margin, boxes, &mut self.candidates)
                             .unwrap_or(needed)
                     }
                 };

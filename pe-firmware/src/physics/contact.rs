@@ -547,52 +547,87 @@ impl ContactModel<'_> {
 /// slave is skipped. Writes them to `out` in that order; returns how many, or
 /// `Err(needed)` if `out` is too small.
 ///
-/// The search runs face by face (each face's corners and bounds computed once, not once
-/// per slave: a check step of the built-in coarse scene's 114 contact nodes and 80 faces
-/// tests some 9000 node-face pairs) and then sorts what it found into that order (the
-/// order is a total one on distinct candidates, so the list is the same).
+/// The search writes the master faces' grown boxes to `boxes` (the caller's scratch, one
+/// per contact face: a board lends its step's face bounds, which it computes again after
+/// the check; a shorter one is filled and searched a part of the faces at a time), then
+/// tests each slave against them, so that a node-face test is a box test on contiguous
+/// boxes (a box that holds nothing stands for a face of another surface or with a corner
+/// unknown). Each face's corners and box are computed once per direction, not once per
+/// slave: a check step of the built-in coarse scene's 114 contact nodes and 80 faces tests
+/// some 9000 node-face pairs. What it found is then sorted into that order (a total order
+/// on distinct candidates, so the list does not depend on how the search ran). Out of
+/// line: a check step's work, kept out of the code of every other step's evaluation.
+#[inline(never)]
 pub fn build_candidates(
     m: &ContactModel<'_>,
     pos: impl Fn(usize) -> Option<V3>,
     margin_m: f64,
+    boxes: &mut [QuadBounds],
     out: &mut [Candidate],
 ) -> Result<usize, usize> {
+    const EMPTY: QuadBounds = QuadBounds {
+        lo: [f64::INFINITY; 3],
+        hi: [f64::NEG_INFINITY; 3],
+        edge_slack: 0.0,
+    };
+    let mut one = [EMPTY];
+    let boxes = if boxes.is_empty() {
+        &mut one[..]
+    } else {
+        boxes
+    };
     let mut n = 0usize;
     let mut needed = 0usize;
     for direction in 0..2 * m.pairs.len() {
         let Some((slave, master, _)) = m.roles(direction) else {
             continue;
         };
-        for (f, face) in m.faces.iter().enumerate() {
-            if face.surface != master {
-                continue;
+        let mut first = 0;
+        for faces in m.faces.chunks(boxes.len()) {
+            let boxes = &mut boxes[..faces.len()];
+            let mut any = false;
+            for (j, (b, face)) in boxes.iter_mut().zip(faces).enumerate() {
+                let mut q = [[0.0; 3]; 4];
+                *b = if face.surface == master && m.face_points(first + j, &pos, &mut q) == Ok(true)
+                {
+                    // The face's bounds grown by the margin, once for all its slaves.
+                    let (mut lo, mut hi) = (q[0], q[0]);
+                    for p in &q[1..] {
+                        QuadBounds::include(&mut lo, &mut hi, p);
+                    }
+                    any = true;
+                    QuadBounds {
+                        lo: core::array::from_fn(|i| lo[i] - margin_m),
+                        hi: core::array::from_fn(|i| hi[i] + margin_m),
+                        edge_slack: 0.0,
+                    }
+                } else {
+                    EMPTY
+                };
             }
-            let mut q = [[0.0; 3]; 4];
-            if m.face_points(f, &pos, &mut q) != Ok(true) {
-                continue;
-            }
-            // The face's bounds grown by the margin, once for all its slaves.
-            let b = QuadBounds::new(&q);
-            let lo: V3 = core::array::from_fn(|i| b.lo[i] - margin_m);
-            let hi: V3 = core::array::from_fn(|i| b.hi[i] + margin_m);
-            for (s, node) in m.nodes.iter().enumerate() {
-                if node.surfaces & (1 << slave) == 0 {
-                    continue;
-                }
-                let Some(x) = pos(s) else { continue };
-                let inside = (0..3).all(|i| x[i] >= lo[i] && x[i] <= hi[i]);
-                if inside && !face.nodes.contains(&(s as u32)) {
-                    needed += 1;
-                    if let Some(c) = out.get_mut(n) {
-                        *c = Candidate {
-                            direction: direction as u16,
-                            slave: s as u32,
-                            face: f as u32,
-                        };
-                        n += 1;
+            if any {
+                for (s, node) in m.nodes.iter().enumerate() {
+                    if node.surfaces & (1 << slave) == 0 {
+                        continue;
+                    }
+                    let Some(x) = pos(s) else { continue };
+                    for (j, (b, face)) in boxes.iter().zip(faces).enumerate() {
+                        let inside = (0..3).all(|i| x[i] >= b.lo[i] && x[i] <= b.hi[i]);
+                        if inside && !face.nodes.contains(&(s as u32)) {
+                            needed += 1;
+                            if let Some(c) = out.get_mut(n) {
+                                *c = Candidate {
+                                    direction: direction as u16,
+                                    slave: s as u32,
+                                    face: (first + j) as u32,
+                                };
+                                n += 1;
+                            }
+                        }
                     }
                 }
             }
+            first += faces.len();
         }
     }
     if needed > n {
@@ -1272,7 +1307,9 @@ mod tests {
         };
         let pos = |c: usize| nodes.get(c).map(|n| n.reference);
         let mut all = vec![Candidate::default(); 4096];
-        let n = build_candidates(&m, pos, 0.03, &mut all).expect("room for the candidates");
+        let mut boxes = vec![QuadBounds::default(); faces.len()];
+        let n =
+            build_candidates(&m, pos, 0.03, &mut boxes, &mut all).expect("room for the candidates");
         all.truncate(n);
         let apply = |c: usize| c.is_multiple_of(3);
         let mut kept = all.clone();
@@ -1361,7 +1398,9 @@ mod tests {
                 nodes.get(c).filter(|_| known).map(|n| n.reference)
             };
             let mut cands = vec![Candidate::default(); 8192];
-            let n = build_candidates(&m, pos, 0.15, &mut cands).expect("room for the candidates");
+            let mut boxes = vec![QuadBounds::default(); faces.len()];
+            let n = build_candidates(&m, pos, 0.15, &mut boxes, &mut cands)
+                .expect("room for the candidates");
             cands.truncate(n);
             let bounds: Vec<QuadBounds> = (0..faces.len())
                 .map(|f| m.face_bounds(f, &pos).expect("valid face"))
@@ -1436,12 +1475,14 @@ mod tests {
         }
     }
 
-    /// [`build_candidates`] searches face by face and sorts; the list must be the one of
-    /// the search as its doc states it, node by node (written out here, the slave-major
-    /// loop): the same candidates in the same order, on [`overlapping_grids`] at three
-    /// margins, with every node's position known and with every seventh unknown (a
-    /// partner's node not received). Non-trivial: candidates are found, and fewer than all
-    /// node-face pairs. With too little room it reports the same number needed.
+    /// [`build_candidates`] searches over boxes written per part of the faces and sorts;
+    /// the list must be the one of the search as its doc states it, node by node (written
+    /// out here, the slave-major loop over the faces' corners): the same candidates in the
+    /// same order, on [`overlapping_grids`] at three margins, with every node's position
+    /// known and with every seventh unknown (a partner's node not received), with boxes for
+    /// every face, for 7 or 1 at a time, or none lent. Non-trivial: candidates are found,
+    /// and fewer than all node-face pairs. With too little room it reports the same number
+    /// needed.
     #[test]
     fn the_face_major_search_gives_the_slave_major_list() {
         let (nodes, faces, pairs) = overlapping_grids();
@@ -1504,17 +1545,25 @@ mod tests {
                     "{name}, margin {margin}: {} candidates",
                     want.len()
                 );
-                let mut got = vec![Candidate::default(); all_pairs];
-                let n = build_candidates(&m, pos, margin, &mut got).expect("room");
-                got.truncate(n);
-                assert_eq!(got.len(), want.len(), "{name}, margin {margin}");
-                assert_eq!(got, want, "{name}, margin {margin}");
-                let mut small = vec![Candidate::default(); want.len() - 1];
-                assert_eq!(
-                    build_candidates(&m, pos, margin, &mut small),
-                    Err(want.len()),
-                    "{name}, margin {margin}"
-                );
+                assert!(faces.len() > 7, "the parts of 7 faces split the faces");
+                for lent in [faces.len(), 7, 1, 0] {
+                    let mut boxes = vec![QuadBounds::default(); lent];
+                    let mut got = vec![Candidate::default(); all_pairs];
+                    let n = build_candidates(&m, pos, margin, &mut boxes, &mut got).expect("room");
+                    got.truncate(n);
+                    assert_eq!(
+                        got.len(),
+                        want.len(),
+                        "{name}, margin {margin}, {lent} boxes"
+                    );
+                    assert_eq!(got, want, "{name}, margin {margin}, {lent} boxes");
+                    let mut small = vec![Candidate::default(); want.len() - 1];
+                    assert_eq!(
+                        build_candidates(&m, pos, margin, &mut boxes, &mut small),
+                        Err(want.len()),
+                        "{name}, margin {margin}, {lent} boxes"
+                    );
+                }
             }
         }
     }

@@ -590,15 +590,18 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                 *x = pos(k).unwrap_or([0.0; 3]);
             }
             let max = candidates.len() as u32;
-            let n = build_candidates(&model, pos, p.candidate_margin_m, candidates).map_err(
-                |needed| {
+            // The step's face bounds are computed again below: their storage lends the
+            // search its boxes.
+            let nf = model.faces.len().min(face_bounds.len());
+            let boxes = &mut face_bounds[..nf];
+            let n = build_candidates(&model, pos, p.candidate_margin_m, boxes, candidates)
+                .map_err(|needed| {
                     fault(FaultKind::ContactCapacity {
                         what: "contact candidates",
                         needed: needed as u32,
                         max,
                     })
-                },
-            )?;
+                })?;
             // Only the groups that give this board's nodes a force are evaluated each step.
             // (build_candidates wrote n <= candidates.len() of them.)
             let kept = &mut candidates[..n.min(max as usize)];
