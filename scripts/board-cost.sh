@@ -48,9 +48,9 @@ python3 scripts/turned-box.py "$OUT/turned-box.vtk"
 sed 's|^generate = .*$|file = "turned-box.vtk"|' "$OUT/regular-box.toml" >"$OUT/turned-box.toml"
 grep -q '^file = "turned-box.vtk"' "$OUT/turned-box.toml"
 
-printf "%-12s %-8s %8s %6s %7s %6s %10s %12s %10s %12s %10s %12s %12s %12s %10s\n" variant scene elements boxes cuboids nodes \
-    "kernel/gen" "elem-step/gen" "kernel/box" "elem-step/box" "kernel/cub" "elem-step/cub" "step/elem" "update/node" "contact"
-echo "variant,scene,elements,boxes,cuboids,nodes,contact_nodes,kernel_general,element_step_general,kernel_box,element_step_box,kernel_cuboid,element_step_cuboid,step_per_element,per_node_update,contact_evaluation" >"$OUT/board-cost.csv"
+printf "%-12s %-8s %8s %6s %7s %6s %10s %12s %10s %12s %10s %12s %12s %12s %10s %10s %8s\n" variant scene elements boxes cuboids nodes \
+    "kernel/gen" "elem-step/gen" "kernel/box" "elem-step/box" "kernel/cub" "elem-step/cub" "step/elem" "update/node" "contact" "check" "tests"
+echo "variant,scene,elements,boxes,cuboids,nodes,contact_nodes,kernel_general,element_step_general,kernel_box,element_step_box,kernel_cuboid,element_step_cuboid,step_per_element,per_node_update,contact_evaluation,check_evaluation,search_tests" >"$OUT/board-cost.csv"
 for SCENE in builtin regular turned; do
   for PREC in f64 f32; do
     for INTEG in reduced full; do
@@ -83,14 +83,15 @@ PY
             -kernel "$ELF" -device loader,file="$D/board-0-0-0.sched",addr=0x00200000 \
             >"$D/bench.txt"
         # bench,VARIANT,ELEMENTS,BOXES,CUBOIDS,NODES,CONTACT_NODES,SAMPLES,BOX_SAMPLES,
-        # CUBOID_SAMPLES,MAX_ABS_U; marks 0..17 (see pe-firmware/board/src/bin/bench.rs)
-        awk -F, '/^bench,/ { print $3, $4, $5, $6, $7, $8, $9, $10, $11 }' "$D/bench.txt" >"$D/meta"
-        read -r NE NB NQ NN NC K KB KQ UMAX <"$D/meta"
+        # CUBOID_SAMPLES,MAX_ABS_U,SEARCH_TESTS; marks 0..19 (see
+        # pe-firmware/board/src/bin/bench.rs)
+        awk -F, '/^bench,/ { print $3, $4, $5, $6, $7, $8, $9, $10, $11, $12 }' "$D/bench.txt" >"$D/meta"
+        read -r NE NB NQ NN NC K KB KQ UMAX NT <"$D/meta"
         if ! awk -v u="${UMAX:-0}" 'BEGIN { exit !(u + 0 > 1e-6) }'; then
             echo "board-cost: $SCENE $V measured on an undeformed state (max |u| = ${UMAX:-?} m): raise STEPS" >&2
             exit 1
         fi
-        awk -v v="$V" -v sc="$SCENE" -v ne="$NE" -v nb="$NB" -v nq="$NQ" -v nn="$NN" -v nc="$NC" -v k="$K" -v kb="$KB" -v kq="$KQ" '
+        awk -v v="$V" -v sc="$SCENE" -v ne="$NE" -v nb="$NB" -v nq="$NQ" -v nn="$NN" -v nc="$NC" -v k="$K" -v kb="$KB" -v kq="$KQ" -v nt="$NT" '
             /insncount: mark/ { d[$3] = substr($7, 1, length($7) - 1) + 0 }
             END {
                 o = d[1]
@@ -100,8 +101,9 @@ PY
                 step = (d[7] - o) / (ne + nb + nq)
                 upd = (d[7] - o - ne * elem - nb * ebox - nq * ecub) / nn
                 cont = d[17] - o
-                printf "%-12s %-8s %8d %6d %7d %6d %10.0f %12.0f %10.0f %12.0f %10.0f %12.0f %12.0f %12.0f %10.0f\n", v, sc, ne + nb + nq, nb, nq, nn, kern, elem, kbox, ebox, kcub, ecub, step, upd, cont
-                printf "%s,%s,%d,%d,%d,%d,%d,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f\n", v, sc, ne + nb + nq, nb, nq, nn, nc, kern, elem, kbox, ebox, kcub, ecub, step, upd, cont >>csv
+                chk = d[19] - o
+                printf "%-12s %-8s %8d %6d %7d %6d %10.0f %12.0f %10.0f %12.0f %10.0f %12.0f %12.0f %12.0f %10.0f %10.0f %8d\n", v, sc, ne + nb + nq, nb, nq, nn, kern, elem, kbox, ebox, kcub, ecub, step, upd, cont, chk, nt
+                printf "%s,%s,%d,%d,%d,%d,%d,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f,%.0f,%d\n", v, sc, ne + nb + nq, nb, nq, nn, nc, kern, elem, kbox, ebox, kcub, ecub, step, upd, cont, chk, nt >>csv
             }' csv="$OUT/board-cost.csv" "$D/insn.log" | tee -a "$OUT/table.txt"
     done
   done
@@ -112,7 +114,8 @@ echo "axis-aligned cuboid (cub); elem-step: plus gathering displacements and sca
 echo "step/elem: a whole runtime step divided by the elements (includes the node updates of the"
 echo "scene); update/node: the rest per node; contact: a step's contact evaluation (positions,"
 echo "travel check, tool and pair tests; not a check step's search) on the one board, which owns"
-echo "every contact node. builtin: the built-in coarse anatomy (every cell"
+echo "every contact node; check: a check step's (the candidate search and the groups kept, then"
+echo "the same evaluation); tests: the search's node-face tests. builtin: the built-in coarse anatomy (every cell"
 echo "distorted: general kernel); regular: a 10x5x5 box (every cell a cuboid); turned: the same"
 echo "box turned by 30 degrees about x (every cell a parallelepiped)."
 echo

@@ -241,9 +241,14 @@ pub struct FirmwareCost {
     /// whole table: a step's contact evaluation (positions, travel check, tool and pair
     /// tests) over the table's nodes, measured on its own between marks on the built-in
     /// scene (one board owning every contact node, in the board-cost state). Not in it: a
-    /// check step's candidate search (once per check interval) and the contact-node
-    /// packets a board of a partition sends and receives.
+    /// check step's candidate search (once per check interval: [`Self::per_search_test`])
+    /// and the contact-node packets a board of a partition sends and receives.
     pub per_contact_node: u32,
+    /// Per node-face test of a check step's candidate search
+    /// ([`crate::physics::contact::search_tests`]): a check step's contact evaluation less
+    /// a step's, over the search's tests, measured on the same state (the search and
+    /// keeping the groups that give the board's nodes a force).
+    pub per_search_test: u32,
     /// A whole step divided by the elements, on the measured scene.
     pub step_per_element: u32,
 }
@@ -336,6 +341,7 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_per_element_step: 539,
             per_node_update: 76,
             per_contact_node: 275,
+            per_search_test: 19,
             step_per_element: 1176,
         },
         FirmwareCost {
@@ -349,6 +355,7 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_per_element_step: 0,
             per_node_update: 76,
             per_contact_node: 274,
+            per_search_test: 19,
             step_per_element: 4328,
         },
         FirmwareCost {
@@ -362,6 +369,7 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_per_element_step: 493,
             per_node_update: 87,
             per_contact_node: 268,
+            per_search_test: 19,
             step_per_element: 1050,
         },
         FirmwareCost {
@@ -375,6 +383,7 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_per_element_step: 0,
             per_node_update: 87,
             per_contact_node: 268,
+            per_search_test: 19,
             step_per_element: 3585,
         },
     ]

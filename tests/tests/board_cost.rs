@@ -20,14 +20,14 @@ fn measured_cost_table_matches_the_firmware() {
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
-        Some("variant,scene,elements,boxes,cuboids,nodes,contact_nodes,kernel_general,element_step_general,kernel_box,element_step_box,kernel_cuboid,element_step_cuboid,step_per_element,per_node_update,contact_evaluation"),
+        Some("variant,scene,elements,boxes,cuboids,nodes,contact_nodes,kernel_general,element_step_general,kernel_box,element_step_box,kernel_cuboid,element_step_cuboid,step_per_element,per_node_update,contact_evaluation,check_evaluation,search_tests"),
         "{path}: header"
     );
     let mut rows = Vec::new();
     let mut parsed = Vec::new();
     for line in lines {
         let f: Vec<&str> = line.split(',').collect();
-        assert_eq!(f.len(), 16, "{path}: {line}");
+        assert_eq!(f.len(), 18, "{path}: {line}");
         let (precision, integration) = match f[0] {
             "f64-reduced" => (Precision::F64, Integration::Reduced),
             "f64-full" => (Precision::F64, Integration::Full),
@@ -41,8 +41,8 @@ fn measured_cost_table_matches_the_firmware() {
             .collect();
         // n: elements, boxes, cuboids, nodes, contact nodes, kernel/gen, step/gen,
         // kernel/box, step/box, kernel/cuboid, step/cuboid, step per element, update per
-        // node, a step's contact evaluation.
-        assert_eq!(n.len(), 14, "{path}: {line}");
+        // node, a step's contact evaluation, a check step's, the search's node-face tests.
+        assert_eq!(n.len(), 16, "{path}: {line}");
         assert!(n[0] > 100.0 && n[3] > 100.0, "{path}: a real scene: {line}");
         parsed.push((precision, integration, f[1].to_string(), n));
         rows.push(format!("{}-{}", f[1], f[0]));
@@ -57,6 +57,8 @@ fn measured_cost_table_matches_the_firmware() {
         if scene != "builtin" {
             // Without contact the evaluation returns at once: the marks measure nothing.
             assert!(n[13] < 50.0, "{path}: {scene} has no contact: {}", n[13]);
+            assert!(n[14] < 50.0, "{path}: {scene} has no contact: {}", n[14]);
+            assert_eq!(n[15], 0.0, "{path}: {scene} has no search");
         }
         let checks = match scene.as_str() {
             "regular" => {
@@ -100,19 +102,32 @@ fn measured_cost_table_matches_the_firmware() {
                     .map(|r| r.3[12])
                     .expect("the regular box of the same precision");
                 let contact = n[13] / n[4];
+                // The check step's evaluation less the plain one, over the search's tests
+                // (a check also keeps the groups: in the charge, a small share).
+                assert!(
+                    n[15] > 1000.0 && n[14] > n[13] + 10.0 * n[15],
+                    "{path}: a search of {} tests: check {} against {}",
+                    n[15],
+                    n[14],
+                    n[13]
+                );
+                let search = (n[14] - n[13]) / n[15];
                 vec![
                     ("kernel_per_element", n[5], table.kernel_per_element),
                     ("per_element_step", n[6], table.per_element_step),
                     ("step_per_element", n[11], table.step_per_element),
                     ("per_contact_node", contact, table.per_contact_node),
                     ("per_node_update", plain, table.per_node_update),
+                    ("per_search_test", search, table.per_search_test),
                 ]
             }
             s => panic!("{path}: unknown scene {s}"),
         };
         for (what, measured, held) in checks {
+            // Every figure is far from zero (a search test, the smallest, takes some ten).
+            let floor = if what == "per_search_test" { 5.0 } else { 50.0 };
             assert!(
-                measured > 50.0,
+                measured > floor,
                 "{path}: {what} of {precision:?} {integration:?} {scene} is {measured}"
             );
             if (held as f64 - measured).abs() > STALE * measured {

@@ -383,3 +383,121 @@ fn pe_compile_keeps_the_balance_with_the_smaller_worst_ratio() {
     assert_eq!(r.balance, Balance::Elements);
     assert!(r.balance_other.is_none());
 }
+
+/// A check step: every board that owns a contact node searches the candidates of the whole
+/// contact table on top of its step; the verdict needs that step within the budget too.
+/// Computed here from the contact setup and the plan: the search's tests are, for each pair
+/// and each of its two directions, the slave surface's nodes times the contact faces (the
+/// search's doc); a check step costs the board's steady step plus the tests at the measured
+/// cost per test; the busiest check step is the report's to a relative 1e-12. The built-in
+/// coarse scene on 2x2x2 with a clock fast enough for its steady steps but not its check
+/// steps (links and global network 1000x faster, out of the way) fails on the check step
+/// alone, naming that board; 20x faster again it keeps real time. The seed box (no
+/// contact) has no check step.
+#[test]
+fn a_check_step_is_in_the_verdict() {
+    let p = system_tests::builtin_problem("coarse", 10);
+    let c = p.contact.as_ref().expect("the built-in scene has contact");
+    let mut tests = 0usize;
+    for pair in &c.pairs {
+        for slave in [pair.a, pair.b] {
+            let slaves = c
+                .node_surfaces
+                .iter()
+                .filter(|&&s| s & (1 << slave) != 0)
+                .count();
+            tests += slaves * c.faces.len();
+        }
+    }
+    assert!(tests > 1000, "{tests} node-face tests");
+    let cost = measured_cost(p.solver.precision, p.solver.integration);
+    assert!(cost.per_search_test > 0);
+    let search_s = |clock_hz: u64| (tests * cost.per_search_test as usize) as f64 / clock_hz as f64;
+    // The clock at which the search alone takes the whole budget: at half of it the search
+    // takes twice the budget while the steady steps fit (checked below).
+    let dt = p.time_step.dt_s;
+    let clock_for_search = (tests * cost.per_search_test as usize) as f64 / (dt / 2.0);
+    let profile = |factor: f64| BoardProfile {
+        clock_hz: (clock_for_search * factor) as u64,
+        link_bytes_per_s: PE_BOARD.link_bytes_per_s * 1000,
+        link_latency_ns: 1,
+        global_bytes_per_s: PE_BOARD.global_bytes_per_s * 1000,
+        ..PE_BOARD
+    };
+    let machine = Machine::parse("2x2x2").expect("machine");
+    let pl = plan(&p, machine).expect("plans");
+    let images = compile_images(&p, &pl).expect("images");
+    let slow = profile(0.5);
+    let r = report("coarse", &p, &pl, &images, &slow).expect("report");
+    let v = &r.real_time;
+    assert_eq!(r.capacity.search_tests, tests);
+    let interval = r.contact.as_ref().expect("contact").check_interval_steps;
+    assert!(interval > 1);
+    assert_eq!(v.check_interval_steps, interval);
+    // Per board: its steady step (the report's compute figure, checked independently by
+    // `verdict_matches_an_independent_computation`) plus the search if it owns a contact
+    // node; the busiest steady step bounds every board's.
+    let owns = |nodes: &[u32], owner: &[bool]| {
+        nodes
+            .iter()
+            .zip(owner)
+            .any(|(n, &o)| o && c.node_globals.contains(n))
+    };
+    let contact_boards = pl
+        .boards
+        .iter()
+        .filter(|b| owns(&b.nodes, &b.owner))
+        .count();
+    assert!(contact_boards >= 2, "{contact_boards} contact boards");
+    let search = search_s(slow.clock_hz);
+    assert!(
+        v.check_step_s_max >= search
+            && v.check_step_s_max <= v.compute_s_max + search * (1.0 + 1e-12),
+        "{} against the search {search} and the steady {}",
+        v.check_step_s_max,
+        v.compute_s_max
+    );
+    let [x, y, z] = v.check_step_board;
+    let board = pl
+        .boards
+        .iter()
+        .find(|b| b.coords == [x, y, z])
+        .expect("the check step's board");
+    assert!(
+        owns(&board.nodes, &board.owner),
+        "the busiest check step is a contact board's"
+    );
+    println!(
+        "coarse 2x2x2 at {:.2} GHz: steady {:e} s, check step {:e} s, budget {:e} s, every {interval} steps",
+        slow.clock_hz as f64 / 1e9,
+        v.compute_s_max,
+        v.check_step_s_max,
+        dt / 2.0
+    );
+    assert!(
+        v.compute_fits && v.links_over_count == 0 && v.global_fits,
+        "{:?}",
+        v.reasons
+    );
+    assert!(!v.check_step_fits && !v.keeps_real_time);
+    assert!(
+        v.reasons.len() == 1
+            && v.reasons[0].starts_with(&format!("a check step (every {interval} steps"))
+            && v.reasons[0].contains(&format!("on board ({x},{y},{z})")),
+        "{:?}",
+        v.reasons
+    );
+    assert!(summary(&r).contains("check step (every"));
+    let fast = profile(10.0);
+    let r = report("coarse", &p, &pl, &images, &fast).expect("report");
+    assert!(r.real_time.keeps_real_time, "{:?}", r.real_time.reasons);
+    assert!(summary(&r).contains("at a check step"));
+    let seed = compiled(
+        &repo_scene("seed-box.toml"),
+        "2x2x2",
+        &fast_clock(&PE_BOARD),
+    );
+    assert_eq!(seed.real_time.check_interval_steps, 0);
+    assert_eq!(seed.capacity.search_tests, 0);
+    assert!(!summary(&seed).contains("check step"));
+}

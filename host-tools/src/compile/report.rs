@@ -238,6 +238,18 @@ pub struct Capacity {
     /// That step's time at one instruction per cycle (s), against the scene's `dt_s`.
     pub step_compute_s_max: f64,
     pub compute_keeps_real_time: bool,
+    /// A check step's candidate search: instructions per node-face test (measured), the
+    /// tests of one search (the whole contact table with every position known: what each
+    /// board that owns a contact node searches; 0 without pairs) and the steps between
+    /// checks (0 without pairs).
+    pub instructions_per_search_test: u32,
+    pub search_tests: usize,
+    pub check_interval_steps: u32,
+    /// The busiest board at a check step: its step plus the search if it owns a contact
+    /// node (s, one instruction per cycle), and that board (the steady figures without
+    /// pairs).
+    pub check_step_s_max: f64,
+    pub check_step_board: [usize; 3],
     /// Elements one board computes per step at the scene's rate and at 10 kHz, with this
     /// scene's nodes per element on its busiest board.
     pub elements_per_board_at_scene_rate: f64,
@@ -409,6 +421,13 @@ pub struct RealTimeVerdict {
     pub compute_s_max: f64,
     pub compute_board: [usize; 3],
     pub compute_fits: bool,
+    /// A check step (every `check_interval_steps`, 0 without pairs): the busiest board's
+    /// compute then (s, from [`Capacity`]), that board, and whether it fits the budget too:
+    /// a board that owns a contact node searches the candidates of the whole table.
+    pub check_interval_steps: u32,
+    pub check_step_s_max: f64,
+    pub check_step_board: [usize; 3],
+    pub check_step_fits: bool,
     /// The busiest link direction, if any link sends.
     pub link_busiest: Option<LinkLoad>,
     pub links: usize,
@@ -419,8 +438,11 @@ pub struct RealTimeVerdict {
     /// The busiest global port's contact traffic at rest, if the scene has contact.
     pub global_busiest: Option<GlobalPortLoad>,
     pub global_fits: bool,
-    /// The largest of compute over its budget, the busiest link's and the busiest global
-    /// port's time over the step (at most 1 when it keeps real time).
+    /// The largest of a steady step's compute over its budget, the busiest link's and the
+    /// busiest global port's time over the step (at most 1 when it keeps real time; the
+    /// check step's ratio is `check_step_s_max / compute_budget_s`, which the search of the
+    /// whole table on each contact board makes nearly the same whatever the partition, so
+    /// the balances are compared on this).
     pub worst_ratio: f64,
     /// Why not, one line each (empty when it keeps real time).
     pub reasons: Vec<String>,
@@ -438,7 +460,24 @@ struct Figures {
 fn figures(problem: &Problem, plan: &Plan, profile: &BoardProfile) -> Result<Figures> {
     let dt = problem.time_step.dt_s;
     let links = LinkTraffic::of(plan, problem.solver.precision);
-    let capacity = capacity_report(problem, plan, profile, dt);
+    let search = contact_tables(problem, plan, dt)?.map(|(run, _)| {
+        let model = pe_firmware::physics::contact::ContactModel {
+            nodes: &run.nodes,
+            faces: &run.faces,
+            pairs: &run.pairs,
+            tools: &run.tools,
+        };
+        let tests = pe_firmware::physics::contact::search_tests(&model);
+        (
+            tests,
+            if tests > 0 {
+                run.params.check_interval_steps
+            } else {
+                0
+            },
+        )
+    });
+    let capacity = capacity_report(problem, plan, profile, dt, search.unwrap_or((0, 0)));
     let contact = contact_report(problem, plan, dt, 1.0 / dt, profile)?;
     let global = contact
         .as_ref()
@@ -517,6 +556,7 @@ pub fn verdict(
 ) -> RealTimeVerdict {
     let budget = dt_s / COMPUTE_MARGIN;
     let compute_fits = capacity.step_compute_s_max <= budget;
+    let check_step_fits = capacity.check_step_s_max <= budget;
     // Slowest first; equal times keep board and face order.
     let mut sorted: Vec<&LinkLoad> = links.iter().collect();
     sorted.sort_by(|a, b| b.time_per_step_s.total_cmp(&a.time_per_step_s));
@@ -535,6 +575,17 @@ pub fn verdict(
             budget * 1e6,
             (capacity.step_compute_s_max - budget) * 1e6,
             capacity.step_compute_s_max / budget
+        ));
+    }
+    if !check_step_fits {
+        let [x, y, z] = capacity.check_step_board;
+        reasons.push(format!(
+            "a check step (every {} steps: the candidate search, {} node-face tests on each board that owns a contact node) computes {:.1} us on board ({x},{y},{z}), over the {:.1} us budget ({:.2}x)",
+            capacity.check_interval_steps,
+            capacity.search_tests,
+            capacity.check_step_s_max * 1e6,
+            budget * 1e6,
+            capacity.check_step_s_max / budget
         ));
     }
     for l in over.iter().take(LINKS_OVER_LISTED) {
@@ -579,7 +630,7 @@ pub fn verdict(
     .fold(0.0, f64::max);
     RealTimeVerdict {
         worst_ratio,
-        keeps_real_time: compute_fits && over.is_empty() && global_fits,
+        keeps_real_time: compute_fits && check_step_fits && over.is_empty() && global_fits,
         global_busiest: global.cloned(),
         global_fits,
         dt_s,
@@ -587,6 +638,10 @@ pub fn verdict(
         compute_s_max: capacity.step_compute_s_max,
         compute_board: capacity.busiest_board,
         compute_fits,
+        check_interval_steps: capacity.check_interval_steps,
+        check_step_s_max: capacity.check_step_s_max,
+        check_step_board: capacity.check_step_board,
+        check_step_fits,
         link_busiest,
         links: links.len(),
         links_over_count: over.len(),
@@ -597,7 +652,14 @@ pub fn verdict(
 
 /// The busiest board's compute per step from the measured firmware cost, and the boards a
 /// 10 kHz step would need.
-fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f64) -> Capacity {
+/// `search`: the tests of a check step's candidate search and the steps between checks.
+fn capacity_report(
+    problem: &Problem,
+    plan: &Plan,
+    profile: &BoardProfile,
+    dt: f64,
+    search: (usize, u32),
+) -> Capacity {
     let cost =
         pe_firmware::profile::measured_cost(problem.solver.precision, problem.solver.integration);
     let per_kernel = |elements: &mut dyn Iterator<Item = usize>| {
@@ -613,16 +675,28 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
         let (_, owned) = board_contact_nodes(b, &on_contact);
         FirmwareCost::charged_contact_nodes(table_nodes, owned)
     };
-    let (busiest, busiest_board) = plan
+    let (search_tests, check_interval_steps) = search;
+    let search_instructions = search_tests as f64 * cost.per_search_test as f64;
+    // Per board: a steady step, and a check step (the search if it owns a contact node).
+    let steps: Vec<(f64, f64, [usize; 3])> = plan
         .boards
         .iter()
         .map(|b| {
             let kinds = per_kernel(&mut b.elements.iter().map(|&e| e as usize));
-            (
-                cost.step_instructions(kinds, b.nodes.len(), contact_nodes(b)),
-                b.coords,
-            )
+            let charged = contact_nodes(b);
+            let step = cost.step_instructions(kinds, b.nodes.len(), charged);
+            let searches = charged > 0 && search_tests > 0;
+            let check = step + if searches { search_instructions } else { 0.0 };
+            (step, check, b.coords)
         })
+        .collect();
+    let (busiest, busiest_board) = steps
+        .iter()
+        .map(|&(step, _, c)| (step, c))
+        .fold((0.0f64, [0; 3]), |m, b| if b.0 > m.0 { b } else { m });
+    let (check_busiest, check_board) = steps
+        .iter()
+        .map(|&(_, check, c)| (check, c))
         .fold((0.0f64, [0; 3]), |m, b| if b.0 > m.0 { b } else { m });
     let npe = plan
         .boards
@@ -647,6 +721,11 @@ fn capacity_report(problem: &Problem, plan: &Plan, profile: &BoardProfile, dt: f
         busiest_board,
         step_compute_s_max: busiest / profile.clock_hz as f64,
         compute_keeps_real_time: busiest / profile.clock_hz as f64 <= dt,
+        instructions_per_search_test: cost.per_search_test,
+        search_tests,
+        check_interval_steps,
+        check_step_s_max: check_busiest / profile.clock_hz as f64,
+        check_step_board: check_board,
         elements_per_board_at_scene_rate: cost.elements_per_board(profile, 1.0 / dt, npe, cpe, mix),
         elements_per_board_at_10_khz: at_10k,
         boards_needed_at_10_khz: (n as f64 / at_10k).ceil() as usize,
@@ -814,6 +893,13 @@ pub fn summary(r: &CompileReport) -> String {
         if c.compute_keeps_real_time { "within dt" } else { "over dt" },
         c.elements_per_board_at_scene_rate, c.elements_per_board_at_10_khz, c.boards_needed_at_10_khz
     );
+    if c.check_interval_steps > 0 {
+        let [x, y, z] = c.check_step_board;
+        s += &format!(
+            "  check step (every {} steps): the candidate search, {} node-face tests at {} instructions each on every board that owns a contact node; busiest board ({x},{y},{z}) {:.1} us\n",
+            c.check_interval_steps, c.search_tests, c.instructions_per_search_test, c.check_step_s_max * 1e6
+        );
+    }
     let g = &r.graphics;
     s += &format!(
         "  graphics: {} surface nodes every {} steps ({:.1} ms) spread over {} steps: {} packets, {} bytes per frame, {:.3} MB/s (the seed: 18 MB/s)\n",
@@ -867,8 +953,13 @@ fn real_time_lines(r: &CompileReport) -> String {
     }
     if v.keeps_real_time {
         s += &format!(
-            "  verdict: keeps real time (busiest board's compute {:.1} us within dt / {COMPUTE_MARGIN} = {:.1} us, every link within dt{})\n",
+            "  verdict: keeps real time (busiest board's compute {:.1} us{} within dt / {COMPUTE_MARGIN} = {:.1} us, every link within dt{})\n",
             v.compute_s_max * 1e6,
+            if v.check_interval_steps > 0 {
+                format!(", {:.1} us at a check step", v.check_step_s_max * 1e6)
+            } else {
+                String::new()
+            },
             v.compute_budget_s * 1e6,
             if v.global_busiest.is_some() { ", every global port's contact traffic at rest within dt" } else { "" }
         );

@@ -639,6 +639,26 @@ pub fn build_candidates(
     Ok(n)
 }
 
+/// The node-face box tests [`build_candidates`] makes on `m` with every position known and
+/// a box lent for every face: per direction, the slave surface's nodes times the faces if
+/// the master surface has one (a box that holds nothing stands for each other face). What
+/// the compile report charges a check step for, at the measured cost of a test
+/// ([`crate::profile::FirmwareCost::per_search_test`]).
+pub fn search_tests(m: &ContactModel<'_>) -> usize {
+    (0..2 * m.pairs.len())
+        .filter_map(|direction| m.roles(direction))
+        .filter(|&(_, master, _)| m.faces.iter().any(|f| f.surface == master))
+        .map(|(slave, _, _)| {
+            let slaves = m
+                .nodes
+                .iter()
+                .filter(|n| n.surfaces & (1 << slave) != 0)
+                .count();
+            slaves * m.faces.len()
+        })
+        .sum()
+}
+
 /// How many candidates at the front of `candidates` form its first group (one slave in one
 /// direction: [`build_candidates`] writes them together).
 #[inline(always)]
@@ -1473,6 +1493,29 @@ mod tests {
                 assert_eq!(s_ref, st);
             }
         }
+    }
+
+    /// [`search_tests`] counts what the search's doc says it tests: the grids have 6x6 nodes
+    /// and 5x5 faces per surface, so each direction tests 36 slaves against all 50 faces
+    /// (3600 in all); without the faces of surface 1 the direction whose master it is
+    /// tests nothing, and the other 36 slaves against the 25 faces left.
+    #[test]
+    fn the_search_tests_are_counted_as_the_search_runs() {
+        let (nodes, faces, pairs) = overlapping_grids();
+        assert_eq!((nodes.len(), faces.len()), (72, 50));
+        let m = ContactModel {
+            nodes: &nodes,
+            faces: &faces,
+            pairs: &pairs,
+            tools: &[],
+        };
+        assert_eq!(search_tests(&m), 2 * 36 * 50);
+        let only_0: Vec<ContactFace> = faces.iter().filter(|f| f.surface == 0).copied().collect();
+        let m = ContactModel {
+            faces: &only_0,
+            ..m
+        };
+        assert_eq!(search_tests(&m), 36 * 25);
     }
 
     /// [`build_candidates`] searches over boxes written per part of the faces and sorts;

@@ -17,7 +17,7 @@ use super::{Fault, FaultKind, Runtime, WireReal};
 use crate::image::{path_value, ContactNode, ContactNodePlace, ContactPair, ElementRecord, Tool};
 use crate::physics::contact::{
     build_candidates, check_travel, evaluate_kept_pairs_bounded, evaluate_tools,
-    keep_applied_groups, Capsule, ContactModel, ContactStats,
+    keep_applied_groups, search_tests, Capsule, ContactModel, ContactStats,
 };
 use crate::physics::Real;
 
@@ -507,6 +507,35 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             return Ok(());
         }
         self.evaluate_contact_at(false)
+    }
+
+    /// The contact evaluation of a check step at the current displacements and step index:
+    /// the candidate search and the groups kept for this board, then the evaluation of
+    /// [`Self::evaluate_contact_again`]. For the cost measurement (`pe-board-bench`: a check
+    /// step's search, the compile report's charge per search test); the candidates are
+    /// then those of this state. A board without pairs (or without contact) does nothing.
+    pub fn check_contact_again(&mut self) -> Result<(), Fault> {
+        if self.header.counts.contact_nodes == 0 || !self.has_pairs() {
+            return Ok(());
+        }
+        self.evaluate_contact_at(true)
+    }
+
+    /// The node-face tests of this board's candidate search with every position known
+    /// ([`search_tests`] of its contact tables; 0 without pairs).
+    pub fn contact_search_tests(&self) -> usize {
+        let c = self.header.counts;
+        if c.pairs == 0 {
+            return 0;
+        }
+        let t = &self.st.contact;
+        let model = ContactModel {
+            nodes: t.nodes.get(..c.contact_nodes as usize).unwrap_or(&[]),
+            faces: t.faces.get(..c.contact_faces as usize).unwrap_or(&[]),
+            pairs: self.contact.pairs.get(..c.pairs as usize).unwrap_or(&[]),
+            tools: &[],
+        };
+        search_tests(&model)
     }
 
     /// Contact forces of the owned nodes at this step (the serial solver's arithmetic, in

@@ -15,10 +15,14 @@
 //! * marks 16→17: the contact evaluation of a step again, at the state after the measured
 //!   step (`Runtime::evaluate_contact_again`: positions, travel check, tool and pair tests;
 //!   not the check step's search), which the one board owns whole (nothing on a scene
-//!   without contact).
+//!   without contact);
+//! * marks 18→19: a check step's contact evaluation at the same state
+//!   (`Runtime::check_contact_again`: the candidate search and the groups kept, then the
+//!   evaluation of 16→17), whose search makes `SEARCH_TESTS` node-face tests
+//!   (`Runtime::contact_search_tests`).
 //!
 //! Marks 2→5 are on the general-kernel elements. Then prints
-//! `bench,VARIANT,ELEMENTS,PARALLELEPIPEDS,CUBOIDS,NODES,CONTACT_NODES,SAMPLES,BOX_SAMPLES,CUBOID_SAMPLES,MAX_ABS_U_M` via
+//! `bench,VARIANT,ELEMENTS,PARALLELEPIPEDS,CUBOIDS,NODES,CONTACT_NODES,SAMPLES,BOX_SAMPLES,CUBOID_SAMPLES,MAX_ABS_U_M,SEARCH_TESTS` via
 //! semihosting and exits. Inputs pass
 //! through `black_box` so nothing is folded at build time. No SysTick: nothing but the
 //! measured code runs between marks.
@@ -103,6 +107,12 @@ fn main() -> ! {
     if r.is_err() {
         fail("fault in the measured contact evaluation");
     }
+    bench_mark(18);
+    let r = rt.check_contact_again();
+    bench_mark(19);
+    if r.is_err() {
+        fail("fault in the measured contact check");
+    }
 
     // The largest displacement component, so a measurement on an undeformed state (where
     // the material law's functions take their cheapest paths) is seen and refused.
@@ -112,7 +122,7 @@ fn main() -> ! {
         .flatten()
         .fold(0.0f64, |m, v| m.max(v.to_f64().abs()));
     pe_board::log_info!(
-        "bench,{},{},{},{},{},{},{},{},{},{}",
+        "bench,{},{},{},{},{},{},{},{},{},{},{}",
         VARIANT,
         ne,
         nb,
@@ -122,7 +132,8 @@ fn main() -> ! {
         measured,
         measured_boxes,
         measured_cuboids,
-        u_max
+        u_max,
+        rt.contact_search_tests()
     );
     report::exit(true)
 }
