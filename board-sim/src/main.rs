@@ -671,8 +671,19 @@ fn link_model(
             bare.step_s * 1e6
         );
     }
+    let check = match modelled.check_step_s {
+        Some(c) => {
+            let [x, y, z] = modelled.check_slowest_board;
+            format!(
+                ", a check step (every {} steps: the candidate search) {:.1} us on board ({x},{y},{z})",
+                modelled.check_interval_steps,
+                c * 1e6
+            )
+        }
+        None => String::new(),
+    };
     println!(
-        "link model ({}): a step takes {:.1} us on the slowest board ({:.1} us computing), dt = {:.1} us: {}",
+        "link model ({}): a step takes {:.1} us on the slowest board ({:.1} us computing){check}, dt = {:.1} us: {}",
         profile.name, modelled.step_s * 1e6, modelled.compute_s * 1e6, modelled.dt_s * 1e6,
         if modelled.real_time { "keeps real time" } else { "does NOT keep real time" }
     );

@@ -6,7 +6,9 @@
 //! after it is sent (links are full duplex, one frame at a time per direction), a receive
 //! waits for its frame. The cycles per element-step and per node update are the firmware's
 //! instruction counts measured under QEMU (`pe_firmware::profile::MEASURED_COST`, from
-//! `scripts/board-cost.sh`), taking one instruction per cycle.
+//! `scripts/board-cost.sh`), taking one instruction per cycle. With contact pairs it
+//! replays a check step too: every board that owns a contact node then also searches the
+//! candidates of the whole table (the compile report's charge).
 
 use host_tools::compile::{decode_image, image_file_name, DecodedImage};
 use pe_firmware::image::{Integration, Precision};
@@ -27,6 +29,8 @@ pub struct SimTiming {
     pub cycles_per_node_update: f64,
     /// Extra per contact-surface node.
     pub cycles_per_contact_node: f64,
+    /// Per node-face test of a check step's candidate search.
+    pub cycles_per_search_test: f64,
     pub link_bytes_per_s: f64,
     pub link_latency_s: f64,
     /// Bytes link recovery adds to every frame (its envelope, `link_proto::reliable::OVERHEAD`;
@@ -55,6 +59,7 @@ impl SimTiming {
             cycles_per_cuboid_element: reduced.cuboid_per_element_step as f64,
             cycles_per_node_update: reduced.per_node_update.max(full.per_node_update) as f64,
             cycles_per_contact_node: reduced.per_contact_node.max(full.per_contact_node) as f64,
+            cycles_per_search_test: reduced.per_search_test.max(full.per_search_test) as f64,
             link_bytes_per_s: p.link_bytes_per_s as f64,
             link_latency_s: p.link_latency_ns as f64 * 1e-9,
             frame_overhead_bytes: 0,
@@ -70,10 +75,16 @@ pub struct StepTiming {
     pub step_s: f64,
     /// Of which computing (s), on that board.
     pub compute_s: f64,
-    /// The scene's time step (s) and whether the array keeps up with it.
+    /// The scene's time step (s) and whether the array keeps up with it (at a check step
+    /// too).
     pub dt_s: f64,
     pub real_time: bool,
     pub slowest_board: [usize; 3],
+    /// With contact pairs: a check step (every `check_interval_steps`) on its slowest
+    /// board (s), and that board.
+    pub check_interval_steps: u32,
+    pub check_step_s: Option<f64>,
+    pub check_slowest_board: [usize; 3],
 }
 
 fn frame_s(t: &SimTiming, values: usize, width: usize) -> f64 {
@@ -96,7 +107,6 @@ fn charged_contact_nodes(im: &DecodedImage) -> usize {
 /// Models one step of the machine whose images are in `dir`.
 pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::Result<StepTiming> {
     let count = dims.iter().product::<usize>();
-    let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
     let mut imgs: Vec<DecodedImage> = Vec::with_capacity(count);
     for b in 0..count {
         let c = [
@@ -126,6 +136,68 @@ pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::R
     // operation happen before the receives that wait for them (the program's order), so
     // walking it operation by operation across the boards is exact.
     let program = Program::new(&h.counts.rounds, false, false);
+    // A check step's search per board: the whole table's, on a board that owns a contact
+    // node.
+    let search: Vec<f64> = imgs
+        .iter()
+        .map(|im| {
+            if charged_contact_nodes(im) == 0 {
+                return 0.0;
+            }
+            let nodes: Vec<_> = im.contact_nodes.iter().map(|(n, _)| *n).collect();
+            let m = pe_firmware::physics::contact::ContactModel {
+                nodes: &nodes,
+                faces: &im.contact_faces,
+                pairs: &im.pairs,
+                tools: &im.tools,
+            };
+            pe_firmware::physics::contact::search_tests(&m) as f64 * t.cycles_per_search_test
+                / t.clock_hz
+        })
+        .collect();
+    let (step_s, b, compute_s) = walk(&imgs, &program, dims, &t, cpe, width, &vec![0.0; count]);
+    let check = search
+        .iter()
+        .any(|&s| s > 0.0)
+        .then(|| walk(&imgs, &program, dims, &t, cpe, width, &search));
+    let dt_s = h.params.dt_s;
+    Ok(StepTiming {
+        inputs: t,
+        step_s,
+        compute_s,
+        dt_s,
+        real_time: step_s <= dt_s && check.is_none_or(|c| c.0 <= dt_s),
+        slowest_board: coords(b),
+        check_interval_steps: if check.is_some() {
+            h.contact.check_interval_steps
+        } else {
+            0
+        },
+        check_step_s: check.map(|c| c.0),
+        check_slowest_board: coords(check.map_or(b, |c| c.1)),
+    })
+}
+
+/// One step of every board in model time, each board computing `extra[b]` (s) more in its
+/// node update: the slowest board's step (s), that board, and its compute (s).
+fn walk(
+    imgs: &[DecodedImage],
+    program: &Program,
+    dims: [usize; 3],
+    t: &SimTiming,
+    cpe: f64,
+    width: usize,
+    extra: &[f64],
+) -> (f64, usize, f64) {
+    let count = imgs.len();
+    let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
+    let coords = |b: usize| {
+        [
+            b % dims[0],
+            (b / dims[0]) % dims[1],
+            b / (dims[0] * dims[1]),
+        ]
+    };
     let mut now = vec![0.0f64; count];
     let mut compute = vec![0.0f64; count];
     // Send time per board, axis, round and face.
@@ -147,7 +219,8 @@ pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::R
                 Op::Update => {
                     let c = (im.header.counts.nodes as f64 * t.cycles_per_node_update
                         + charged_contact_nodes(im) as f64 * t.cycles_per_contact_node)
-                        / t.clock_hz;
+                        / t.clock_hz
+                        + extra[b];
                     now[b] += c;
                     compute[b] += c;
                 }
@@ -166,7 +239,7 @@ pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::R
                         d[a] -= 1;
                     }
                     let from = sent[index(d)][a][r][1 - f];
-                    now[b] = now[b].max(from + frame_s(&t, 3 * n_recv, width));
+                    now[b] = now[b].max(from + frame_s(t, 3 * n_recv, width));
                 }
                 Op::Graphics | Op::Contact | Op::External(_) => {}
             }
@@ -176,12 +249,5 @@ pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::R
         .iter()
         .enumerate()
         .fold((0.0, 0), |w, (b, &s)| if s > w.0 { (s, b) } else { w });
-    Ok(StepTiming {
-        inputs: t,
-        step_s,
-        compute_s: compute[b],
-        dt_s: h.params.dt_s,
-        real_time: step_s <= h.params.dt_s,
-        slowest_board: coords(b),
-    })
+    (step_s, b, compute[b])
 }

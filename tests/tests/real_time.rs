@@ -501,3 +501,111 @@ fn a_check_step_is_in_the_verdict() {
     assert_eq!(seed.capacity.search_tests, 0);
     assert!(!summary(&seed).contains("check step"));
 }
+
+/// board-sim's link model replays a check step too. With the links made instant (no
+/// latency, 1e15 bytes/s) a board's step is its compute plus its waits for a slower
+/// neighbour's sends, and on this scene the slowest board waits for none: the step is the
+/// slowest board's compute, per board from its
+/// decoded image, its elements at their kernels' measured cycles, its nodes' updates and,
+/// if it owns a contact node, the whole contact table's; a check step adds, on each board
+/// that owns a contact node, the search of the whole table (per pair direction the slave
+/// surface's nodes times the faces, counted here from the image) at the measured cycles
+/// per test. Both equal the model's within 1 ns (the instant links still take their bytes
+/// over 1e15 bytes/s, some 1e-13 s a frame; the model is never below), on the built-in
+/// coarse scene on 2x2x2; with a clock at which the steady step fits dt and the check step does not, the
+/// model says it does not keep real time, and 20x faster it does.
+#[test]
+fn the_link_model_replays_a_check_step() {
+    use board_sim::timing::{model, SimTiming};
+    use host_tools::compile::{compile_to_dir, decode_image, image_file_name};
+    let p = system_tests::builtin_problem("coarse", 10);
+    let dir = system_tests::temp_dir("check-step-model");
+    let machine = Machine::parse("2x2x2").expect("machine");
+    compile_to_dir("coarse", "builtin", &p, machine, &PE_BOARD, &dir).expect("compiles");
+    let cost = measured_cost(p.solver.precision, p.solver.integration);
+    let (mut steady, mut search) = (Vec::new(), Vec::new());
+    for b in 0..machine.count() {
+        let c = machine.coords(b);
+        let bytes = std::fs::read(dir.join(image_file_name(c))).expect("image");
+        let im = decode_image(&bytes, None).expect("decodes");
+        let n = im.header.counts;
+        let ends = |e: [u32; 4]| e[3] as f64;
+        let general = ends(n.batch_ends);
+        let boxes = ends(n.box_batch_ends);
+        let cuboids = ends(n.cuboid_batch_ends);
+        let owns = im.contact_nodes.iter().any(|(_, place)| place.owned);
+        let table = if owns {
+            im.contact_nodes.len() as f64
+        } else {
+            0.0
+        };
+        steady.push(
+            general * cost.per_element_step as f64
+                + boxes * cost.box_per_element_step as f64
+                + cuboids * cost.cuboid_per_element_step as f64
+                + n.nodes as f64 * cost.per_node_update as f64
+                + table * cost.per_contact_node as f64,
+        );
+        let mut tests = 0usize;
+        for pair in &im.pairs {
+            for slave in [pair.a, pair.b] {
+                let slaves = im
+                    .contact_nodes
+                    .iter()
+                    .filter(|(node, _)| node.surfaces & (1 << slave) != 0)
+                    .count();
+                tests += slaves * im.contact_faces.len();
+            }
+        }
+        search.push(if owns {
+            (tests * cost.per_search_test as usize) as f64
+        } else {
+            0.0
+        });
+    }
+    assert!(
+        search.iter().filter(|&&s| s > 0.0).count() >= 2,
+        "contact boards search"
+    );
+    let steady_max = steady.iter().copied().fold(0.0, f64::max);
+    let check_max = steady
+        .iter()
+        .zip(&search)
+        .map(|(a, b)| a + b)
+        .fold(0.0, f64::max);
+    let dt = p.time_step.dt_s;
+    // A clock at which the steady step takes 0.6 dt.
+    let clock = steady_max / (0.6 * dt);
+    assert!(
+        check_max / clock > dt,
+        "the check step is over dt at that clock"
+    );
+    let timing = |clock_hz: f64| SimTiming {
+        clock_hz,
+        link_bytes_per_s: 1e15,
+        link_latency_s: 0.0,
+        ..SimTiming::for_precision(&PE_BOARD, p.solver.precision)
+    };
+    let close = |a: f64, b: f64| a >= b && a - b <= 1e-9;
+    let t = model(&dir, [2, 2, 2], timing(clock)).expect("model");
+    assert!(
+        close(t.step_s, steady_max / clock),
+        "{} vs {}",
+        t.step_s,
+        steady_max / clock
+    );
+    let check = t.check_step_s.expect("a check step");
+    assert!(
+        close(check, check_max / clock),
+        "{check} vs {}",
+        check_max / clock
+    );
+    let interval = compiled(&p, "2x2x2", &PE_BOARD)
+        .contact
+        .expect("contact")
+        .check_interval_steps;
+    assert_eq!(t.check_interval_steps, interval);
+    assert!(t.step_s <= dt && !t.real_time);
+    let t = model(&dir, [2, 2, 2], timing(20.0 * clock)).expect("model");
+    assert!(t.real_time, "{:?} against {dt}", t.check_step_s);
+}
