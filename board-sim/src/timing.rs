@@ -104,17 +104,21 @@ fn charged_contact_nodes(im: &DecodedImage) -> usize {
     FirmwareCost::charged_contact_nodes(im.contact_nodes.len(), owned)
 }
 
+/// Board `b`'s coordinates on a machine of `dims` (x fastest).
+fn coords(b: usize, dims: [usize; 3]) -> [usize; 3] {
+    [
+        b % dims[0],
+        (b / dims[0]) % dims[1],
+        b / (dims[0] * dims[1]),
+    ]
+}
+
 /// Models one step of the machine whose images are in `dir`.
 pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::Result<StepTiming> {
     let count = dims.iter().product::<usize>();
     let mut imgs: Vec<DecodedImage> = Vec::with_capacity(count);
     for b in 0..count {
-        let c = [
-            b % dims[0],
-            (b / dims[0]) % dims[1],
-            b / (dims[0] * dims[1]),
-        ];
-        let p = dir.join(image_file_name(c));
+        let p = dir.join(image_file_name(coords(b, dims)));
         let bytes = std::fs::read(&p)?;
         imgs.push(decode_image(&bytes, None).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?);
     }
@@ -124,13 +128,6 @@ pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::R
         t.cycles_per_element_full
     } else {
         t.cycles_per_element_reduced
-    };
-    let coords = |b: usize| {
-        [
-            b % dims[0],
-            (b / dims[0]) % dims[1],
-            b / (dims[0] * dims[1]),
-        ]
     };
     // Every board walks the firmware's own step program in model time. Sends of an
     // operation happen before the receives that wait for them (the program's order), so
@@ -167,14 +164,14 @@ pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::R
         compute_s,
         dt_s,
         real_time: step_s <= dt_s && check.is_none_or(|c| c.0 <= dt_s),
-        slowest_board: coords(b),
+        slowest_board: coords(b, dims),
         check_interval_steps: if check.is_some() {
             h.contact.check_interval_steps
         } else {
             0
         },
         check_step_s: check.map(|c| c.0),
-        check_slowest_board: coords(check.map_or(b, |c| c.1)),
+        check_slowest_board: coords(check.map_or(b, |c| c.1), dims),
     })
 }
 
@@ -191,13 +188,6 @@ fn walk(
 ) -> (f64, usize, f64) {
     let count = imgs.len();
     let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
-    let coords = |b: usize| {
-        [
-            b % dims[0],
-            (b / dims[0]) % dims[1],
-            b / (dims[0] * dims[1]),
-        ]
-    };
     let mut now = vec![0.0f64; count];
     let mut compute = vec![0.0f64; count];
     // Send time per board, axis, round and face.
@@ -232,7 +222,7 @@ fn walk(
                         continue;
                     }
                     // Face 0 (+axis) receives what the +axis neighbour sent on its −axis face.
-                    let mut d = coords(b);
+                    let mut d = coords(b, dims);
                     if f == 0 {
                         d[a] += 1;
                     } else {

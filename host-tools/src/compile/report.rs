@@ -10,6 +10,7 @@ use super::image::BoardImage;
 use super::image::{contact_tables, graphics_params, image_file_name};
 use super::partition::Machine;
 use super::plan::{plan_balanced, Balance, Plan, FACE_NAMES};
+use crate::problem::contact::ContactRun;
 use crate::problem::elements::kernel_of;
 use crate::problem::Problem;
 
@@ -124,15 +125,16 @@ fn node_packet_bytes(n: usize, precision: link_proto::Precision) -> usize {
         + n * node_entry_len(precision)
 }
 
-/// The contact traffic at rest: the runtime's box test on the reference positions.
+/// The contact traffic at rest: the runtime's box test on the reference positions, from
+/// the contact tables (`contact_tables`) and their contact boards.
 fn contact_report(
     problem: &Problem,
     plan: &Plan,
-    dt: f64,
+    tables: Option<&(ContactRun, Vec<u8>)>,
     rate: f64,
     profile: &BoardProfile,
 ) -> Result<Option<ContactCompileReport>> {
-    let Some((run, boards)) = contact_tables(problem, plan, dt)? else {
+    let Some((run, boards)) = tables else {
         return Ok(None);
     };
     let p = run.params;
@@ -460,7 +462,8 @@ struct Figures {
 fn figures(problem: &Problem, plan: &Plan, profile: &BoardProfile) -> Result<Figures> {
     let dt = problem.time_step.dt_s;
     let links = LinkTraffic::of(plan, problem.solver.precision);
-    let search = contact_tables(problem, plan, dt)?.map(|(run, _)| {
+    let tables = contact_tables(problem, plan, dt)?;
+    let search = tables.as_ref().map(|(run, _)| {
         let model = pe_firmware::physics::contact::ContactModel {
             nodes: &run.nodes,
             faces: &run.faces,
@@ -478,7 +481,7 @@ fn figures(problem: &Problem, plan: &Plan, profile: &BoardProfile) -> Result<Fig
         )
     });
     let capacity = capacity_report(problem, plan, profile, dt, search.unwrap_or((0, 0)));
-    let contact = contact_report(problem, plan, dt, 1.0 / dt, profile)?;
+    let contact = contact_report(problem, plan, tables.as_ref(), 1.0 / dt, profile)?;
     let global = contact
         .as_ref()
         .and_then(|c| c.global_busiest_at_rest.as_ref());
