@@ -17,7 +17,9 @@ use system_tests::*;
 /// `node_kinds.toml` on one board is the serial run bit for bit, including the kinetic
 /// energy (each node's term is the serial solver's, summed in mesh order) and the
 /// reactions; on 2x2x2 (loads, contact and held nodes on several boards, replicas) it
-/// agrees to round-off.
+/// agrees to round-off, the reactions too (held nodes are not exchanged: each board adds
+/// its part of a held node's force, and the boards' sums add up; relative 1e-9 of each
+/// reaction's magnitude, which is far from zero, against round-off near 1e-14).
 #[test]
 fn mixed_node_kinds_equal_serial_bit_for_bit() {
     let (p, src) = file_problem("node_kinds.toml");
@@ -60,6 +62,26 @@ fn mixed_node_kinds_equal_serial_bit_for_bit() {
             );
         }
         assert!(d < 1e-10, "{m}: {d:e}");
+        for (name, a, b) in [
+            (
+                "prescribed",
+                out.reaction_prescribed,
+                r.prescribed_reaction_n,
+            ),
+            ("fixed", out.reaction_fixed, r.fixed_reaction_n),
+        ] {
+            let size = b.iter().map(|v| v * v).sum::<f64>().sqrt();
+            assert!(
+                size > 1e-6,
+                "{m}: the {name} reaction {b:?} N is not trivial"
+            );
+            for i in 0..3 {
+                assert!(
+                    (a[i] - b[i]).abs() <= 1e-9 * size,
+                    "{m}: {name} reaction {a:?} against the serial {b:?}"
+                );
+            }
+        }
         let ke = (out.kinetic_energy - r.kinetic_energy_final).abs();
         assert!(ke <= 1e-9 * r.kinetic_energy_final, "{m}: KE {ke:e}");
     }

@@ -503,17 +503,19 @@ fn a_check_step_is_in_the_verdict() {
 }
 
 /// board-sim's link model replays a check step too. With the links made instant (no
-/// latency, 1e15 bytes/s) a board's step is its compute plus its waits for a slower
-/// neighbour's sends, and on this scene the slowest board waits for none: the step is the
-/// slowest board's compute, per board from its
-/// decoded image, its elements at their kernels' measured cycles, its nodes' updates and,
-/// if it owns a contact node, the whole contact table's; a check step adds, on each board
-/// that owns a contact node, the search of the whole table (per pair direction the slave
-/// surface's nodes times the faces, counted here from the image) at the measured cycles
-/// per test. Both equal the model's within 1 ns (the instant links still take their bytes
-/// over 1e15 bytes/s, some 1e-13 s a frame; the model is never below), on the built-in
-/// coarse scene on 2x2x2; with a clock at which the steady step fits dt and the check step does not, the
-/// model says it does not keep real time, and 20x faster it does.
+/// latency, 1e15 bytes/s) a board's step is its compute plus its waits for its neighbours'
+/// sends, replayed here independently in the step's order (recover x; send ±x; recover y;
+/// add ±x; send ±y; recover z; add ±y; send ±z; recover inner; add ±z; update: one
+/// exchange round per axis, asserted): per board from its decoded image, each batch's
+/// elements at their kernels' measured cycles, its nodes' updates and, if it owns a contact
+/// node, the whole contact table's; a board waits at each "add" for the neighbour it
+/// receives from to have sent. A check step adds, on each board that owns a contact node,
+/// the search of the whole table (per pair direction the slave surface's nodes times the
+/// faces, counted here from the image) at the measured cycles per test, in the update.
+/// Both equal the model's within 1 ns (the instant links still take their bytes over 1e15
+/// bytes/s, some 1e-13 s a frame; the model is never below), on the built-in coarse scene
+/// on 2x2x2; with a clock at which the slowest board's steady compute fits dt and its check
+/// step's does not, the model says it does not keep real time, and 20x faster it does.
 #[test]
 fn the_link_model_replays_a_check_step() {
     use board_sim::timing::{model, SimTiming};
@@ -523,28 +525,35 @@ fn the_link_model_replays_a_check_step() {
     let machine = Machine::parse("2x2x2").expect("machine");
     compile_to_dir("coarse", "builtin", &p, machine, &PE_BOARD, &dir).expect("compiles");
     let cost = measured_cost(p.solver.precision, p.solver.integration);
-    let (mut steady, mut search) = (Vec::new(), Vec::new());
+    // Per board: each batch's and the update's instructions, what it receives per axis
+    // and face, and its search at a check step.
+    let (mut batches, mut update, mut search) = (Vec::new(), Vec::new(), Vec::new());
+    let mut receives = Vec::new();
     for b in 0..machine.count() {
         let c = machine.coords(b);
         let bytes = std::fs::read(dir.join(image_file_name(c))).expect("image");
         let im = decode_image(&bytes, None).expect("decodes");
         let n = im.header.counts;
-        let ends = |e: [u32; 4]| e[3] as f64;
-        let general = ends(n.batch_ends);
-        let boxes = ends(n.box_batch_ends);
-        let cuboids = ends(n.cuboid_batch_ends);
+        let size = |e: [u32; 4], k: usize| (e[k] - if k == 0 { 0 } else { e[k - 1] }) as f64;
+        let batch: [f64; 4] = core::array::from_fn(|k| {
+            size(n.batch_ends, k) * cost.per_element_step as f64
+                + size(n.box_batch_ends, k) * cost.box_per_element_step as f64
+                + size(n.cuboid_batch_ends, k) * cost.cuboid_per_element_step as f64
+        });
+        assert!(im.rounds.iter().all(|r| r.len() <= 1), "one round per axis");
+        let recv: [[bool; 2]; 3] = core::array::from_fn(|a| {
+            core::array::from_fn(|f| im.rounds[a].first().is_some_and(|r| !r.recv[f].is_empty()))
+        });
         let owns = im.contact_nodes.iter().any(|(_, place)| place.owned);
         let table = if owns {
             im.contact_nodes.len() as f64
         } else {
             0.0
         };
-        steady.push(
-            general * cost.per_element_step as f64
-                + boxes * cost.box_per_element_step as f64
-                + cuboids * cost.cuboid_per_element_step as f64
-                + n.nodes as f64 * cost.per_node_update as f64
-                + table * cost.per_contact_node as f64,
+        batches.push(batch);
+        receives.push(recv);
+        update.push(
+            n.nodes as f64 * cost.per_node_update as f64 + table * cost.per_contact_node as f64,
         );
         let mut tests = 0usize;
         for pair in &im.pairs {
@@ -567,12 +576,40 @@ fn the_link_model_replays_a_check_step() {
         search.iter().filter(|&&s| s > 0.0).count() >= 2,
         "contact boards search"
     );
-    let steady_max = steady.iter().copied().fold(0.0, f64::max);
-    let check_max = steady
-        .iter()
-        .zip(&search)
-        .map(|(a, b)| a + b)
+    // The replay, in instructions: `sent[b][a]` is when board b sends along axis a.
+    let replay = |extra: &[f64]| -> f64 {
+        let count = machine.count();
+        let mut now: Vec<f64> = batches.iter().map(|b| b[0]).collect();
+        let mut sent = vec![[0.0f64; 3]; count];
+        for a in 0..3 {
+            for b in 0..count {
+                sent[b][a] = now[b];
+                now[b] += batches[b][a + 1];
+            }
+            for b in 0..count {
+                let c = machine.coords(b);
+                for (f, &gets) in receives[b][a].iter().enumerate() {
+                    if gets {
+                        let mut d = c;
+                        d[a] = if f == 0 { d[a] + 1 } else { d[a] - 1 };
+                        now[b] = now[b].max(sent[machine.index(d)][a]);
+                    }
+                }
+            }
+        }
+        (0..count)
+            .map(|b| now[b] + update[b] + extra[b])
+            .fold(0.0, f64::max)
+    };
+    let steady_max = replay(&vec![0.0; machine.count()]);
+    let check_max = replay(&search);
+    let compute_max = (0..machine.count())
+        .map(|b| batches[b].iter().sum::<f64>() + update[b])
         .fold(0.0, f64::max);
+    assert!(
+        steady_max >= compute_max && compute_max > 0.0,
+        "{steady_max} vs {compute_max}"
+    );
     let dt = p.time_step.dt_s;
     // A clock at which the steady step takes 0.6 dt.
     let clock = steady_max / (0.6 * dt);

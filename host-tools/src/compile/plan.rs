@@ -1,11 +1,17 @@
 //! The plan: which board computes which elements (batches x, y, z, inner), which nodes
 //! each holds (owner and replicas), and the exchange rounds with their summation trees.
+//!
+//! A free node is held by every board of the box spanned by the boards whose elements touch
+//! it, and exchanged along the box's lines. A held node (fixed or prescribed) is on the
+//! boards whose elements touch it only, and never exchanged: its displacement is its
+//! path's whatever the force, so each of those boards computes it alone, and adds its part
+//! of the node's force to the reaction.
 
 use anyhow::{bail, Result};
 use pe_firmware::image::{Combine, STAGE_NOT_OWNED};
 
 use super::partition::{
-    cost_weights, node_board_range, node_elements, partition_weighted, Machine,
+    cost_weights, exchanged_nodes, node_board_range, node_elements, partition_weighted, Machine,
 };
 use crate::problem::Problem;
 
@@ -151,8 +157,9 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
         Balance::Elements => vec![1; mesh.cells.len()],
         Balance::Cost => cost_weights(problem),
     };
-    let element_board = partition_weighted(mesh, machine, &weight)?;
-    let (node_box, node_owner, rounds) = node_boxes(problem, machine, &element_board)?;
+    let exchanged = exchanged_nodes(problem);
+    let element_board = partition_weighted(mesh, machine, &weight, &exchanged)?;
+    let (node_box, node_owner, rounds) = node_boxes(problem, machine, &element_board, &exchanged)?;
     let mut boards: Vec<BoardPlan> = (0..machine.count())
         .map(|b| BoardPlan {
             coords: machine.coords(b),
@@ -168,16 +175,27 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
     let trees: Vec<Vec<Transfer>> = (0..machine.dims.iter().copied().max().unwrap_or(1))
         .map(line_transfers)
         .collect();
+    let around = node_elements(mesh);
     for (n, &(lo, hi)) in node_box.iter().enumerate() {
-        place_node(
-            machine,
-            &mut boards,
-            &trees,
-            n as u32,
-            node_owner[n],
-            lo,
-            hi,
-        );
+        if exchanged[n] {
+            place_node(
+                machine,
+                &mut boards,
+                &trees,
+                n as u32,
+                node_owner[n],
+                lo,
+                hi,
+            );
+        } else {
+            place_held_node(
+                &mut boards,
+                &element_board,
+                &around[n],
+                n as u32,
+                node_owner[n],
+            );
+        }
     }
     for (e, &b) in element_board.iter().enumerate() {
         boards[b as usize].elements.push(e as u32);
@@ -199,11 +217,12 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
 type BoardBox = ([usize; 3], [usize; 3]);
 
 /// Per node: the box of boards whose elements touch it and its owner (the lowest such
-/// board); the rounds each axis needs.
+/// board); the rounds each axis needs for the nodes `exchanged` marks.
 fn node_boxes(
     problem: &Problem,
     machine: Machine,
     element_board: &[u32],
+    exchanged: &[bool],
 ) -> Result<(Vec<BoardBox>, Vec<u32>, [usize; 3])> {
     let mesh = &problem.mesh;
     let around = node_elements(mesh);
@@ -219,8 +238,10 @@ fn node_boxes(
             );
         }
         let (lo, hi) = node_board_range(machine, element_board, els);
-        for a in 0..3 {
-            rounds[a] = rounds[a].max(line_rounds(hi[a] - lo[a]));
+        if exchanged[n] {
+            for a in 0..3 {
+                rounds[a] = rounds[a].max(line_rounds(hi[a] - lo[a]));
+            }
         }
         node_owner[n] = els
             .iter()
@@ -275,6 +296,25 @@ fn place_node(
                 }
             }
         }
+    }
+}
+
+/// Puts held node `n` (fixed or prescribed) on the boards whose elements touch it, and on
+/// no other: its displacement is its path's whatever the force, so each of them computes
+/// it from its own elements' nodes and nothing is exchanged for it.
+fn place_held_node(
+    boards: &mut [BoardPlan],
+    element_board: &[u32],
+    around: &[u32],
+    n: u32,
+    owner: u32,
+) {
+    let mut on: Vec<u32> = around.iter().map(|&e| element_board[e as usize]).collect();
+    on.sort_unstable();
+    on.dedup();
+    for b in on {
+        boards[b as usize].nodes.push(n);
+        boards[b as usize].owner.push(b == owner);
     }
 }
 

@@ -167,7 +167,10 @@ pub struct Runtime<'a, T, E> {
     /// Range of each stage's records in the external-force list.
     external_stages: [(u32, u32); STAGES],
     pub stats: LinkStats,
-    /// Sum of `f_int − f_ext` over owned prescribed and fixed nodes at the last step (N).
+    /// Sum of `f_int − f_ext` over this board's share of the prescribed and fixed nodes at
+    /// the last step (N): a held node is not exchanged, so each board that holds it adds
+    /// its own partial force, its owner the external force too, and the boards' sums add
+    /// up to the reaction.
     pub reaction_prescribed: [f64; 3],
     pub reaction_fixed: [f64; 3],
     /// Kinetic energy of owned nodes at the last step (J).
@@ -432,8 +435,8 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
     /// Central-difference update of every held node from its total force
     /// ([`update_node`], the serial solver's function), so replicas and the serial run
     /// agree; clears the forces for the next step on the way. A free node takes the short
-    /// path (its gain and force); an owned fixed or prescribed node adds its force to the
-    /// reaction. Out of line: its loop keeps its values in registers.
+    /// path (its gain and force); a fixed or prescribed node (held: not exchanged, so its
+    /// force is this board's part) adds its force to the reaction. Out of line: its loop keeps its values in registers.
     #[inline(never)]
     fn update(&mut self, t_next: f64) -> Result<(), Fault> {
         let c = self.header.counts;
@@ -472,16 +475,12 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
                     update_node(&cd, u, du, mv, inv_2dt, limit, rec.global)
                 }
                 NodeMotion::Fixed => {
-                    if rec.owner {
-                        add_reaction(&mut rf, total);
-                    }
+                    add_reaction(&mut rf, total);
                     let mv = NodeMove::Held([T::ZERO; 3]);
                     update_node(&cd, u, du, mv, inv_2dt, limit, rec.global)
                 }
                 NodeMotion::Prescribed(p) => {
-                    if rec.owner {
-                        add_reaction(&mut rp, total);
-                    }
+                    add_reaction(&mut rp, total);
                     let mv = NodeMove::Held(prescribed(points, p, t_next));
                     update_node(&cd, u, du, mv, inv_2dt, limit, rec.global)
                 }

@@ -9,7 +9,7 @@
 //!
 //! [`refine`] then moves single elements between boards holding face neighbours to
 //! minimise the force vectors the exchange rounds send (the exact count of
-//! [`crate::compile::plan`]'s scheme) and the relays, keeping every board within
+//! [`crate::compile::plan`]'s scheme, in which a held node is not exchanged) and the relays, keeping every board within
 //! [`BALANCE_MAX`] times the mean load, non-empty, and its pieces as connected as they
 //! were: simulated annealing from a fixed seed, then greedy passes. The result is the same
 //! on every machine.
@@ -23,7 +23,7 @@ use anyhow::{bail, Result};
 
 use crate::mesh::Mesh;
 use crate::problem::elements::kernel_of;
-use crate::problem::Problem;
+use crate::problem::{NodeKind, Problem};
 
 pub mod refine;
 
@@ -156,14 +156,32 @@ pub fn cost_weights(problem: &Problem) -> Vec<u64> {
         .collect()
 }
 
-/// Board (linear index) of every element, every element weighing one: the slab partition,
-/// refined (see [`refine`]).
+/// Board (linear index) of every element, every element weighing one and every node
+/// exchanged: the slab partition, refined (see [`refine`]).
 pub fn partition(mesh: &Mesh, machine: Machine) -> Result<Vec<u32>> {
-    partition_weighted(mesh, machine, &vec![1; mesh.cells.len()])
+    let exchanged = vec![true; mesh.nodes.len()];
+    partition_weighted(mesh, machine, &vec![1; mesh.cells.len()], &exchanged)
 }
 
-/// Board of every element, balancing the elements' `weight` (see the module doc).
-pub fn partition_weighted(mesh: &Mesh, machine: Machine, weight: &[u64]) -> Result<Vec<u32>> {
+/// Whether each node of `problem` is exchanged: a held node (fixed or prescribed) is not,
+/// since its displacement is its path's whatever the force (every board that holds it
+/// computes it; see [`crate::compile::plan`]).
+pub fn exchanged_nodes(problem: &Problem) -> Vec<bool> {
+    problem
+        .node_kind
+        .iter()
+        .map(|k| *k == NodeKind::Free)
+        .collect()
+}
+
+/// Board of every element, balancing the elements' `weight`, the exchange counting the
+/// nodes `exchanged` marks (see the module doc).
+pub fn partition_weighted(
+    mesh: &Mesh,
+    machine: Machine,
+    weight: &[u64],
+    exchanged: &[bool],
+) -> Result<Vec<u32>> {
     if weight.len() != mesh.cells.len() || weight.contains(&0) {
         bail!(
             "{} element weights for {} elements (each at least 1)",
@@ -171,9 +189,16 @@ pub fn partition_weighted(mesh: &Mesh, machine: Machine, weight: &[u64]) -> Resu
             mesh.cells.len()
         );
     }
+    if exchanged.len() != mesh.nodes.len() {
+        bail!(
+            "{} exchange marks for {} nodes",
+            exchanged.len(),
+            mesh.nodes.len()
+        );
+    }
     let mut board = slabs_weighted(mesh, machine, weight)?;
     let around = node_elements(mesh);
-    let adj = refine::Adjacency::new(&mesh.cells, &around);
+    let adj = refine::Adjacency::new(&mesh.cells, &around, exchanged);
     let cap = load_cap(machine, &board, weight);
     refine::refine(&adj, machine, &mut board, weight, cap);
     Ok(board)

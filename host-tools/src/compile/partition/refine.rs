@@ -1,9 +1,11 @@
 //! Refinement of a partition by single-element moves between boards (Fiduccia–Mattheyses
 //! passes), minimising the force vectors the exchange rounds send under the balance bound.
 //!
-//! The objective is exact: the sum over nodes of [`box_vectors`] of the node's box of boards
-//! (what [`crate::compile::plan`] sends for it), plus [`RELAY_PENALTY`] per board a node
-//! spans beyond two along an axis (relays cost exchange rounds). A move takes an element to
+//! The objective is exact: the sum over exchanged nodes (held ones are not) of
+//! [`box_vectors`] of the node's box of boards (what [`crate::compile::plan`] sends for
+//! it), plus [`RELAY_PENALTY`] per board a node spans beyond two along an axis (relays cost
+//! exchange rounds), plus a term in the square of each link's load ([`LINK_LOAD_SCALE`]:
+//! the busiest link decides whether the exchange fits the step). A move takes an element to
 //! a board that holds one of its face neighbours; it is refused when the target would hold
 //! more than the balance bound allows, when the source would be left empty, or when it
 //! would split the source board's elements (face-connected) into more pieces. Each pass
@@ -20,6 +22,14 @@ use crate::compile::plan::box_vectors;
 /// Objective units per board a node spans beyond two along an axis (a relay): more than
 /// any move's gain in vectors, so relays are removed first and never added for vectors.
 pub const RELAY_PENALTY: i64 = 64;
+
+/// The links' term of the objective: each link direction's load `L` (vectors per step)
+/// costs `L² / LINK_LOAD_SCALE`, so that of two partitions sending as many vectors, the
+/// one with the busier links (whose time decides whether the exchange fits the step) costs
+/// more: a vector moved from a link of load `L` to one of load `L' < L` gains about
+/// `(L - L') / 16` vectors' worth. (Measured on 4x4x4: the seed box's busiest link 27
+/// vectors against 31 without the term; `L²/64` and `L²/16` did worse.)
+const LINK_LOAD_SCALE: i64 = 32;
 
 /// The annealing's seed (printed in the compile report).
 pub const ANNEAL_SEED: u64 = 1;
@@ -48,10 +58,16 @@ pub struct Adjacency<'a> {
     pub around: &'a [Vec<u32>],
     /// Elements sharing a face (four nodes) with each element.
     pub faces: Vec<Vec<u32>>,
+    /// Whether each node's force is exchanged (a held node's is not: it costs nothing).
+    pub exchanged: &'a [bool],
 }
 
 impl<'a> Adjacency<'a> {
-    pub fn new(cells: &'a [[u32; 8]], around: &'a [Vec<u32>]) -> Adjacency<'a> {
+    pub fn new(
+        cells: &'a [[u32; 8]],
+        around: &'a [Vec<u32>],
+        exchanged: &'a [bool],
+    ) -> Adjacency<'a> {
         let faces = cells
             .iter()
             .enumerate()
@@ -78,8 +94,16 @@ impl<'a> Adjacency<'a> {
             cells,
             around,
             faces,
+            exchanged,
         }
     }
+}
+
+/// A node's box of boards: the lowest and the highest board coordinates along each axis.
+type Span = ([usize; 3], [usize; 3]);
+
+fn span_of((lo, hi): Span) -> [usize; 3] {
+    core::array::from_fn(|a| hi[a] - lo[a])
 }
 
 /// The objective of one node whose box of boards spans `span` (boards beyond the first per
@@ -91,6 +115,7 @@ pub fn node_cost(span: [usize; 3]) -> i64 {
 
 struct State<'a> {
     adj: &'a Adjacency<'a>,
+    machine: Machine,
     coords: Vec<[usize; 3]>,
     board: Vec<u32>,
     count: Vec<usize>,
@@ -100,6 +125,13 @@ struct State<'a> {
     load: Vec<u64>,
     cap: u64,
     node_cost: Vec<i64>,
+    /// Each node's box of boards (lowest and highest coordinates per axis).
+    node_box: Vec<Span>,
+    /// Force vectors each link carries per step and direction ([`State::link_index`]): the
+    /// nodes whose box holds both its boards.
+    link_load: Vec<i64>,
+    /// Scratch of [`State::delta`]: (link, change in its load).
+    link_change: std::cell::RefCell<Vec<(u32, i64)>>,
     /// Walk marks of [`State::reaches_all`] (the walk's number, per element).
     visited: Vec<u64>,
     visit_mark: u64,
@@ -109,8 +141,12 @@ struct State<'a> {
 }
 
 impl State<'_> {
-    /// The node's cost with element `moved` on board `to` (or as it is, for `None`).
-    fn cost_with(&self, n: u32, moved: Option<(u32, u32)>) -> i64 {
+    /// The node's box of boards with element `moved` on board `to` (or as it is, for
+    /// `None`); a single board's (no exchange) for a node that is not exchanged.
+    fn box_with(&self, n: u32, moved: Option<(u32, u32)>) -> Span {
+        if !self.adj.exchanged[n as usize] {
+            return ([0; 3], [0; 3]);
+        }
         let mut lo = [usize::MAX; 3];
         let mut hi = [0; 3];
         for &e in &self.adj.around[n as usize] {
@@ -124,15 +160,68 @@ impl State<'_> {
                 hi[a] = hi[a].max(c[a]);
             }
         }
-        node_cost(core::array::from_fn(|a| hi[a] - lo[a]))
+        (lo, hi)
+    }
+
+    /// The link between board `c` and its neighbour one up along `axis`.
+    fn link_index(&self, axis: usize, c: [usize; 3]) -> u32 {
+        (axis * self.machine.count() + self.machine.index(c)) as u32
+    }
+
+    /// Calls `f` with every link a node of box `b` is sent over (each way once per step:
+    /// every line of the box along an axis runs that axis's tree, one vector each way per
+    /// link; see [`box_vectors`]).
+    fn for_links(&self, (lo, hi): Span, mut f: impl FnMut(u32)) {
+        for a in 0..3 {
+            let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+            for i in lo[a]..hi[a] {
+                for j in lo[b]..=hi[b] {
+                    for k in lo[c]..=hi[c] {
+                        let mut at = [0; 3];
+                        (at[a], at[b], at[c]) = (i, j, k);
+                        f(self.link_index(a, at));
+                    }
+                }
+            }
+        }
+    }
+
+    /// What a link direction carrying `load` vectors per step costs ([`LINK_LOAD_SCALE`]).
+    fn link_cost(load: i64) -> i64 {
+        load * load / LINK_LOAD_SCALE
     }
 
     /// Objective change of moving element `e` to board `to`.
     fn delta(&self, e: u32, to: u32) -> i64 {
-        self.adj.cells[e as usize]
-            .iter()
-            .map(|&n| self.cost_with(n, Some((e, to))) - self.node_cost[n as usize])
-            .sum()
+        let mut d = 0;
+        let mut change = self.link_change.borrow_mut();
+        change.clear();
+        for &n in &self.adj.cells[e as usize] {
+            let new = self.box_with(n, Some((e, to)));
+            let old = self.node_box[n as usize];
+            if new == old {
+                continue;
+            }
+            d += node_cost(span_of(new)) - self.node_cost[n as usize];
+            self.for_links(old, |l| change.push((l, -1)));
+            self.for_links(new, |l| change.push((l, 1)));
+        }
+        if change.is_empty() {
+            return d;
+        }
+        change.sort_unstable();
+        let mut i = 0;
+        while i < change.len() {
+            let l = change[i].0;
+            let mut by = 0;
+            while i < change.len() && change[i].0 == l {
+                by += change[i].1;
+                i += 1;
+            }
+            let load = self.link_load[l as usize];
+            d += Self::link_cost(load + by) - Self::link_cost(load);
+        }
+        d
     }
 
     fn apply(&mut self, e: u32, to: u32) {
@@ -144,8 +233,22 @@ impl State<'_> {
         self.load[to as usize] += w;
         self.board[e as usize] = to;
         for &n in &self.adj.cells[e as usize] {
-            self.node_cost[n as usize] = self.cost_with(n, None);
+            self.set_box(n as usize, self.box_with(n, None));
         }
+    }
+
+    /// Records node `n`'s box (its cost and the links it loads).
+    fn set_box(&mut self, n: usize, b: Span) {
+        let old = self.node_box[n];
+        if old == b {
+            return;
+        }
+        let mut load = std::mem::take(&mut self.link_load);
+        self.for_links(old, |l| load[l as usize] -= 1);
+        self.for_links(b, |l| load[l as usize] += 1);
+        self.link_load = load;
+        self.node_box[n] = b;
+        self.node_cost[n] = node_cost(span_of(b));
     }
 
     /// Boards of `e`'s face neighbours other than its own, ascending.
@@ -232,8 +335,14 @@ impl State<'_> {
         self.load[to as usize] + self.weight[e as usize] <= self.cap
     }
 
+    /// The objective: the nodes' costs and the links'.
     fn total(&self) -> i64 {
-        self.node_cost.iter().sum()
+        self.node_cost.iter().sum::<i64>()
+            + self
+                .link_load
+                .iter()
+                .map(|&l| Self::link_cost(l))
+                .sum::<i64>()
     }
 }
 
@@ -362,21 +471,26 @@ pub fn refine(
     }
     let mut s = State {
         adj,
+        machine,
         coords,
         board: std::mem::take(board),
         count,
         weight,
         load,
         cap,
-        node_cost: Vec::new(),
+        node_cost: vec![0; adj.around.len()],
+        node_box: vec![([0; 3], [0; 3]); adj.around.len()],
+        link_load: vec![0; 3 * machine.count()],
+        link_change: Default::default(),
         visited: vec![0; adj.cells.len()],
         visit_mark: 0,
         near: vec![0; adj.cells.len()],
         near_mark: 0,
     };
-    s.node_cost = (0..adj.around.len() as u32)
-        .map(|n| s.cost_with(n, None))
-        .collect();
+    for n in 0..adj.around.len() {
+        let b = s.box_with(n as u32, None);
+        s.set_box(n, b);
+    }
     let before = s.total();
     let tries = (ANNEAL_TRIES_PER_ELEMENT * s.board.len()).min(ANNEAL_TRIES_MAX);
     anneal(&mut s, tries);
