@@ -6,6 +6,7 @@ use host_tools::compile::partition::Machine;
 use host_tools::compile::{compile_images, plan, report, summary, CompileReport};
 use host_tools::problem::Problem;
 use pe_firmware::image::Precision;
+use pe_firmware::physics::contact::{ContactFace, ContactPair};
 use pe_firmware::profile::{measured_cost, BoardProfile, PE_BOARD};
 use system_tests::repo_scene;
 
@@ -384,6 +385,28 @@ fn pe_compile_keeps_the_balance_with_the_smaller_worst_ratio() {
     assert!(r.balance_other.is_none());
 }
 
+/// Per pair and direction of a contact table, the candidate search's slaves and the faces
+/// it tests them against (the search's doc, written out here): the slave surface's nodes
+/// (`node_surfaces`, one mask per contact node) and the master surface's faces.
+fn search_directions(
+    pairs: &[ContactPair],
+    node_surfaces: &[u8],
+    faces: &[ContactFace],
+) -> Vec<(usize, usize)> {
+    pairs
+        .iter()
+        .flat_map(|pair| [(pair.a, pair.b), (pair.b, pair.a)])
+        .map(|(slave, master)| {
+            let slaves = node_surfaces
+                .iter()
+                .filter(|&&s| s & (1 << slave) != 0)
+                .count();
+            let masters = faces.iter().filter(|f| f.surface == master).count();
+            (slaves, masters)
+        })
+        .collect()
+}
+
 /// A check step: every board that owns a contact node searches the candidates of the whole
 /// contact table on top of its step; the verdict needs that step within the budget too.
 /// Computed here from the contact setup and the plan: the search's tests are, for each pair
@@ -398,19 +421,11 @@ fn pe_compile_keeps_the_balance_with_the_smaller_worst_ratio() {
 fn a_check_step_is_in_the_verdict() {
     let p = system_tests::builtin_problem("coarse", 10);
     let c = p.contact.as_ref().expect("the built-in scene has contact");
-    let mut tests = 0usize;
-    for pair in &c.pairs {
-        for (slave, master) in [(pair.a, pair.b), (pair.b, pair.a)] {
-            let slaves = c
-                .node_surfaces
-                .iter()
-                .filter(|&&s| s & (1 << slave) != 0)
-                .count();
-            let masters = c.faces.iter().filter(|f| f.surface == master).count();
-            assert!(masters > 0 && masters < c.faces.len(), "{masters} faces");
-            tests += slaves * masters;
-        }
+    let directions = search_directions(&c.pairs, &c.node_surfaces, &c.faces);
+    for &(_, masters) in &directions {
+        assert!(masters > 0 && masters < c.faces.len(), "{masters} faces");
     }
+    let tests: usize = directions.iter().map(|(s, m)| s * m).sum();
     assert!(tests > 1000, "{tests} node-face tests");
     let cost = measured_cost(p.solver.precision, p.solver.integration);
     assert!(cost.per_search_test > 0);
@@ -566,22 +581,15 @@ fn the_link_model_replays_a_check_step() {
         update.push(
             n.nodes as f64 * cost.per_node_update as f64 + table * cost.per_contact_node as f64,
         );
-        let mut tests = 0usize;
-        for pair in &im.pairs {
-            for (slave, master) in [(pair.a, pair.b), (pair.b, pair.a)] {
-                let slaves = im
-                    .contact_nodes
-                    .iter()
-                    .filter(|(node, _)| node.surfaces & (1 << slave) != 0)
-                    .count();
-                let masters = im
-                    .contact_faces
-                    .iter()
-                    .filter(|f| f.surface == master)
-                    .count();
-                tests += slaves * masters;
-            }
-        }
+        let surfaces: Vec<u8> = im
+            .contact_nodes
+            .iter()
+            .map(|(node, _)| node.surfaces)
+            .collect();
+        let tests: usize = search_directions(&im.pairs, &surfaces, &im.contact_faces)
+            .iter()
+            .map(|(s, m)| s * m)
+            .sum();
         search.push(if owns {
             (tests * cost.per_search_test as usize) as f64
         } else {

@@ -159,7 +159,9 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
     };
     let exchanged = exchanged_nodes(problem);
     let element_board = partition_weighted(mesh, machine, &weight, &exchanged)?;
-    let (node_box, node_owner, rounds) = node_boxes(problem, machine, &element_board, &exchanged)?;
+    let around = node_elements(mesh);
+    let (node_box, node_owner, rounds) =
+        node_boxes(problem, machine, &element_board, &around, &exchanged)?;
     let mut boards: Vec<BoardPlan> = (0..machine.count())
         .map(|b| BoardPlan {
             coords: machine.coords(b),
@@ -175,7 +177,6 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
     let trees: Vec<Vec<Transfer>> = (0..machine.dims.iter().copied().max().unwrap_or(1))
         .map(line_transfers)
         .collect();
-    let around = node_elements(mesh);
     for (n, &(lo, hi)) in node_box.iter().enumerate() {
         if exchanged[n] {
             place_node(
@@ -217,15 +218,16 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
 type BoardBox = ([usize; 3], [usize; 3]);
 
 /// Per node: the box of boards whose elements touch it and its owner (the lowest such
-/// board); the rounds each axis needs for the nodes `exchanged` marks.
+/// board); the rounds each axis needs for the nodes `exchanged` marks. `around`: the
+/// elements around each node ([`node_elements`]).
 fn node_boxes(
     problem: &Problem,
     machine: Machine,
     element_board: &[u32],
+    around: &[Vec<u32>],
     exchanged: &[bool],
 ) -> Result<(Vec<BoardBox>, Vec<u32>, [usize; 3])> {
     let mesh = &problem.mesh;
-    let around = node_elements(mesh);
     let mut node_box = Vec::with_capacity(mesh.nodes.len());
     let mut rounds = [0usize; 3];
     let mut node_owner = vec![0u32; mesh.nodes.len()];

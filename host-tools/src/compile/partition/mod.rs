@@ -9,8 +9,9 @@
 //!
 //! [`refine`] then moves single elements between boards holding face neighbours to
 //! minimise the force vectors the exchange rounds send (the exact count of
-//! [`crate::compile::plan`]'s scheme, in which a held node is not exchanged) and the relays, keeping every board within
-//! [`BALANCE_MAX`] times the mean load, non-empty, and its pieces as connected as they
+//! [`crate::compile::plan`]'s scheme, in which a held node is not exchanged), the relays
+//! and the busiest links' loads, keeping every board within [`BALANCE_MAX`] times the mean
+//! load, non-empty, and its pieces as connected as they
 //! were: simulated annealing from a fixed seed, then greedy passes. The result is the same
 //! on every machine.
 //!
