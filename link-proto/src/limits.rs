@@ -34,6 +34,9 @@ pub const FRAME_PAYLOAD_LEN_MAX: usize = VALUES_PER_FRAME_MAX * VALUE_LEN_MAX;
 pub const FRAME_LEN_MIN: usize = FRAME_HEADER_LEN + CRC_LEN;
 /// Largest link frame, header and CRC included.
 pub const FRAME_LEN_MAX: usize = FRAME_HEADER_LEN + FRAME_PAYLOAD_LEN_MAX + CRC_LEN;
+/// A link receive buffer: any frame, also inside its recovery envelope, which
+/// [`crate::reliable`] then checks and unwraps in place (one copy per frame, not two).
+pub const FRAME_RX_LEN: usize = FRAME_LEN_MAX + crate::reliable::OVERHEAD;
 
 /// Length of the global packet header.
 pub const PACKET_HEADER_LEN: usize = 8;

@@ -155,6 +155,9 @@ pub enum SendError {
     TooLong,
     /// No link on this face (edge of the array).
     NoLink,
+    /// Shorter than the CRC a link frame ends with: link recovery ([`crate::reliable`])
+    /// carries frames only.
+    NotAFrame,
     /// The underlying stream failed.
     Io(embedded_io::ErrorKind),
 }
@@ -199,6 +202,7 @@ impl fmt::Display for SendError {
             SendError::WouldBlock => f.write_str("send queue full"),
             SendError::TooLong => f.write_str("frame too long for the port"),
             SendError::NoLink => f.write_str("no link on this face"),
+            SendError::NotAFrame => f.write_str("not a link frame: shorter than its CRC"),
             SendError::Io(k) => write!(f, "stream error: {k:?}"),
         }
     }

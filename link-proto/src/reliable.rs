@@ -10,11 +10,19 @@
 //! | 1       | 1    | reserved (0)                                                         |
 //! | 2       | 2    | seq (u16): data: its number; ack: the next expected (all before it arrived); nack: the number wanted (all before it arrived); status: the sender's next number |
 //! | 4       | 2    | (data) the next number this side expects on the reverse direction: a piggybacked ack; else 0 |
-//! | 6       | `n`  | (data) the frame                                                     |
-//! | 6 + `n` | 4    | CRC-32 of bytes `0 .. 6 + n`                                         |
+//! | 6       | `n`  | (data) the frame, whose last four bytes are the CRC-32 of the rest   |
+//! | 6 + `n` | 4    | CRC-32 of bytes `0 .. 6` followed by (data) the frame's last four    |
 //!
 //! [`OVERHEAD`] = 10 bytes per frame. The type codes lie outside the frame kinds (a link
 //! carries envelopes only, or frames only; [`data_frame`] finds the frame in an envelope).
+//!
+//! A data envelope carries a link frame, which ends with the CRC-32 of its other bytes
+//! ([`crate::frame`]). That CRC protects the frame; the envelope's protects the header and
+//! binds the frame's CRC to it. So the sender computes a CRC over ten bytes, not over the
+//! frame again, and the receiver checks both: any change to the envelope fails one of
+//! them. Bytes that do not end with their own CRC-32 are refused by every receiver as
+//! damaged (sent again until the receiver's requests run out): recovery carries frames,
+//! not arbitrary bytes.
 //!
 //! The protocol, per face and direction (go-back-N with a window of `window` frames):
 //! - The sender keeps every frame until it is acknowledged, at most `window`; a send
@@ -29,12 +37,18 @@
 //!   window without sending data acknowledges explicitly.
 //! - A receiver that has asked `retries` times for a frame without getting it stops with
 //!   [`RecvError::RetriesExhausted`] (the caller names its board, link and step).
+//! - A face is read when its frames are asked for, when its send window is full (for
+//!   acks), and by every wait for a frame that has lasted half `nack_after_ns` (every face
+//!   then: a board waiting on one link still answers the nacks of the others, before their
+//!   first request would be repeated). A receive buffer that holds an envelope
+//!   ([`crate::FRAME_RX_LEN`]) takes the next frame straight from the link, checked and
+//!   unwrapped in place; frames read ahead wait in receive slots and are copied out.
 //!
 //! Time comes in through [`Clock`] (never read globally). Storage is the caller's: one
 //! buffer of [`Reliable::buffer_len`] bytes. No allocation, no panics.
 
 use crate::error::Error;
-use crate::frame::crc32;
+use crate::frame::{crc32, CRC32};
 use crate::limits::CRC_LEN;
 use crate::link::{Face, Links, RecvError, SendError};
 
@@ -156,6 +170,42 @@ struct RxState {
     ack_owed: bool,
 }
 
+/// The CRC an envelope ends with: over its header, then (data) its frame's own CRC. Ten
+/// bytes at most: the byte-wise table, on the host too (no set-up per call).
+fn envelope_crc(header: &[u8], frame_crc: &[u8]) -> u32 {
+    let mut d = CRC32.digest();
+    d.update(header);
+    d.update(frame_crc);
+    d.finalize()
+}
+
+/// The type, sequence number and piggybacked ack of the envelope `bytes[..n]`, or `None` if
+/// it is too short, longer than `bytes`, or fails a CRC: its own, or (data) its frame's.
+fn envelope_header(bytes: &[u8], n: usize) -> Option<(u8, u16, u16)> {
+    let e = bytes.get(..n).filter(|e| e.len() >= OVERHEAD)?;
+    let (e, crc) = e.split_at(n - CRC_LEN);
+    let (header, frame) = e.split_at(HEADER_LEN);
+    let frame_crc = if e[0] == code::DATA {
+        let (rest, frame_crc) = frame.split_at(frame.len().checked_sub(CRC_LEN)?);
+        if crc32(rest).to_le_bytes() != frame_crc {
+            return None;
+        }
+        frame_crc
+    } else if frame.is_empty() {
+        frame
+    } else {
+        return None;
+    };
+    if envelope_crc(header, frame_crc).to_le_bytes() != crc {
+        return None;
+    }
+    Some((
+        e[0],
+        u16::from_le_bytes([e[2], e[3]]),
+        u16::from_le_bytes([e[4], e[5]]),
+    ))
+}
+
 fn diff(a: u16, b: u16) -> i16 {
     a.wrapping_sub(b) as i16
 }
@@ -244,7 +294,7 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
         let mut e = [0u8; OVERHEAD];
         e[0] = kind;
         e[2..4].copy_from_slice(&seq.to_le_bytes());
-        let crc = crc32(&e[..HEADER_LEN]);
+        let crc = envelope_crc(&e[..HEADER_LEN], &[]);
         e[HEADER_LEN..].copy_from_slice(&crc.to_le_bytes());
         if self.inner.try_send(face, &e).is_err() {
             return false;
@@ -298,24 +348,28 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
         self.control(face, code::NACK, seq);
     }
 
-    /// Handles the envelope of `n` bytes just read into the first free receive slot.
+    /// Handles the envelope of `n` bytes just read into the first free receive slot: a
+    /// frame taken in order stays there for delivery.
     fn take(&mut self, face: Face, n: usize) {
+        let range = self.rx_slot(face, self.rx[face.index()].count);
+        let head = envelope_header(&self.buf.as_ref()[range], n);
+        if self.take_header(face, head) {
+            let r = &mut self.rx[face.index()];
+            let k = (r.head + r.count) % self.config.window;
+            r.lens[k] = n as u16;
+            r.count += 1;
+        }
+    }
+
+    /// Acts on a received envelope whose check gave `head` (see [`envelope_header`]); true for a data frame taken in order, which the caller keeps
+    /// for delivery.
+    fn take_header(&mut self, face: Face, head: Option<(u8, u16, u16)>) -> bool {
         let f = face.index();
-        let range = self.rx_slot(face, self.rx[f].count);
-        let slot = &self.buf.as_ref()[range];
-        let ok = n >= OVERHEAD
-            && n <= slot.len()
-            && crc32(&slot[..n - CRC_LEN]).to_le_bytes() == slot[n - CRC_LEN..n];
-        if !ok {
+        let Some((kind, seq, ack)) = head else {
             self.stats[f].damaged += 1;
             self.lost(face);
-            return;
-        }
-        let (kind, seq, ack) = (
-            slot[0],
-            u16::from_le_bytes([slot[2], slot[3]]),
-            u16::from_le_bytes([slot[4], slot[5]]),
-        );
+            return false;
+        };
         match kind {
             code::ACK => self.acked(face, seq),
             code::NACK => {
@@ -346,9 +400,6 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
                 let r = &mut self.rx[f];
                 match diff(seq, r.expected) {
                     0 => {
-                        let k = (r.head + r.count) % self.config.window;
-                        r.lens[k] = n as u16;
-                        r.count += 1;
                         r.expected = r.expected.wrapping_add(1);
                         r.nacks = 0;
                         r.waiting_since = None;
@@ -356,6 +407,7 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
                         if usize::from(r.unacked) * 2 >= self.config.window {
                             r.ack_owed = true;
                         }
+                        return true;
                     }
                     d if d < 0 => {
                         self.stats[f].duplicates += 1;
@@ -372,6 +424,7 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
                 self.lost(face);
             }
         }
+        false
     }
 
     /// Reads what has arrived on `face` while a receive slot is free, then sends what is
@@ -427,6 +480,19 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
         true
     }
 
+    /// Whether a wait for a frame began less than half `nack_after_ns` ago on some face.
+    /// Such a board reads only the awaited face, so that its frames (and the others' when
+    /// asked for) go straight into the caller's buffer; once a wait is older, it reads
+    /// every face, to answer the nacks of neighbours waiting on it, in time for their
+    /// first request.
+    fn waiting_briefly(&self, now: u64) -> bool {
+        let brief = self.config.nack_after_ns / 2;
+        self.rx.iter().any(|r| {
+            r.waiting_since
+                .is_some_and(|t| now.saturating_sub(t) < brief)
+        })
+    }
+
     /// Services every face (a board waiting on one link still answers the others).
     fn service_all(&mut self) -> Result<(), RecvError> {
         for face in Face::ALL {
@@ -442,9 +508,19 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Links for Reliable<L, C, 
         if frame.len() > self.config.frame_len_max {
             return Err(SendError::TooLong);
         }
-        let _ = self.service(face);
+        if frame.len() < CRC_LEN {
+            return Err(SendError::NotAFrame);
+        }
         if !self.flush(face) {
             return Err(SendError::WouldBlock);
+        }
+        if diff(self.tx[f].next, self.tx[f].base) as usize >= self.config.window {
+            // The window is full: read the face for acks (otherwise it is read when its
+            // frames are asked for, so that they can go straight to the caller).
+            let _ = self.service(face);
+            if !self.flush(face) {
+                return Err(SendError::WouldBlock);
+            }
         }
         let t = self.tx[f];
         if diff(t.next, t.base) as usize >= self.config.window {
@@ -459,7 +535,7 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Links for Reliable<L, C, 
         slot[2..4].copy_from_slice(&t.next.to_le_bytes());
         slot[4..6].copy_from_slice(&ack.to_le_bytes());
         slot[HEADER_LEN..HEADER_LEN + frame.len()].copy_from_slice(frame);
-        let crc = crc32(&slot[..len - CRC_LEN]);
+        let crc = envelope_crc(&slot[..HEADER_LEN], &frame[frame.len() - CRC_LEN..]);
         slot[len - CRC_LEN..len].copy_from_slice(&crc.to_le_bytes());
         let range = self.tx_slot(face, t.next);
         self.inner
@@ -477,9 +553,34 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Links for Reliable<L, C, 
 
     fn try_recv(&mut self, face: Face, buf: &mut [u8]) -> Result<Option<usize>, RecvError> {
         let f = face.index();
+        if self.rx[f].count == 0 && buf.len() >= self.slot_len() {
+            // Nothing held: the next frame in order goes from the link straight into the
+            // caller's buffer, checked there and moved to its start (one copy of the frame,
+            // not two: the slot is only for frames read ahead of their delivery).
+            loop {
+                let n = match self.inner.try_recv(face, buf) {
+                    Ok(None) | Err(RecvError::NoLink) => break,
+                    Ok(Some(n)) => n,
+                    Err(RecvError::Damaged(_)) | Err(RecvError::BufferTooSmall { .. }) => {
+                        self.stats[f].damaged += 1;
+                        self.lost(face);
+                        continue;
+                    }
+                    Err(e) => return Err(e),
+                };
+                if self.take_header(face, envelope_header(buf, n)) {
+                    let len = n - OVERHEAD;
+                    buf.copy_within(HEADER_LEN..HEADER_LEN + len, 0);
+                    self.flush(face);
+                    return Ok(Some(len));
+                }
+            }
+        }
         self.service(face)?;
-        if self.rx[f].count == 0 {
-            // Waiting: answer the other links, and ask again for this one's frame in time.
+        let now = self.clock.now_ns();
+        if self.rx[f].count == 0 && !self.waiting_briefly(now) {
+            // Waiting for a while: answer the other links (their nacks), and ask again for
+            // this one's frame in time.
             self.service_all()?;
         }
         if self.rx[f].count > 0 {
@@ -495,7 +596,6 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Links for Reliable<L, C, 
             r.count -= 1;
             return Ok(Some(n));
         }
-        let now = self.clock.now_ns();
         let r = &mut self.rx[f];
         match r.waiting_since {
             None => {
@@ -526,7 +626,15 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Links for Reliable<L, C, 
     }
 
     fn poll(&mut self) {
-        let _ = self.service_all();
+        let now = self.clock.now_ns();
+        if self.waiting_briefly(now) {
+            // Sends what is owed; reads nothing ahead of the frame awaited.
+            for face in Face::ALL {
+                self.flush(face);
+            }
+        } else {
+            let _ = self.service_all();
+        }
         self.inner.poll();
     }
 }

@@ -2,7 +2,7 @@
 //! ([`crate::image::read_image`]), then the runtime's own indexes (exchange ranges, the
 //! external-force stages, this board's contact slot, the step program).
 
-use link_proto::{FRAME_LEN_MAX, VALUES_PER_FRAME_MAX};
+use link_proto::{FRAME_LEN_MAX, FRAME_RX_LEN, VALUES_PER_FRAME_MAX};
 
 use super::contact::ContactState;
 use super::exchange::{Exchange, LISTS_MAX};
@@ -50,7 +50,7 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         // The frame buffers live in the storage (a runtime on the stack stays small).
         for (len, max) in [
             (st.tx.len(), FRAME_LEN_MAX),
-            (st.rx.len(), FRAME_LEN_MAX),
+            (st.rx.len(), FRAME_RX_LEN),
             (st.scratch.len(), VALUES_PER_FRAME_MAX),
         ] {
             if len < max {

@@ -7,7 +7,7 @@
 
 use core::mem::size_of;
 
-use link_proto::{FRAME_LEN_MAX, VALUES_PER_FRAME_MAX};
+use link_proto::{FRAME_LEN_MAX, FRAME_RX_LEN, VALUES_PER_FRAME_MAX};
 
 use crate::image::{
     zero_record, ContactFace, ContactNode, ContactNodePlace, Counts, ExternalRecord, ImageParts,
@@ -146,7 +146,8 @@ impl Capacities {
             + self.contact_candidates * size_of::<Candidate>()
             + self.contact_sends * size_of::<u32>()
             + self.graphics_nodes * size_of::<u16>()
-            + 2 * FRAME_LEN_MAX
+            + FRAME_LEN_MAX
+            + FRAME_RX_LEN
             + VALUES_PER_FRAME_MAX * size_of::<T>()
     }
 
@@ -337,7 +338,7 @@ pub struct StorageBuf<
     send_list: S::Of<u32, NS>,
     graphics: S::Of<u16, NN>,
     tx: S::Of<u8, FRAME_LEN_MAX>,
-    rx: S::Of<u8, FRAME_LEN_MAX>,
+    rx: S::Of<u8, FRAME_RX_LEN>,
     scratch: S::Of<T, VALUES_PER_FRAME_MAX>,
 }
 
@@ -427,7 +428,7 @@ impl<
         put::<S, _, NS>(&mut self.send_list, caps.contact_sends)?;
         put::<S, _, NN>(&mut self.graphics, caps.graphics_nodes)?;
         put::<S, _, FRAME_LEN_MAX>(&mut self.tx, FRAME_LEN_MAX)?;
-        put::<S, _, FRAME_LEN_MAX>(&mut self.rx, FRAME_LEN_MAX)?;
+        put::<S, _, FRAME_RX_LEN>(&mut self.rx, FRAME_RX_LEN)?;
         put::<S, _, VALUES_PER_FRAME_MAX>(&mut self.scratch, VALUES_PER_FRAME_MAX)?;
         Some(Storage {
             laws: &mut self.laws,
