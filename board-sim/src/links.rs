@@ -314,6 +314,23 @@ impl Links for EmuLinks {
         pop_into(ch, buf)
     }
 
+    fn peek(&mut self, face: Face) -> link_proto::Peek {
+        use link_proto::Peek;
+        let Some(ch) = self.rx[face.index()].as_ref() else {
+            return Peek::Nothing;
+        };
+        if ch.len.load(Ordering::Acquire) == 0 {
+            return Peek::Nothing;
+        }
+        let Ok(q) = ch.queue.lock() else {
+            return Peek::Unknown;
+        };
+        match q.frames.front() {
+            None => Peek::Nothing,
+            Some(f) => f.first().map_or(Peek::Unknown, |&b| Peek::First(b)),
+        }
+    }
+
     fn try_send_global(&mut self, packet: &[u8]) -> Result<(), SendError> {
         let net = self.net.as_ref().ok_or(SendError::NoLink)?;
         // The network routes on the header's destination, as a switch would.
@@ -787,6 +804,11 @@ impl<L: Links> Links for FaultyLinks<L> {
         self.release();
         self.inner.poll();
     }
+    /// Faults hit frames as they are sent: the head of a link is what a receive would take.
+    fn peek(&mut self, face: Face) -> link_proto::Peek {
+        self.release();
+        self.inner.peek(face)
+    }
     /// The same drop and corrupt as frames (from the global stream), and the stall; recorded
     /// on `global to <destination>` at the packet's step (a recovery control envelope at
     /// the last packet's step).
@@ -922,6 +944,12 @@ impl Links for Lower {
             Lower::Faulty(l) => l.poll(),
         }
     }
+    fn peek(&mut self, face: Face) -> link_proto::Peek {
+        match self {
+            Lower::Clean(l) => l.peek(face),
+            Lower::Faulty(l) => l.peek(face),
+        }
+    }
 }
 
 /// A board's clock for link recovery: its worker's [`SweepClock`], passed in.
@@ -956,6 +984,9 @@ macro_rules! links_by_variant {
             }
             fn poll(&mut self) {
                 match self { $($v(l) => l.poll(),)+ }
+            }
+            fn peek(&mut self, face: Face) -> link_proto::Peek {
+                match self { $($v(l) => l.peek(face),)+ }
             }
         }
     };
@@ -1082,5 +1113,29 @@ mod tests {
             "the parked waiter saw the ring"
         );
         assert_eq!(bell.parked(), 0);
+    }
+
+    /// A peek tells the first byte of the frame at the head of a link without taking it:
+    /// the receive that follows gets that frame, whole; an empty link and a face at the
+    /// machine's edge have nothing.
+    #[test]
+    fn a_peek_sees_the_head_of_a_link_and_leaves_it() {
+        use link_proto::Peek;
+        let bells: Vec<Arc<Doorbell>> = (0..2).map(|_| Default::default()).collect();
+        let (mut links, _) = build_links([2, 1, 1], &bells, false);
+        let (a, b) = links.split_at_mut(1);
+        let (a, b) = (&mut a[0], &mut b[0]);
+        assert_eq!(b.peek(Face::NegX), Peek::Nothing);
+        assert_eq!(b.peek(Face::PosX), Peek::Nothing, "the machine's edge");
+        a.try_send(Face::PosX, &[0xA3, 1, 2, 3]).expect("sent");
+        a.try_send(Face::PosX, &[0xA1, 9]).expect("sent");
+        assert_eq!(b.peek(Face::NegX), Peek::First(0xA3));
+        assert_eq!(b.peek(Face::NegX), Peek::First(0xA3), "not taken");
+        let mut buf = [0u8; 8];
+        assert_eq!(b.try_recv(Face::NegX, &mut buf), Ok(Some(4)));
+        assert_eq!(buf[..4], [0xA3, 1, 2, 3]);
+        assert_eq!(b.peek(Face::NegX), Peek::First(0xA1));
+        assert_eq!(b.try_recv(Face::NegX, &mut buf), Ok(Some(2)));
+        assert_eq!(b.peek(Face::NegX), Peek::Nothing);
     }
 }

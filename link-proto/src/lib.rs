@@ -80,6 +80,6 @@ pub use error::{Error, Result};
 pub use frame::{emit_values, Frame, FrameKind, FrameRepr, Payload, Precision, Values};
 pub use framing::{encode_wire, StreamDecoder};
 pub use limits::*;
-pub use link::{Axis, Face, Links, RecvError, SendError};
+pub use link::{Axis, Face, Links, Peek, RecvError, SendError};
 pub use packet::{Control, Packet, PacketKind, PacketRepr};
 pub use stream::{FacePort, GlobalPort, StreamLinks, StreamPort};

@@ -259,6 +259,25 @@ pub trait Links {
     /// Moves queued bytes along without sending or receiving a new frame, for
     /// firmware that computes between sends. Default: nothing to do.
     fn poll(&mut self) {}
+
+    /// The first byte of the next whole frame on a face, without taking it, for a link
+    /// that can tell (a wrapper reads control frames ahead of data this way:
+    /// [`crate::reliable`]). Default: [`Peek::Unknown`].
+    fn peek(&mut self, face: Face) -> Peek {
+        let _ = face;
+        Peek::Unknown
+    }
+}
+
+/// What [`Links::peek`] saw on a face.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Peek {
+    /// No whole frame has arrived.
+    Nothing,
+    /// A whole frame has arrived; this is its first byte.
+    First(u8),
+    /// The link cannot tell without taking the frame.
+    Unknown,
 }
 
 impl<L: Links + ?Sized> Links for &mut L {
@@ -280,5 +299,9 @@ impl<L: Links + ?Sized> Links for &mut L {
 
     fn poll(&mut self) {
         (**self).poll()
+    }
+
+    fn peek(&mut self, face: Face) -> Peek {
+        (**self).peek(face)
     }
 }

@@ -37,10 +37,12 @@
 //!   window without sending data acknowledges explicitly.
 //! - A receiver that has asked `retries` times for a frame without getting it stops with
 //!   [`RecvError::RetriesExhausted`] (the caller names its board, link and step).
-//! - A face is read when its frames are asked for, when its send window is full (for
-//!   acks), and by every wait for a frame that has lasted half `nack_after_ns` (every face
-//!   then: a board waiting on one link still answers the nacks of the others, before their
-//!   first request would be repeated). A receive buffer that holds an envelope
+//! - A face's data is read when its frames are asked for, when its send window is full
+//!   (for acks), and by a wait for a frame that has lasted half `nack_after_ns` (every
+//!   face then: a board waiting on one link still answers the nacks of the others, before
+//!   their first request is repeated). Its control envelopes are read sooner: at each send
+//!   on it and each poll, from the head of a link that can look ahead ([`Links::peek`];
+//!   one that cannot is read to the end). A receive buffer that holds an envelope
 //!   ([`crate::FRAME_RX_LEN`]) takes the next frame straight from the link, checked and
 //!   unwrapped in place; frames read ahead wait in receive slots and are copied out.
 //!
@@ -50,7 +52,7 @@
 use crate::error::Error;
 use crate::frame::{crc32, CRC32};
 use crate::limits::CRC_LEN;
-use crate::link::{Face, Links, RecvError, SendError};
+use crate::link::{Face, Links, Peek, RecvError, SendError};
 
 /// Envelope header length.
 pub const HEADER_LEN: usize = 6;
@@ -430,22 +432,52 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
     /// Reads what has arrived on `face` while a receive slot is free, then sends what is
     /// owed (retransmissions, status, ack).
     fn service(&mut self, face: Face) -> Result<(), RecvError> {
-        let f = face.index();
-        while self.rx[f].count < self.config.window {
-            let range = self.rx_slot(face, self.rx[f].count);
-            match self.inner.try_recv(face, &mut self.buf.as_mut()[range]) {
-                Ok(None) => break,
-                Ok(Some(n)) => self.take(face, n),
-                Err(RecvError::Damaged(_)) | Err(RecvError::BufferTooSmall { .. }) => {
-                    self.stats[f].damaged += 1;
-                    self.lost(face);
+        while self.read_one(face)? {}
+        self.flush(face);
+        Ok(())
+    }
+
+    /// Reads the control envelopes (acks, nacks, statuses) at the head of `face`'s link,
+    /// up to its first data envelope, which stays on the link for the caller's buffer;
+    /// then sends what is owed. A link that cannot look ahead ([`Peek::Unknown`]) is read
+    /// to the end as by [`Self::service`].
+    fn read_controls(&mut self, face: Face) -> Result<(), RecvError> {
+        loop {
+            match self.inner.peek(face) {
+                Peek::Nothing | Peek::First(code::DATA) => break,
+                Peek::First(_) => {
+                    if !self.read_one(face)? {
+                        break;
+                    }
                 }
-                Err(RecvError::NoLink) => return Ok(()),
-                Err(e) => return Err(e),
+                Peek::Unknown => return self.service(face),
             }
         }
         self.flush(face);
         Ok(())
+    }
+
+    /// Reads one envelope from `face` into the first free receive slot and acts on it;
+    /// false if none was read (nothing arrived, no slot free, no link).
+    fn read_one(&mut self, face: Face) -> Result<bool, RecvError> {
+        let f = face.index();
+        if self.rx[f].count >= self.config.window {
+            return Ok(false);
+        }
+        let range = self.rx_slot(face, self.rx[f].count);
+        match self.inner.try_recv(face, &mut self.buf.as_mut()[range]) {
+            Ok(None) | Err(RecvError::NoLink) => Ok(false),
+            Ok(Some(n)) => {
+                self.take(face, n);
+                Ok(true)
+            }
+            Err(RecvError::Damaged(_)) | Err(RecvError::BufferTooSmall { .. }) => {
+                self.stats[f].damaged += 1;
+                self.lost(face);
+                Ok(true)
+            }
+            Err(e) => Err(e),
+        }
     }
 
     /// Sends what is owed on `face`; returns whether every retransmission went out.
@@ -481,16 +513,29 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
     }
 
     /// Whether a wait for a frame began less than half `nack_after_ns` ago on some face.
-    /// Such a board reads only the awaited face, so that its frames (and the others' when
-    /// asked for) go straight into the caller's buffer; once a wait is older, it reads
-    /// every face, to answer the nacks of neighbours waiting on it, in time for their
-    /// first request.
+    /// Such a board reads only the control envelopes at the head of its other faces, so
+    /// that their frames go straight into the caller's buffer when asked for; once a wait
+    /// is older, it reads every face to its end, to answer the nacks of neighbours waiting
+    /// on it (behind data, or on a link that cannot look ahead) before their first request
+    /// is repeated.
     fn waiting_briefly(&self, now: u64) -> bool {
         let brief = self.config.nack_after_ns / 2;
         self.rx.iter().any(|r| {
             r.waiting_since
                 .is_some_and(|t| now.saturating_sub(t) < brief)
         })
+    }
+
+    /// Answers every face: its control envelopes while a wait is brief, everything it
+    /// carries once a wait has lasted (see [`Self::waiting_briefly`]).
+    fn answer_all(&mut self, now: u64) -> Result<(), RecvError> {
+        if !self.waiting_briefly(now) {
+            return self.service_all();
+        }
+        for face in Face::ALL {
+            self.read_controls(face)?;
+        }
+        Ok(())
     }
 
     /// Services every face (a board waiting on one link still answers the others).
@@ -511,12 +556,15 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Links for Reliable<L, C, 
         if frame.len() < CRC_LEN {
             return Err(SendError::NotAFrame);
         }
+        // Nacks and acks at the head of the link are read now (a nack for a frame not sent
+        // yet is answered "not yet", not with the frame sent in the meantime); data waits
+        // for the caller's buffer.
+        let _ = self.read_controls(face);
         if !self.flush(face) {
             return Err(SendError::WouldBlock);
         }
         if diff(self.tx[f].next, self.tx[f].base) as usize >= self.config.window {
-            // The window is full: read the face for acks (otherwise it is read when its
-            // frames are asked for, so that they can go straight to the caller).
+            // The window is full: read the face to its end for acks, on data too.
             let _ = self.service(face);
             if !self.flush(face) {
                 return Err(SendError::WouldBlock);
@@ -578,10 +626,10 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Links for Reliable<L, C, 
         }
         self.service(face)?;
         let now = self.clock.now_ns();
-        if self.rx[f].count == 0 && !self.waiting_briefly(now) {
-            // Waiting for a while: answer the other links (their nacks), and ask again for
-            // this one's frame in time.
-            self.service_all()?;
+        if self.rx[f].count == 0 {
+            // Waiting: answer the other links (their nacks; all they carry once the wait has
+            // lasted), and ask again for this one's frame in time.
+            self.answer_all(now)?;
         }
         if self.rx[f].count > 0 {
             let r = self.rx[f];
@@ -627,14 +675,7 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Links for Reliable<L, C, 
 
     fn poll(&mut self) {
         let now = self.clock.now_ns();
-        if self.waiting_briefly(now) {
-            // Sends what is owed; reads nothing ahead of the frame awaited.
-            for face in Face::ALL {
-                self.flush(face);
-            }
-        } else {
-            let _ = self.service_all();
-        }
+        let _ = self.answer_all(now);
         self.inner.poll();
     }
 }

@@ -775,4 +775,8 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Links for GlobalReliable<
         self.service();
         self.inner.poll();
     }
+
+    fn peek(&mut self, face: Face) -> crate::link::Peek {
+        self.inner.peek(face)
+    }
 }

@@ -6,7 +6,9 @@ use std::collections::VecDeque;
 use std::rc::Rc;
 
 use link_proto::reliable::{code, Clock, Reliable, ReliableConfig};
-use link_proto::{Face, FrameKind, FrameRepr, Links, Payload, Precision, RecvError, SendError};
+use link_proto::{
+    Face, FrameKind, FrameRepr, Links, Payload, Peek, Precision, RecvError, SendError,
+};
 
 /// What the wire does to the n-th envelope it carries in one direction.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -43,15 +45,19 @@ impl Wire {
 /// A face of a board with its outgoing and incoming wires.
 type FaceWires = (Face, Rc<RefCell<Wire>>, Rc<RefCell<Wire>>);
 
-/// One board's ends: on each face it has, sends into `out` and receives from `inp`.
+/// One board's ends: on each face it has, sends into `out` and receives from `inp`;
+/// with `peeks`, it tells the next envelope's type without taking it (as board-sim's
+/// links do), else it cannot ([`Peek::Unknown`], as a byte stream).
 struct End {
     faces: Vec<FaceWires>,
+    peeks: bool,
 }
 
 impl End {
     fn one(face: Face, out: &Rc<RefCell<Wire>>, inp: &Rc<RefCell<Wire>>) -> End {
         End {
             faces: vec![(face, out.clone(), inp.clone())],
+            peeks: true,
         }
     }
     fn wires(&self, face: Face) -> Option<&FaceWires> {
@@ -100,6 +106,16 @@ impl Links for End {
                 buf[..f.len()].copy_from_slice(&f);
                 Ok(Some(f.len()))
             }
+        }
+    }
+    fn peek(&mut self, face: Face) -> Peek {
+        match self.wires(face) {
+            Some((_, _, inp)) if self.peeks => match inp.borrow().queue.front() {
+                None => Peek::Nothing,
+                Some(e) => Peek::First(e[0]),
+            },
+            Some(_) => Peek::Unknown,
+            None => Peek::Nothing,
         }
     }
     fn try_send_global(&mut self, _: &[u8]) -> Result<(), SendError> {
@@ -487,6 +503,7 @@ fn a_waiting_board_answers_the_nacks_of_its_other_faces() {
             (Face::NegX, ba.clone(), ab.clone()),
             (Face::PosY, bc.clone(), cb.clone()),
         ],
+        peeks: true,
     });
     let mut c = board(End::one(Face::NegY, &cb, &bc));
     b.try_send(Face::PosY, &frame(6)).unwrap();
@@ -508,4 +525,46 @@ fn a_waiting_board_answers_the_nacks_of_its_other_faces() {
     assert_eq!(s.retransmitted_frames, 1, "{s:?}");
     assert!(s.nacks_received >= 1);
     assert!(c.stats()[Face::NegY.index()].nacks_sent < CONFIG.retries as u64);
+}
+
+/// A nack for a frame not sent yet (the receiver's wait ran out first) is read before the
+/// frame goes out, and answered "not yet": the frame is sent once, not again for a request
+/// that crossed it. With a link that can look ahead, the sender reads only the nack at the
+/// head (a data envelope behind it stays on the link); with one that cannot, all of it.
+#[test]
+fn a_nack_that_crosses_its_frame_is_answered_not_yet() {
+    for peeks in [true, false] {
+        let (mut a, mut b, ab, ba, t) = pair(
+            Box::new(|_, _| Fate::Deliver),
+            Box::new(|_, _| Fate::Deliver),
+        );
+        a.inner_mut().peeks = peeks;
+        // B waits past nack_after_ns for frame 0 of A's, which A has not sent.
+        let mut buf = vec![0u8; DIRECT];
+        while fates(&ba, code::NACK) == 0 {
+            assert_eq!(b.try_recv(Face::NegX, &mut buf), Ok(None));
+            t.set(t.get() + 100);
+        }
+        // B sends A a frame behind its nack; then A sends its frame 0.
+        b.try_send(Face::NegX, &frame(1)).unwrap();
+        assert_eq!(ba.borrow().queue.len(), 2, "the nack, then B's frame");
+        a.try_send(Face::PosX, &frame(0)).unwrap();
+        assert_eq!(
+            ba.borrow().queue.len(),
+            if peeks { 1 } else { 0 },
+            "what A left on its link (peeks: {peeks})"
+        );
+        assert_eq!(recv_in(&mut a, &mut b, &t, DIRECT, 20).unwrap(), frame(0));
+        let sa = a.stats()[Face::PosX.index()];
+        assert_eq!(sa.nacks_received, 1, "peeks: {peeks}");
+        assert_eq!(sa.statuses_sent, 1, "answered not yet (peeks: {peeks})");
+        assert_eq!(sa.retransmitted_frames, 0, "peeks: {peeks}");
+        assert_eq!(fates(&ab, code::DATA), 1);
+        let mut got = vec![0u8; DIRECT];
+        let n = a
+            .try_recv(Face::PosX, &mut got)
+            .unwrap()
+            .expect("B's frame");
+        assert_eq!(got[..n], frame(1)[..]);
+    }
 }
