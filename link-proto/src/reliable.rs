@@ -172,35 +172,43 @@ struct RxState {
     ack_owed: bool,
 }
 
-/// The CRC an envelope ends with: over its header, then (data) its frame's own CRC. Ten
-/// bytes at most: the byte-wise table, on the host too (no set-up per call).
-fn envelope_crc(header: &[u8], frame_crc: &[u8]) -> u32 {
+/// The CRC an envelope ends with: over its header, then (data) the carried frame's own
+/// CRC, its last four bytes. Ten bytes at most: the byte-wise table, on the host too (no
+/// set-up per call). The global network's envelopes ([`crate::reliable_global`]) follow
+/// the same rule for their packets.
+pub(crate) fn envelope_crc(header: &[u8], carried_crc: &[u8]) -> u32 {
     let mut d = CRC32.digest();
     d.update(header);
-    d.update(frame_crc);
+    d.update(carried_crc);
     d.finalize()
+}
+
+/// Checks envelope `e`: a header of `header_len` bytes, then (`data`) a frame or packet
+/// that ends with the CRC-32 of its other bytes, or nothing, then the envelope's CRC
+/// ([`envelope_crc`]). The carried bytes, or `None` if too short or a CRC fails.
+pub(crate) fn check_envelope(e: &[u8], header_len: usize, data: bool) -> Option<&[u8]> {
+    let body_len = e.len().checked_sub(CRC_LEN)?;
+    let (body, crc) = e.split_at(body_len);
+    let (header, carried) = body.split_at_checked(header_len)?;
+    let carried_crc = if data {
+        let (rest, own) = carried.split_at(carried.len().checked_sub(CRC_LEN)?);
+        if crc32(rest).to_le_bytes() != own {
+            return None;
+        }
+        own
+    } else if carried.is_empty() {
+        carried
+    } else {
+        return None;
+    };
+    (envelope_crc(header, carried_crc).to_le_bytes() == crc).then_some(carried)
 }
 
 /// The type, sequence number and piggybacked ack of the envelope `bytes[..n]`, or `None` if
 /// it is too short, longer than `bytes`, or fails a CRC: its own, or (data) its frame's.
 fn envelope_header(bytes: &[u8], n: usize) -> Option<(u8, u16, u16)> {
-    let e = bytes.get(..n).filter(|e| e.len() >= OVERHEAD)?;
-    let (e, crc) = e.split_at(n - CRC_LEN);
-    let (header, frame) = e.split_at(HEADER_LEN);
-    let frame_crc = if e[0] == code::DATA {
-        let (rest, frame_crc) = frame.split_at(frame.len().checked_sub(CRC_LEN)?);
-        if crc32(rest).to_le_bytes() != frame_crc {
-            return None;
-        }
-        frame_crc
-    } else if frame.is_empty() {
-        frame
-    } else {
-        return None;
-    };
-    if envelope_crc(header, frame_crc).to_le_bytes() != crc {
-        return None;
-    }
+    let e = bytes.get(..n)?;
+    check_envelope(e, HEADER_LEN, *e.first()? == code::DATA)?;
     Some((
         e[0],
         u16::from_le_bytes([e[2], e[3]]),

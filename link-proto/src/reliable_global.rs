@@ -12,10 +12,12 @@
 //! | 2       | 1    | type: `0xB1` data, `0xB2` ack, `0xB3` nack                          |
 //! | 3       | 1    | reserved (0)                                                        |
 //! | 4       | 2    | seq (u16): data: its number in the flow; ack: the next expected (all before it arrived); nack: the number wanted (all before it arrived) |
-//! | 6       | `n`  | (data) the packet ([`crate::packet`])                               |
-//! | 6 + `n` | 4    | CRC-32 of bytes `0 .. 6 + n`                                        |
+//! | 6       | `n`  | (data) the packet ([`crate::packet`]), ending with its own CRC-32   |
+//! | 6 + `n` | 4    | CRC-32 of bytes `0 .. 6` followed by (data) the packet's last four  |
 //!
-//! [`OVERHEAD`] = 10 bytes per packet; an ack or nack is [`OVERHEAD`] bytes.
+//! [`OVERHEAD`] = 10 bytes per packet; an ack or nack is [`OVERHEAD`] bytes. As on the
+//! links ([`crate::reliable`]), the packet's own CRC protects the packet and the envelope's
+//! its header and the packet's CRC; a receiver (a board or a sink) checks both.
 //!
 //! The protocol, per flow (go-back-N with a window of `window` packets):
 //! - The sender keeps every packet until it is acknowledged, at most `window` per
@@ -55,11 +57,11 @@
 //! buffer of [`GlobalReliable::buffer_len`] bytes. No allocation, no panics.
 
 use crate::error::Error;
-use crate::frame::crc32;
 use crate::limits::CRC_LEN;
 use crate::link::{Face, Links, RecvError, SendError};
 use crate::packet::ADDR_BROADCAST;
 use crate::reliable::Clock;
+use crate::reliable::{check_envelope, envelope_crc};
 
 /// Envelope header length.
 pub const HEADER_LEN: usize = 6;
@@ -130,19 +132,20 @@ pub enum Envelope<'a> {
     Damaged,
 }
 
-/// Checks and reads an envelope.
+/// Checks and reads an envelope: its CRC and (data) its packet's.
 pub fn parse(envelope: &[u8]) -> Envelope<'_> {
     let n = envelope.len();
-    if n < OVERHEAD || crc32(&envelope[..n - CRC_LEN]).to_le_bytes() != envelope[n - CRC_LEN..] {
+    let data = envelope.get(field::TYPE) == Some(&code::DATA);
+    let Some(carried) = check_envelope(envelope, HEADER_LEN, data) else {
         return Envelope::Damaged;
-    }
+    };
     let src = envelope[field::SRC];
     let seq = u16::from_le_bytes([envelope[field::SEQ.start], envelope[field::SEQ.start + 1]]);
     match envelope[field::TYPE] {
         code::DATA => Envelope::Data {
             src,
             seq,
-            packet: &envelope[HEADER_LEN..n - CRC_LEN],
+            packet: carried,
         },
         code::ACK if n == OVERHEAD => Envelope::Ack { src, seq },
         code::NACK if n == OVERHEAD => Envelope::Nack { src, seq },
@@ -157,17 +160,19 @@ pub fn control(dst: u8, src: u8, kind: u8, seq: u16) -> [u8; OVERHEAD] {
     e[field::SRC] = src;
     e[field::TYPE] = kind;
     e[field::SEQ].copy_from_slice(&seq.to_le_bytes());
-    let crc = crc32(&e[..HEADER_LEN]);
+    let crc = envelope_crc(&e[..HEADER_LEN], &[]);
     e[HEADER_LEN..].copy_from_slice(&crc.to_le_bytes());
     e
 }
 
-/// Wraps `packet` (its byte 0 the destination, byte 1 the source) as data number `seq`
-/// into `out`; returns the envelope's length, or `None` if `out` is too short or the packet
-/// has no addresses.
+/// Wraps `packet` (its byte 0 the destination, byte 1 the source, its last four bytes the
+/// CRC-32 of the rest) as data number `seq` into `out`; returns the envelope's length, or
+/// `None` if `out` is too short or the packet is shorter than its addresses and CRC. The
+/// envelope's CRC binds the packet's own (ten bytes, not the packet again).
 pub fn emit_data(packet: &[u8], seq: u16, out: &mut [u8]) -> Option<usize> {
     let len = packet.len() + OVERHEAD;
     let (dst, src) = (*packet.first()?, *packet.get(1)?);
+    let own_crc = packet.get(packet.len().checked_sub(CRC_LEN)?..)?;
     let e = out.get_mut(..len)?;
     e[field::DST] = dst;
     e[field::SRC] = src;
@@ -175,7 +180,7 @@ pub fn emit_data(packet: &[u8], seq: u16, out: &mut [u8]) -> Option<usize> {
     e[3] = 0;
     e[field::SEQ].copy_from_slice(&seq.to_le_bytes());
     e[HEADER_LEN..HEADER_LEN + packet.len()].copy_from_slice(packet);
-    let crc = crc32(&e[..len - CRC_LEN]);
+    let crc = envelope_crc(&e[..HEADER_LEN], own_crc);
     e[len - CRC_LEN..].copy_from_slice(&crc.to_le_bytes());
     Some(len)
 }

@@ -139,11 +139,19 @@ fn board(addr: u8, net: &Rc<RefCell<Net>>, time: &Rc<Cell<u64>>, config: GlobalC
     .unwrap()
 }
 
-/// Packet `k` from `src` to `dst`: addresses, the number, and a body that depends on all three.
+/// Packet `k` from `src` to `dst` (a global packet, ending with its own CRC, as recovery
+/// carries): the number as its message id, and a payload that depends on all three.
 fn packet(src: u8, dst: u8, k: u16) -> Vec<u8> {
-    let mut p = vec![dst, src];
-    p.extend_from_slice(&k.to_le_bytes());
-    p.extend((0..20u8).map(|i| i ^ src ^ dst ^ k as u8));
+    let payload: Vec<u8> = (0..20u8).map(|i| i ^ src ^ dst ^ k as u8).collect();
+    let repr = link_proto::PacketRepr {
+        dst,
+        src,
+        msg_id: k,
+        kind: link_proto::PacketKind::CollisionExchange,
+        payload: &payload,
+    };
+    let mut p = vec![0u8; repr.buffer_len()];
+    repr.emit(&mut p).expect("packet");
     p
 }
 
@@ -400,5 +408,41 @@ fn a_packet_always_corrupted_is_given_up_without_a_retransmission_storm() {
         net.borrow().carried < 200,
         "{} envelopes",
         net.borrow().carried
+    );
+}
+
+/// Every single-bit change to a data envelope is refused (`Damaged`): header, packet, the
+/// packet's own CRC, the envelope's CRC. The envelope's CRC covers ten bytes, the packet's
+/// CRC the rest; the intact envelope gives the packet back. Bytes without their own CRC
+/// are refused however the envelope was made.
+#[test]
+fn every_bit_of_a_global_data_envelope_is_checked() {
+    use link_proto::reliable_global::{emit_data, parse, Envelope, OVERHEAD};
+    let p = packet(3, 9, 41);
+    let mut e = vec![0u8; p.len() + OVERHEAD];
+    assert_eq!(emit_data(&p, 7, &mut e), Some(e.len()));
+    assert_eq!(
+        parse(&e),
+        Envelope::Data {
+            src: 3,
+            seq: 7,
+            packet: &p
+        }
+    );
+    assert!(p.len() > 20 && p.iter().any(|&b| b != 0));
+    for bit in 0..e.len() * 8 {
+        let mut d = e.clone();
+        d[bit / 8] ^= 1 << (bit % 8);
+        assert_eq!(parse(&d), Envelope::Damaged, "bit {bit}");
+    }
+    let mut not_a_packet = p.clone();
+    let last = not_a_packet.len() - 1;
+    not_a_packet[last] ^= 0x40;
+    assert_eq!(emit_data(&not_a_packet, 8, &mut e), Some(e.len()));
+    assert_eq!(parse(&e), Envelope::Damaged);
+    assert_eq!(
+        emit_data(&[9, 3, 0], 8, &mut e),
+        None,
+        "shorter than its CRC"
     );
 }
