@@ -41,8 +41,9 @@
 //! ## Recovery envelope ([`reliable`])
 //!
 //! With link recovery, every frame on a face travels in a 10-byte envelope: type, sequence
-//! number, piggybacked acknowledgement, the frame, CRC-32; acks, nacks and statuses are
-//! envelopes without a frame. See [`reliable`].
+//! number, piggybacked acknowledgement, the frame, and a CRC-32 of the header and the
+//! frame's own CRC; acks, nacks and statuses are envelopes without a frame. Global packets
+//! travel in the same way ([`reliable_global`]). See [`reliable`].
 //!
 //! ## Byte stream ([`framing`])
 //!
