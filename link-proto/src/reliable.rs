@@ -216,6 +216,14 @@ fn envelope_header(bytes: &[u8], n: usize) -> Option<(u8, u16, u16)> {
     ))
 }
 
+/// One read of a link ([`Reliable::read`]).
+enum Read {
+    Nothing,
+    Damaged,
+    /// An envelope of this many bytes.
+    Envelope(usize),
+}
+
 fn diff(a: u16, b: u16) -> i16 {
     a.wrapping_sub(b) as i16
 }
@@ -371,8 +379,8 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
         }
     }
 
-    /// Acts on a received envelope whose check gave `head` (see [`envelope_header`]); true for a data frame taken in order, which the caller keeps
-    /// for delivery.
+    /// Acts on a received envelope whose check gave `head` (see [`envelope_header`]); true
+    /// for a data frame taken in order, which the caller keeps for delivery.
     fn take_header(&mut self, face: Face, head: Option<(u8, u16, u16)>) -> bool {
         let f = face.index();
         let Some((kind, seq, ack)) = head else {
@@ -473,16 +481,27 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
             return Ok(false);
         }
         let range = self.rx_slot(face, self.rx[f].count);
-        match self.inner.try_recv(face, &mut self.buf.as_mut()[range]) {
-            Ok(None) | Err(RecvError::NoLink) => Ok(false),
-            Ok(Some(n)) => {
+        let read = self.inner.try_recv(face, &mut self.buf.as_mut()[range]);
+        Ok(match self.read(face, read)? {
+            Read::Nothing => false,
+            Read::Damaged => true,
+            Read::Envelope(n) => {
                 self.take(face, n);
-                Ok(true)
+                true
             }
+        })
+    }
+
+    /// What a read of `face`'s link gave: a damaged or truncated envelope is counted and
+    /// asked for again; a missing link reads as nothing; other errors are the caller's.
+    fn read(&mut self, face: Face, r: Result<Option<usize>, RecvError>) -> Result<Read, RecvError> {
+        match r {
+            Ok(None) | Err(RecvError::NoLink) => Ok(Read::Nothing),
+            Ok(Some(n)) => Ok(Read::Envelope(n)),
             Err(RecvError::Damaged(_)) | Err(RecvError::BufferTooSmall { .. }) => {
-                self.stats[f].damaged += 1;
+                self.stats[face.index()].damaged += 1;
                 self.lost(face);
-                Ok(true)
+                Ok(Read::Damaged)
             }
             Err(e) => Err(e),
         }
@@ -614,15 +633,11 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Links for Reliable<L, C, 
             // caller's buffer, checked there and moved to its start (one copy of the frame,
             // not two: the slot is only for frames read ahead of their delivery).
             loop {
-                let n = match self.inner.try_recv(face, buf) {
-                    Ok(None) | Err(RecvError::NoLink) => break,
-                    Ok(Some(n)) => n,
-                    Err(RecvError::Damaged(_)) | Err(RecvError::BufferTooSmall { .. }) => {
-                        self.stats[f].damaged += 1;
-                        self.lost(face);
-                        continue;
-                    }
-                    Err(e) => return Err(e),
+                let read = self.inner.try_recv(face, buf);
+                let n = match self.read(face, read)? {
+                    Read::Nothing => break,
+                    Read::Damaged => continue,
+                    Read::Envelope(n) => n,
                 };
                 if self.take_header(face, envelope_header(buf, n)) {
                     let len = n - OVERHEAD;

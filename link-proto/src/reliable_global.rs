@@ -134,7 +134,6 @@ pub enum Envelope<'a> {
 
 /// Checks and reads an envelope: its CRC and (data) its packet's.
 pub fn parse(envelope: &[u8]) -> Envelope<'_> {
-    let n = envelope.len();
     let data = envelope.get(field::TYPE) == Some(&code::DATA);
     let Some(carried) = check_envelope(envelope, HEADER_LEN, data) else {
         return Envelope::Damaged;
@@ -147,8 +146,9 @@ pub fn parse(envelope: &[u8]) -> Envelope<'_> {
             seq,
             packet: carried,
         },
-        code::ACK if n == OVERHEAD => Envelope::Ack { src, seq },
-        code::NACK if n == OVERHEAD => Envelope::Nack { src, seq },
+        // An envelope without a packet is exactly OVERHEAD bytes (checked above).
+        code::ACK => Envelope::Ack { src, seq },
+        code::NACK => Envelope::Nack { src, seq },
         _ => Envelope::Damaged,
     }
 }

@@ -429,6 +429,10 @@ fn a_buffer_that_holds_an_envelope_takes_frames_straight_from_the_link() {
 fn every_bit_of_a_data_envelope_is_checked() {
     let bits = (frame(7).len() + link_proto::reliable::OVERHEAD) * 8;
     assert_eq!(bits, 46 * 8);
+    assert!(
+        frame(7).iter().filter(|&&b| b != 0).count() > 20,
+        "a frame far from zeros"
+    );
     for bit in 0..bits {
         for len in [SLOTTED, DIRECT] {
             let (mut a, mut b, _ab, _ba, t) = pair(
