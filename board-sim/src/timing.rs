@@ -132,7 +132,7 @@ pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::R
     // Every board walks the firmware's own step program in model time. Sends of an
     // operation happen before the receives that wait for them (the program's order), so
     // walking it operation by operation across the boards is exact.
-    let program = Program::new(&h.counts.rounds, false, false);
+    let program = Program::new(&h.counts.rounds, &h.counts.late_rounds, false, false);
     // A check step's search per board: the whole table's, on a board that owns a contact
     // node.
     let search: Vec<f64> = imgs

@@ -555,6 +555,7 @@ fn the_link_model_replays_a_check_step() {
     // and face, and its search at a check step.
     let (mut batches, mut update, mut search) = (Vec::new(), Vec::new(), Vec::new());
     let mut receives = Vec::new();
+    let mut lates = Vec::new();
     for b in 0..machine.count() {
         let c = machine.coords(b);
         let bytes = std::fs::read(dir.join(image_file_name(c))).expect("image");
@@ -566,10 +567,23 @@ fn the_link_model_replays_a_check_step() {
                 + size(n.box_batch_ends, k) * cost.box_per_element_step as f64
                 + size(n.cuboid_batch_ends, k) * cost.cuboid_per_element_step as f64
         });
-        assert!(im.rounds.iter().all(|r| r.len() <= 1), "one round per axis");
-        let recv: [[bool; 2]; 3] = core::array::from_fn(|a| {
-            core::array::from_fn(|f| im.rounds[a].first().is_some_and(|r| !r.recv[f].is_empty()))
+        // On 2x2x2 a node spans at most two boards per axis: along each axis round 0
+        // (nodes first exchanged along it) and round 1 (nodes summed along the earlier
+        // axes first), then the x and y broadcasts after the z exchange.
+        let late = n.late_rounds.map(|r| r as usize);
+        assert!(
+            (0..3).all(|a| im.rounds[a].len() <= 2 + late[a] && late[a] <= 1),
+            "two first rounds per axis, one late round at most"
+        );
+        assert!(late[0] + late[1] > 0, "the corner nodes' broadcasts");
+        // Per axis and round, whether the board receives on each face (+, −).
+        let recv: [Vec<[bool; 2]>; 3] = core::array::from_fn(|a| {
+            im.rounds[a]
+                .iter()
+                .map(|r| core::array::from_fn(|f| !r.recv[f].is_empty()))
+                .collect()
         });
+        lates.push(late);
         let owns = im.contact_nodes.iter().any(|(_, place)| place.owned);
         let table = if owns {
             im.contact_nodes.len() as f64
@@ -600,25 +614,45 @@ fn the_link_model_replays_a_check_step() {
         search.iter().filter(|&&s| s > 0.0).count() >= 2,
         "contact boards search"
     );
-    // The replay, in instructions: `sent[b][a]` is when board b sends along axis a.
+    // The replay, in instructions: `sent[b]` is when board b sent the round (of axis
+    // `a`, index `r`) being received. An axis's round 0 is sent when its batch is done,
+    // its round 1 when the earlier axis's rounds are received, both received after the
+    // next axis's batch (the inner batch for z); the late rounds (y, then x) are sent and
+    // received back to back.
+    let count = machine.count();
+    let receive = |now: &mut [f64], sent: &[f64], a: usize, r: usize| {
+        for b in 0..count {
+            let c = machine.coords(b);
+            let Some(flags) = receives[b][a].get(r) else {
+                continue;
+            };
+            for (f, &gets) in flags.iter().enumerate() {
+                if gets {
+                    let mut d = c;
+                    d[a] = if f == 0 { d[a] + 1 } else { d[a] - 1 };
+                    now[b] = now[b].max(sent[machine.index(d)]);
+                }
+            }
+        }
+    };
     let replay = |extra: &[f64]| -> f64 {
-        let count = machine.count();
         let mut now: Vec<f64> = batches.iter().map(|b| b[0]).collect();
-        let mut sent = vec![[0.0f64; 3]; count];
+        let mut sent0 = now.clone();
+        let mut sent1 = now.clone();
         for a in 0..3 {
             for b in 0..count {
-                sent[b][a] = now[b];
                 now[b] += batches[b][a + 1];
             }
-            for b in 0..count {
-                let c = machine.coords(b);
-                for (f, &gets) in receives[b][a].iter().enumerate() {
-                    if gets {
-                        let mut d = c;
-                        d[a] = if f == 0 { d[a] + 1 } else { d[a] - 1 };
-                        now[b] = now[b].max(sent[machine.index(d)][a]);
-                    }
-                }
+            let next0 = now.clone();
+            receive(&mut now, &sent0, a, 0);
+            receive(&mut now, &sent1, a, 1);
+            sent0 = next0;
+            sent1 = now.clone();
+        }
+        for a in [1, 0] {
+            for r in 2..2 + lates[0][a] {
+                let sent = now.clone();
+                receive(&mut now, &sent, a, r);
             }
         }
         (0..count)

@@ -175,15 +175,17 @@ fn corrupted_or_foreign_images_are_refused() {
         }
     );
     // Version: the first header byte after the magic (a one-byte postcard varint); fix the CRC.
+    let stale = pe_firmware::image::FORMAT_VERSION - 1;
     let mut old = good.clone();
-    old[4] = 7;
+    assert_eq!(old[4] as u16, pe_firmware::image::FORMAT_VERSION);
+    old[4] = stale as u8;
     let n = old.len();
     let crc = link_proto::frame::crc32(&old[..n - 4]);
     old[n - 4..].copy_from_slice(&crc.to_le_bytes());
     assert_eq!(
         decode_image(&old, None).unwrap_err(),
         ImageError::WrongVersion {
-            found: 7,
+            found: stale,
             expected: pe_firmware::image::FORMAT_VERSION
         }
     );

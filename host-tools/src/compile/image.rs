@@ -168,7 +168,10 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
             box_batch_ends,
             cuboid_batch_ends,
             core::array::from_fn(|f| bp.exchange[f].len() as u16),
-            plan.rounds.map(|r| r as u8),
+            (
+                plan.rounds.map(|r| r as u8),
+                plan.late_rounds.map(|r| r as u8),
+            ),
             external_counts,
         ),
         params: SceneParams {

@@ -54,7 +54,13 @@ pub struct Plan {
     pub element_board: Vec<u32>,
     /// Owner board of every node.
     pub node_owner: Vec<u32>,
+    /// Exchange rounds per axis, of which the last `late_rounds` run after the z exchange
+    /// (the x and y broadcasts of [`for_box_lines`]; none along z). Of the first ones,
+    /// round 0 holds what waits for no other board and round 1 what waits for the earlier
+    /// axes (see `place_node`); the program, [`pe_firmware::runtime::Program::new`], runs
+    /// them in that order.
     pub rounds: [usize; 3],
+    pub late_rounds: [usize; 3],
     pub boards: Vec<BoardPlan>,
     /// What the partition balances.
     pub balance: Balance,
@@ -87,59 +93,140 @@ struct Transfer {
     combine: Combine,
 }
 
-/// The summation tree of a node held by `m + 1` boards in a line (positions 0..=m).
-/// Two boards: one symmetric exchange (`p0 + p1` on both, exact since `a + b = b + a`).
-/// More: reduce towards the middle board `r = m/2` (left prefix sums `((p0 + p1) + …)`, right
-/// suffix sums), the middle forms `(left + p_r) + right`, then broadcasts the total back.
-fn line_transfers(m: usize) -> Vec<Transfer> {
-    let t = |round, from, to, combine| Transfer {
-        round,
-        from,
-        to,
-        combine,
-    };
-    if m == 1 {
-        return vec![t(0, 0, 1, Combine::Before), t(0, 1, 0, Combine::After)];
-    }
-    let root = m / 2;
-    let reduce = m - root;
-    let mut v = Vec::new();
-    for i in 0..root {
-        v.push(t(i, i, i + 1, Combine::Before));
-    }
-    for j in root + 1..=m {
-        v.push(t(m - j, j, j - 1, Combine::After));
-    }
-    for d in 1..=root {
-        v.push(t(reduce + d - 1, root - d + 1, root - d, Combine::Replace));
-    }
-    for d in 1..=m - root {
-        v.push(t(reduce + d - 1, root + d - 1, root + d, Combine::Replace));
-    }
+/// The board of a line of `m + 1` boards (positions 0..=m) that a node's summation tree
+/// reduces to: the middle one.
+pub fn line_root(m: usize) -> usize {
+    m / 2
+}
+
+/// Rounds the reduce half of a line's tree takes, and the broadcast half too.
+fn half_rounds(m: usize) -> usize {
+    m - line_root(m)
+}
+
+/// The reduce half of the summation tree of a line of `m + 1` boards: the left boards'
+/// prefix sums `((p0 + p1) + …)` and the right ones' suffix sums go towards the root
+/// ([`line_root`]), which forms `(left + p_r) + right`. Rounds from 0.
+fn line_reduce(m: usize) -> Vec<Transfer> {
+    let root = line_root(m);
+    let mut v: Vec<Transfer> = (0..root)
+        .map(|i| Transfer {
+            round: i,
+            from: i,
+            to: i + 1,
+            combine: Combine::Before,
+        })
+        .collect();
+    v.extend((root + 1..=m).map(|j| Transfer {
+        round: m - j,
+        from: j,
+        to: j - 1,
+        combine: Combine::After,
+    }));
     v
 }
 
-/// Rounds the line of `m + 1` boards needs.
+/// The broadcast half: the root's total back along the line, replacing the partial sums.
+/// Rounds from 0.
+fn line_broadcast(m: usize) -> Vec<Transfer> {
+    let root = line_root(m);
+    let mut v: Vec<Transfer> = (1..=root)
+        .map(|d| Transfer {
+            round: d - 1,
+            from: root - d + 1,
+            to: root - d,
+            combine: Combine::Replace,
+        })
+        .collect();
+    v.extend((1..=m - root).map(|d| Transfer {
+        round: d - 1,
+        from: root + d - 1,
+        to: root + d,
+        combine: Combine::Replace,
+    }));
+    v
+}
+
+/// The whole summation tree of a line of `m + 1` boards, for a node's last axis.
+/// Two boards: one symmetric exchange (`p0 + p1` on both, exact since `a + b = b + a`).
+/// More: [`line_reduce`], then [`line_broadcast`].
+fn line_transfers(m: usize) -> Vec<Transfer> {
+    if m == 1 {
+        let t = |from, to, combine| Transfer {
+            round: 0,
+            from,
+            to,
+            combine,
+        };
+        return vec![t(0, 1, Combine::Before), t(1, 0, Combine::After)];
+    }
+    let mut v = line_reduce(m);
+    v.extend(line_broadcast(m).into_iter().map(|t| Transfer {
+        round: t.round + half_rounds(m),
+        ..t
+    }));
+    v
+}
+
+/// Rounds the whole tree of a line of `m + 1` boards needs.
 pub fn line_rounds(m: usize) -> usize {
     match m {
         0 => 0,
         1 => 1,
-        _ => 2 * (m - m / 2),
+        _ => 2 * half_rounds(m),
     }
 }
 
-/// Force vectors one node's summation tree sends along a line of `m + 1` boards
-/// ([`line_transfers`]): `m` towards the middle board and `m` back (two boards: one each way).
+/// Calls `f(axis, line)` for every line of boards along `axis` that a node held by the box
+/// of boards `lo..=hi` is summed over (`line`: the line's board at `lo[axis]`). The node is
+/// reduced axis by axis, x first: along every x line of its box; then along the y lines
+/// through the x roots ([`line_root`]); then along the z line through the x and y roots,
+/// whose tree broadcasts the total back over it; then the y and the x broadcasts retrace the
+/// reductions. So an axis's lines are those with the earlier axes at their roots and the
+/// later ones anywhere in the box.
+pub fn for_box_lines(lo: [usize; 3], hi: [usize; 3], mut f: impl FnMut(usize, [usize; 3])) {
+    for a in 0..3 {
+        if hi[a] == lo[a] {
+            continue;
+        }
+        let mut l = lo;
+        let mut h = hi;
+        for b in 0..a {
+            l[b] = lo[b] + line_root(hi[b] - lo[b]);
+            h[b] = l[b];
+        }
+        l[a] = lo[a];
+        h[a] = lo[a];
+        for z in l[2]..=h[2] {
+            for y in l[1]..=h[1] {
+                for x in l[0]..=h[0] {
+                    f(a, [x, y, z]);
+                }
+            }
+        }
+    }
+}
+
+/// The last axis along which a box of boards spanning `span[a] + 1` boards per axis has
+/// more than one board: the one whose tree runs whole ([`line_transfers`]); the earlier
+/// axes reduce before it and broadcast after it.
+fn last_axis(span: [usize; 3]) -> Option<usize> {
+    (0..3).rev().find(|&a| span[a] > 0)
+}
+
+/// Force vectors one node's tree sends along a line of `m + 1` boards: `m` towards the
+/// root and `m` back (two boards: one each way).
 pub fn line_vectors(m: usize) -> usize {
     2 * m
 }
 
 /// Force vectors per step of a node held by a box of boards spanning `span[a] + 1` boards
-/// along each axis: every line of the box along an axis runs that axis's tree, and the
-/// box has `(span[b] + 1) (span[c] + 1)` lines along axis `a` (`b`, `c` the other axes).
+/// along each axis: the lines of [`for_box_lines`], axis `a` having
+/// `(span[b] + 1)` lines for each later axis `b`:
+/// `2 m_x (m_y + 1)(m_z + 1) + 2 m_y (m_z + 1) + 2 m_z`.
 pub fn box_vectors(span: [usize; 3]) -> usize {
     (0..3)
-        .map(|a| line_vectors(span[a]) * (span[(a + 1) % 3] + 1) * (span[(a + 2) % 3] + 1))
+        .map(|a| line_vectors(span[a]) * (a + 1..3).map(|b| span[b] + 1).product::<usize>())
         .sum()
 }
 
@@ -160,8 +247,12 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
     let exchanged = exchanged_nodes(problem);
     let element_board = partition_weighted(mesh, machine, &weight, &exchanged)?;
     let around = node_elements(mesh);
-    let (node_box, node_owner, rounds) =
+    let (node_box, node_owner, trees) =
         node_boxes(problem, machine, &element_board, &around, &exchanged)?;
+    let late_rounds = trees.late;
+    // Round 0 of an axis goes first (see `place_node`).
+    let early = trees.early.map(|r| if r > 0 { r + 1 } else { 0 });
+    let rounds: [usize; 3] = core::array::from_fn(|a| early[a] + late_rounds[a]);
     let mut boards: Vec<BoardPlan> = (0..machine.count())
         .map(|b| BoardPlan {
             coords: machine.coords(b),
@@ -174,20 +265,9 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
             ext_stage: Vec::new(),
         })
         .collect();
-    let trees: Vec<Vec<Transfer>> = (0..machine.dims.iter().copied().max().unwrap_or(1))
-        .map(line_transfers)
-        .collect();
     for (n, &(lo, hi)) in node_box.iter().enumerate() {
         if exchanged[n] {
-            place_node(
-                machine,
-                &mut boards,
-                &trees,
-                n as u32,
-                node_owner[n],
-                lo,
-                hi,
-            );
+            place_node(machine, &mut boards, early, n as u32, node_owner[n], lo, hi);
         } else {
             place_held_node(
                 &mut boards,
@@ -209,6 +289,7 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
         element_board,
         node_owner,
         rounds,
+        late_rounds,
         boards,
         balance,
     })
@@ -217,19 +298,28 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
 /// A node's box of boards (low, high corner).
 type BoardBox = ([usize; 3], [usize; 3]);
 
+/// The rounds per axis the nodes' trees need: their reduce halves and whole trees, and
+/// their broadcast halves after the z exchange.
+struct TreeRounds {
+    early: [usize; 3],
+    late: [usize; 3],
+}
+
 /// Per node: the box of boards whose elements touch it and its owner (the lowest such
-/// board); the rounds each axis needs for the nodes `exchanged` marks. `around`: the
-/// elements around each node ([`node_elements`]).
+/// board); the rounds each axis needs for the nodes `exchanged` marks, before the z
+/// exchange's end and after it (the broadcasts). `around`: the elements around each node
+/// ([`node_elements`]).
 fn node_boxes(
     problem: &Problem,
     machine: Machine,
     element_board: &[u32],
     around: &[Vec<u32>],
     exchanged: &[bool],
-) -> Result<(Vec<BoardBox>, Vec<u32>, [usize; 3])> {
+) -> Result<(Vec<BoardBox>, Vec<u32>, TreeRounds)> {
     let mesh = &problem.mesh;
     let mut node_box = Vec::with_capacity(mesh.nodes.len());
-    let mut rounds = [0usize; 3];
+    let mut early = [0usize; 3];
+    let mut late = [0usize; 3];
     let mut node_owner = vec![0u32; mesh.nodes.len()];
     for (n, els) in around.iter().enumerate() {
         if els.is_empty() {
@@ -241,8 +331,15 @@ fn node_boxes(
         }
         let (lo, hi) = node_board_range(machine, element_board, els);
         if exchanged[n] {
-            for a in 0..3 {
-                rounds[a] = rounds[a].max(line_rounds(hi[a] - lo[a]));
+            let span: [usize; 3] = core::array::from_fn(|a| hi[a] - lo[a]);
+            let last = last_axis(span);
+            for a in (0..3).filter(|&a| span[a] > 0) {
+                if Some(a) == last {
+                    early[a] = early[a].max(line_rounds(span[a]));
+                } else {
+                    early[a] = early[a].max(half_rounds(span[a]));
+                    late[a] = late[a].max(half_rounds(span[a]));
+                }
             }
         }
         node_owner[n] = els
@@ -252,15 +349,20 @@ fn node_boxes(
             .unwrap_or(0);
         node_box.push((lo, hi));
     }
-    Ok((node_box, node_owner, rounds))
+    Ok((node_box, node_owner, TreeRounds { early, late }))
 }
 
-/// Puts node `n` on every board of its box and its summation tree into the rounds: every
-/// line of the box along an axis runs the same tree.
+/// Puts node `n` on every board of its box and its summation tree into the rounds: along
+/// each line of [`for_box_lines`], the whole tree on the node's last axis, else the reduce
+/// half in the axis's first rounds and the broadcast half after the `early[a]` rounds (so
+/// after the z exchange). Round 0 of an axis holds the transfers that wait for no other
+/// board: the first round of a node's first axis. The program sends it as soon as the
+/// axis's batch is done, before the earlier axes' frames are received; the tree's round
+/// `r` is round `r + 1` otherwise.
 fn place_node(
     machine: Machine,
     boards: &mut [BoardPlan],
-    trees: &[Vec<Transfer>],
+    early: [usize; 3],
     n: u32,
     owner: u32,
     lo: [usize; 3],
@@ -275,30 +377,38 @@ fn place_node(
             }
         }
     }
-    for a in 0..3 {
-        let m = hi[a] - lo[a];
-        if m == 0 {
-            continue;
+    let span: [usize; 3] = core::array::from_fn(|a| hi[a] - lo[a]);
+    let last = last_axis(span);
+    let first = (0..3).find(|&a| span[a] > 0);
+    let early_round = |a: usize, r: usize| if r == 0 && Some(a) == first { 0 } else { r + 1 };
+    for_box_lines(lo, hi, |a, start| {
+        let m = span[a];
+        let at = |t: usize| {
+            let mut c = start;
+            c[a] = lo[a] + t;
+            machine.index(c)
+        };
+        let transfers: Vec<(usize, Transfer)> = if Some(a) == last {
+            line_transfers(m)
+                .into_iter()
+                .map(|t| (early_round(a, t.round), t))
+                .collect()
+        } else {
+            let reduce = line_reduce(m)
+                .into_iter()
+                .map(|t| (early_round(a, t.round), t));
+            let broadcast = line_broadcast(m)
+                .into_iter()
+                .map(|t| (early[a] + t.round, t));
+            reduce.chain(broadcast).collect()
+        };
+        for (round, tr) in transfers {
+            // face index within the axis: 0 = +axis, 1 = −axis
+            let (send_face, recv_face) = if tr.to > tr.from { (0, 1) } else { (1, 0) };
+            boards[at(tr.from)].rounds[a][round].send[send_face].push(n);
+            boards[at(tr.to)].rounds[a][round].recv[recv_face].push((n, tr.combine));
         }
-        let (o1, o2) = ((a + 1) % 3, (a + 2) % 3);
-        for p in lo[o1]..=hi[o1] {
-            for q in lo[o2]..=hi[o2] {
-                let at = |t: usize| {
-                    let mut c = [0; 3];
-                    c[a] = lo[a] + t;
-                    c[o1] = p;
-                    c[o2] = q;
-                    machine.index(c)
-                };
-                for tr in &trees[m] {
-                    // face index within the axis: 0 = +axis, 1 = −axis
-                    let (send_face, recv_face) = if tr.to > tr.from { (0, 1) } else { (1, 0) };
-                    boards[at(tr.from)].rounds[a][tr.round].send[send_face].push(n);
-                    boards[at(tr.to)].rounds[a][tr.round].recv[recv_face].push((n, tr.combine));
-                }
-            }
-        }
-    }
+    });
 }
 
 /// Puts held node `n` (fixed or prescribed) on the boards whose elements touch it, and on

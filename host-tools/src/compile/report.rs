@@ -19,8 +19,12 @@ use crate::problem::Problem;
 pub struct CompileReport {
     pub scene: String,
     pub machine: String,
-    /// Exchange rounds per axis (1 where every node spans at most two boards).
+    /// Exchange rounds per axis ([`Plan::rounds`]: round 0 for the nodes first exchanged
+    /// along the axis, round 1 for those summed along earlier axes first, more for nodes
+    /// spanning over two boards), of which `late_rounds` run after the z exchange (the x and
+    /// y broadcasts).
     pub rounds: [usize; 3],
+    pub late_rounds: [usize; 3],
     pub profile: String,
     pub precision: String,
     pub integration: String,
@@ -305,6 +309,7 @@ pub fn report(
         scene: scene.to_string(),
         machine: plan.machine.to_string(),
         rounds: plan.rounds,
+        late_rounds: plan.late_rounds,
         profile: profile.name.to_string(),
         precision: problem.solver.precision.name().to_string(),
         integration: problem.solver.integration.name().to_string(),
@@ -845,8 +850,8 @@ pub fn summary(r: &CompileReport) -> String {
     s += &format!("  elements per board {min}..{max} (imbalance max/mean {:.3}); nodes per board {}..{}; {} replicas\n",
         r.load_imbalance, r.nodes_per_board.iter().min().copied().unwrap_or(0), r.nodes_per_board.iter().max().copied().unwrap_or(0), r.replicated_nodes);
     s += &format!(
-        "  exchange rounds per step: x {}, y {}, z {}\n",
-        r.rounds[0], r.rounds[1], r.rounds[2]
+        "  exchange rounds per step: x {}, y {}, z {} (of which after the z exchange, the broadcasts: x {}, y {})\n",
+        r.rounds[0], r.rounds[1], r.rounds[2], r.late_rounds[0], r.late_rounds[1]
     );
     s += &format!(
         "  border nodes per face (max over boards): +x {} -x {} +y {} -y {} +z {} -z {}\n",
@@ -861,7 +866,7 @@ pub fn summary(r: &CompileReport) -> String {
         "  force vectors per step: {} in all, {} on the busiest link direction\n",
         r.force_vectors_per_step, r.force_vectors_per_link_max
     );
-    s += "  (a force vector: one node's partial or summed force that one board sends to a neighbour over one link in one exchange round; every round and both directions counted)\n";
+    s += "  (a force vector: one node's partial or summed force that one board sends to a neighbour over one link in one exchange round; every round and both directions counted. A node on k boards of one line costs 2(k - 1): its partial sums go to one board and the total comes back; a node on a 2x2 block of boards costs 6, on 2x2x2 14: reduced along x, then y, exchanged along z, broadcast back along y, then x)\n";
     s += &format!(
         "  partition: slabs refined by simulated annealing (seed {}) within {:.2} x the mean {} per board{}\n",
         crate::compile::partition::refine::ANNEAL_SEED,

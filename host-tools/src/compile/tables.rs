@@ -69,7 +69,7 @@ impl<T: ImageReal, E: ElementRecord<T>> ImageTables<T, E> {
         box_batch_ends: [u32; 4],
         cuboid_batch_ends: [u32; 4],
         exchange: [u16; 6],
-        rounds: [u8; 3],
+        (rounds, late_rounds): ([u8; 3], [u8; 3]),
         external: [u16; STAGES],
     ) -> Counts {
         Counts {
@@ -83,6 +83,7 @@ impl<T: ImageReal, E: ElementRecord<T>> ImageTables<T, E> {
             nodes: self.nodes.len() as u32,
             exchange,
             rounds,
+            late_rounds,
             sends: self.sends.len() as u32,
             recvs: self.recvs.len() as u32,
             path_points: self.path_points.len() as u16,

@@ -197,6 +197,11 @@ pub fn validate<T: ImageReal, E: ElementRecord<T>>(
             (e.material as usize) < c.materials as usize,
         )?;
     }
+    if c.late_rounds[2] > 0 || (0..3).any(|a| c.late_rounds[a] > c.rounds[a]) {
+        return Err(ImageError::Malformed {
+            record: "late exchange rounds",
+        });
+    }
     let lists = &p.lists[..c.exchange_lists()];
     let sends: usize = lists.iter().map(|l| l.sends as usize).sum();
     let recvs: usize = lists.iter().map(|l| l.recvs as usize).sum();

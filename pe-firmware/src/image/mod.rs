@@ -32,7 +32,7 @@ pub use crate::physics::contact::{ContactFace, ContactNode, ContactPair, Tool};
 /// First four bytes of every schedule image.
 pub const MAGIC: [u8; 4] = *b"PESI";
 /// Format version; bumped whenever a record type changes.
-pub const FORMAT_VERSION: u16 = 6;
+pub const FORMAT_VERSION: u16 = 7;
 
 /// The id of the compilation an image belongs to: a 64-bit hash the compiler computes over
 /// every image of the set (with this field zero) and the scene's mesh (see `pe compile`).
@@ -140,6 +140,10 @@ pub struct Counts {
     pub exchange: [u16; 6],
     /// Exchange rounds per axis (the same on every board of the machine).
     pub rounds: [u8; 3],
+    /// Of each axis's `rounds`, how many run last, after the z exchange: the broadcasts of
+    /// the totals back along x and y (none along z). See
+    /// [`crate::runtime::program::Program::new`].
+    pub late_rounds: [u8; 3],
     /// Send and receive entries over all rounds and faces.
     pub sends: u32,
     pub recvs: u32,

@@ -90,7 +90,7 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         let has_graphics = c.graphics_nodes > 0 && header.graphics.interval_steps > 0;
         Ok(Runtime {
             header,
-            program: Program::new(&c.rounds, has_contact, has_graphics),
+            program: Program::new(&c.rounds, &c.late_rounds, has_contact, has_graphics),
             pc: 0,
             waiting_since: None,
             exchange,

@@ -41,11 +41,21 @@ pub struct Program {
 }
 
 impl Program {
-    /// The step: batch x; send ±x; batch y; receive ±x (and further x rounds); send ±y;
-    /// batch z; receive ±y...; send ±z; inner batch; receive ±z...; update. External forces
-    /// of owned nodes go in just before their first exchange. `rounds` per axis (at most
-    /// [`ROUNDS_PER_AXIS_MAX`] are taken); graphics and contact come first when present.
-    pub fn new(rounds: &[u8; 3], contact: bool, graphics: bool) -> Program {
+    /// The step, each axis's rounds in two parts: its first rounds, then the last
+    /// `late[a]` (the broadcasts of the totals reduced along x and y, after the z exchange;
+    /// none along z). Of the first ones, round 0 waits for no other board (the nodes first
+    /// exchanged along the axis), so it goes as soon as the axis's batch is done; round 1
+    /// waits for the earlier axes (nodes already summed along them):
+    ///
+    /// batch x; send x0, x1; batch y; send y0; receive x0, x1 (and further x rounds); send
+    /// y1; batch z; send z0; receive y0, y1...; send z1; inner batch; receive z0, z1...;
+    /// the late rounds, y then x (send, receive); update.
+    ///
+    /// Each face's frames are received −axis first (the summation trees put the lower
+    /// board on the left). External forces of owned nodes go in just before their first
+    /// exchange. `rounds` per axis (at most [`ROUNDS_PER_AXIS_MAX`] are taken); graphics
+    /// and contact come first when present.
+    pub fn new(rounds: &[u8; 3], late: &[u8; 3], contact: bool, graphics: bool) -> Program {
         let mut p = Program {
             ops: [Op::Update; OPS_MAX],
             len: 0,
@@ -56,28 +66,54 @@ impl Program {
         if contact {
             p.push(Op::Contact);
         }
+        let total = |a: u8| rounds[a as usize].min(ROUNDS_PER_AXIS_MAX as u8);
+        let early = |a: u8| total(a).saturating_sub(late[a as usize]);
         p.push(Op::Batch(0));
         for axis in 0..3u8 {
-            let r = rounds[axis as usize].min(ROUNDS_PER_AXIS_MAX as u8);
             p.push(Op::External(axis));
-            if r > 0 {
-                p.push(Op::Send(axis, 0, 0));
-                p.push(Op::Send(axis, 0, 1));
+            if early(axis) > 0 {
+                p.send(axis, 0);
+            }
+            if axis > 0 {
+                p.finish(axis - 1, early(axis - 1));
+            }
+            if early(axis) > 1 {
+                p.send(axis, 1);
             }
             p.push(Op::Batch(axis + 1));
-            for round in 0..r {
-                if round > 0 {
-                    p.push(Op::Send(axis, round, 0));
-                    p.push(Op::Send(axis, round, 1));
-                }
-                // The −axis face first: the summation trees put the lower board on the left.
-                p.push(Op::Recv(axis, round, 1));
-                p.push(Op::Recv(axis, round, 0));
+        }
+        p.finish(2, early(2));
+        for axis in [1u8, 0] {
+            for round in early(axis)..total(axis) {
+                p.send(axis, round);
+                p.recv(axis, round);
             }
         }
         p.push(Op::External(3));
         p.push(Op::Update);
         p
+    }
+
+    /// The receives of an axis's rounds 0 and 1, then its further first rounds (send,
+    /// receive).
+    fn finish(&mut self, axis: u8, early: u8) {
+        for round in 0..early.min(2) {
+            self.recv(axis, round);
+        }
+        for round in 2..early {
+            self.send(axis, round);
+            self.recv(axis, round);
+        }
+    }
+
+    fn send(&mut self, axis: u8, round: u8) {
+        self.push(Op::Send(axis, round, 0));
+        self.push(Op::Send(axis, round, 1));
+    }
+
+    fn recv(&mut self, axis: u8, round: u8) {
+        self.push(Op::Recv(axis, round, 1));
+        self.push(Op::Recv(axis, round, 0));
     }
 
     fn push(&mut self, op: Op) {

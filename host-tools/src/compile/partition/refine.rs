@@ -17,7 +17,7 @@ use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
 use super::Machine;
-use crate::compile::plan::box_vectors;
+use crate::compile::plan::{box_vectors, for_box_lines};
 
 /// Objective units per board a node spans beyond two along an axis (a relay): more than
 /// any move's gain in vectors, so relays are removed first and never added for vectors.
@@ -169,21 +169,16 @@ impl State<'_> {
     }
 
     /// Calls `f` with every link a node of box `b` is sent over (each way once per step:
-    /// every line of the box along an axis runs that axis's tree, one vector each way per
-    /// link; see [`box_vectors`]).
+    /// the tree along each line of [`for_box_lines`] sends one vector each way per link;
+    /// see [`box_vectors`]).
     fn for_links(&self, (lo, hi): Span, mut f: impl FnMut(u32)) {
-        for a in 0..3 {
-            let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+        for_box_lines(lo, hi, |a, start| {
+            let mut at = start;
             for i in lo[a]..hi[a] {
-                for j in lo[b]..=hi[b] {
-                    for k in lo[c]..=hi[c] {
-                        let mut at = [0; 3];
-                        (at[a], at[b], at[c]) = (i, j, k);
-                        f(self.link_index(a, at));
-                    }
-                }
+                at[a] = i;
+                f(self.link_index(a, at));
             }
-        }
+        });
     }
 
     /// What a link direction carrying `load` vectors per step costs ([`LINK_LOAD_SCALE`]).
