@@ -531,8 +531,9 @@ fn a_check_step_is_in_the_verdict() {
 /// board-sim's link model replays a check step too. With the links made instant (no
 /// latency, 1e15 bytes/s) a board's step is its compute plus its waits for its neighbours'
 /// sends, replayed here independently in the step's order (recover x; send ±x; recover y;
-/// add ±x; send ±y; recover z; add ±y; send ±z; recover inner; add ±z; update: one
-/// exchange round per axis, asserted): per board from its decoded image, each batch's
+/// send ±y0; add ±x; send ±y1; recover z; send ±z0; add ±y; send ±z1; recover inner; add
+/// ±z; the broadcasts along y, then x; update: rounds 0 and 1 and one late round per axis at
+/// most, asserted): per board from its decoded image, each batch's
 /// elements at their kernels' measured cycles, its nodes' updates and, if it owns a contact
 /// node, the whole contact table's; a board waits at each "add" for the neighbour it
 /// receives from to have sent. A check step adds, on each board that owns a contact node,

@@ -4,6 +4,8 @@ use std::path::Path;
 
 use anyhow::{anyhow, Context, Result};
 
+use pe_firmware::runtime::{Op, Program};
+
 use super::{decode_image, image_file_name, FACE_NAMES};
 
 /// `pe inspect`: a readable dump of one board's schedule.
@@ -61,7 +63,7 @@ pub fn inspect(dir: &Path, board: [usize; 3]) -> Result<String> {
         e[2],
         e[3]
     );
-    s += "  schedule: recover x | send ±x | recover y | add ±x | send ±y | recover z | add ±y | send ±z | recover inner | add ±z | update\n";
+    s += &format!("  schedule: {}\n", schedule(c));
     let g = |l: u16| {
         d.nodes
             .get(l as usize)
@@ -95,4 +97,24 @@ pub fn inspect(dir: &Path, board: [usize; 3]) -> Result<String> {
         }
     }
     Ok(s)
+}
+
+/// The step program the board runs ([`Program::new`], its graphics and contact left out),
+/// one entry per operation on both faces of an axis: "recover x", "send ±y0", "add ±x0",
+/// "update".
+fn schedule(c: &pe_firmware::image::Counts) -> String {
+    let axis = |a: u8| ["x", "y", "z"].get(a as usize).copied().unwrap_or("?");
+    let program = Program::new(&c.rounds, &c.late_rounds, false, false);
+    let mut out: Vec<String> = Vec::new();
+    for op in program.ops() {
+        let entry = match *op {
+            Op::Batch(k) => format!("recover {}", ["x", "y", "z", "inner"][(k as usize).min(3)]),
+            Op::Send(a, r, 0) => format!("send ±{}{r}", axis(a)),
+            Op::Recv(a, r, 1) => format!("add ±{}{r}", axis(a)),
+            Op::Update => "update".to_string(),
+            _ => continue,
+        };
+        out.push(entry);
+    }
+    out.join(" | ")
 }

@@ -2,16 +2,20 @@
 //! static schedule image per board (the seed's section 4).
 //!
 //! Per board: its elements in four batches (x border, y border, z border, inner), the nodes
-//! it holds (own nodes and replicas), and one exchange list per face. A node is held by every
-//! board in the bounding box of the boards whose elements touch it (at most 2 per axis, see
-//! [`partition`]); across a face both boards list the shared nodes in ascending
-//! global order, so frames carry no addresses. The step (both ends know it):
+//! it holds (own nodes and replicas), and exchange lists per face and round. A node is held
+//! by every board in the bounding box of the boards whose elements touch it (see
+//! [`partition`]); across a face both boards list the shared nodes in ascending global
+//! order, so frames carry no addresses. The step (both ends know it,
+//! [`pe_firmware::runtime::Program`]):
 //!
-//! recover batch x; send ±x; recover batch y; add from ±x; send ±y; recover batch z;
-//! add from ±y; send ±z; recover inner; add from ±z; update positions.
+//! recover batch x; send ±x; recover batch y; send ±y round 0; add from ±x; send ±y round
+//! 1; recover batch z; send ±z round 0; add from ±y; send ±z round 1; recover inner; add
+//! from ±z; the broadcasts along y, then x; update positions.
 //!
-//! After the x, y and z exchanges every holder of a node has the same total force, so all
-//! replicas compute identical positions (two-term sums `a + b = b + a` are exact in IEEE).
+//! A node's partial sums are reduced along x, then y, exchanged along z, and the total is
+//! broadcast back along y, then x (`plan::for_box_lines`), so every holder of a node has
+//! the same total force and all replicas compute identical positions (two-term sums
+//! `a + b = b + a` are exact in IEEE).
 //! Gravity and loads are applied once, by the node's owner (the lowest-numbered board whose
 //! elements touch it), into its partial sum just before the node is first sent (or before
 //! the update, if it is never sent).
