@@ -180,10 +180,11 @@ pub fn line_rounds(m: usize) -> usize {
 /// Calls `f(axis, line)` for every line of boards along `axis` that a node held by the box
 /// of boards `lo..=hi` is summed over (`line`: the line's board at `lo[axis]`). The node is
 /// reduced axis by axis, x first: along every x line of its box; then along the y lines
-/// through the x roots ([`line_root`]); then along the z line through the x and y roots,
-/// whose tree broadcasts the total back over it; then the y and the x broadcasts retrace the
-/// reductions. So an axis's lines are those with the earlier axes at their roots and the
-/// later ones anywhere in the box.
+/// through the x roots ([`line_root`]); then along the z line through the x and y roots.
+/// The last axis the node spans runs its whole tree, which leaves the total on every board
+/// of its lines; then the earlier axes' broadcasts, y then x, retrace their reductions. So
+/// an axis's lines are those with the earlier axes at their roots and the later ones
+/// anywhere in the box.
 pub fn for_box_lines(lo: [usize; 3], hi: [usize; 3], mut f: impl FnMut(usize, [usize; 3])) {
     for a in 0..3 {
         if hi[a] == lo[a] {
