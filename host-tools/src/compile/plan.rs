@@ -86,6 +86,7 @@ impl Balance {
 
 /// One transfer of a node's value along an axis line: in `round`, from line position
 /// `from` to `to` (adjacent), combined at the receiver by `combine`.
+#[derive(Clone, Copy)]
 struct Transfer {
     round: usize,
     from: usize,
@@ -254,6 +255,7 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
     // Round 0 of an axis goes first (see `place_node`).
     let early = trees.early.map(|r| if r > 0 { r + 1 } else { 0 });
     let rounds: [usize; 3] = core::array::from_fn(|a| early[a] + late_rounds[a]);
+    let trees = LineTrees::new(machine.dims.iter().copied().max().unwrap_or(1));
     let mut boards: Vec<BoardPlan> = (0..machine.count())
         .map(|b| BoardPlan {
             coords: machine.coords(b),
@@ -266,9 +268,17 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
             ext_stage: Vec::new(),
         })
         .collect();
-    for (n, &(lo, hi)) in node_box.iter().enumerate() {
+    for (n, &node_box) in node_box.iter().enumerate() {
         if exchanged[n] {
-            place_node(machine, &mut boards, early, n as u32, node_owner[n], lo, hi);
+            place_node(
+                machine,
+                &mut boards,
+                &trees,
+                early,
+                n as u32,
+                node_owner[n],
+                node_box,
+            );
         } else {
             place_held_node(
                 &mut boards,
@@ -294,6 +304,25 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
         boards,
         balance,
     })
+}
+
+/// The trees of lines of `m + 1` boards, indexed by `m` (built once per plan): the whole
+/// tree ([`line_transfers`]) and its two halves ([`line_reduce`], [`line_broadcast`]).
+struct LineTrees {
+    whole: Vec<Vec<Transfer>>,
+    reduce: Vec<Vec<Transfer>>,
+    broadcast: Vec<Vec<Transfer>>,
+}
+
+impl LineTrees {
+    /// Lines of up to `boards` boards.
+    fn new(boards: usize) -> LineTrees {
+        LineTrees {
+            whole: (0..boards).map(line_transfers).collect(),
+            reduce: (0..boards).map(line_reduce).collect(),
+            broadcast: (0..boards).map(line_broadcast).collect(),
+        }
+    }
 }
 
 /// A node's box of boards (low, high corner).
@@ -363,11 +392,11 @@ fn node_boxes(
 fn place_node(
     machine: Machine,
     boards: &mut [BoardPlan],
+    trees: &LineTrees,
     early: [usize; 3],
     n: u32,
     owner: u32,
-    lo: [usize; 3],
-    hi: [usize; 3],
+    (lo, hi): BoardBox,
 ) {
     for z in lo[2]..=hi[2] {
         for y in lo[1]..=hi[1] {
@@ -389,25 +418,23 @@ fn place_node(
             c[a] = lo[a] + t;
             machine.index(c)
         };
-        let transfers: Vec<(usize, Transfer)> = if Some(a) == last {
-            line_transfers(m)
-                .into_iter()
-                .map(|t| (early_round(a, t.round), t))
-                .collect()
-        } else {
-            let reduce = line_reduce(m)
-                .into_iter()
-                .map(|t| (early_round(a, t.round), t));
-            let broadcast = line_broadcast(m)
-                .into_iter()
-                .map(|t| (early[a] + t.round, t));
-            reduce.chain(broadcast).collect()
-        };
-        for (round, tr) in transfers {
+        let mut put = |round: usize, tr: &Transfer| {
             // face index within the axis: 0 = +axis, 1 = −axis
             let (send_face, recv_face) = if tr.to > tr.from { (0, 1) } else { (1, 0) };
             boards[at(tr.from)].rounds[a][round].send[send_face].push(n);
             boards[at(tr.to)].rounds[a][round].recv[recv_face].push((n, tr.combine));
+        };
+        if Some(a) == last {
+            for t in &trees.whole[m] {
+                put(early_round(a, t.round), t);
+            }
+        } else {
+            for t in &trees.reduce[m] {
+                put(early_round(a, t.round), t);
+            }
+            for t in &trees.broadcast[m] {
+                put(early[a] + t.round, t);
+            }
         }
     });
 }

@@ -84,10 +84,7 @@ impl Program {
         }
         p.finish(2, early(2));
         for axis in [1u8, 0] {
-            for round in early(axis)..total(axis) {
-                p.send(axis, round);
-                p.recv(axis, round);
-            }
+            p.round_trips(axis, early(axis)..total(axis));
         }
         p.push(Op::External(3));
         p.push(Op::Update);
@@ -100,7 +97,12 @@ impl Program {
         for round in 0..early.min(2) {
             self.recv(axis, round);
         }
-        for round in 2..early {
+        self.round_trips(axis, 2..early);
+    }
+
+    /// Rounds sent and received back to back (each waits for the one before).
+    fn round_trips(&mut self, axis: u8, rounds: core::ops::Range<u8>) {
+        for round in rounds {
             self.send(axis, round);
             self.recv(axis, round);
         }
