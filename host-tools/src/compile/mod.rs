@@ -13,7 +13,8 @@
 //! from ±z; the broadcasts along y, then x; update positions.
 //!
 //! A node's partial sums are reduced along x, then y, exchanged along z, and the total is
-//! broadcast back along y, then x (`plan::for_box_lines`), so every holder of a node has
+//! broadcast back along y, then x (`plan::trees`; the root of each line chosen to spread
+//! the links' loads), so every holder of a node has
 //! the same total force and all replicas compute identical positions (two-term sums
 //! `a + b = b + a` are exact in IEEE).
 //! Gravity and loads are applied once, by the node's owner (the lowest-numbered board whose

@@ -17,7 +17,7 @@ use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
 use super::Machine;
-use crate::compile::plan::{box_vectors, for_box_lines};
+use crate::compile::plan::{box_vectors, default_roots, for_box_links};
 
 /// Objective units per board a node spans beyond two along an axis (a relay): more than
 /// any move's gain in vectors, so relays are removed first and never added for vectors.
@@ -168,16 +168,12 @@ impl State<'_> {
         (axis * self.machine.count() + self.machine.index(c)) as u32
     }
 
-    /// Calls `f` with every link a node of box `b` is sent over (each way once per step:
-    /// the tree along each line of [`for_box_lines`] sends one vector each way per link;
-    /// see [`box_vectors`]).
+    /// Calls `f` with every link a node of box `b` is sent over with its default roots
+    /// (each way once per step; see [`box_vectors`]). The plan then chooses each node's
+    /// roots to spread the loads ([`crate::compile::plan::choose_roots`]).
     fn for_links(&self, (lo, hi): Span, mut f: impl FnMut(u32)) {
-        for_box_lines(lo, hi, |a, start| {
-            let mut at = start;
-            for i in lo[a]..hi[a] {
-                at[a] = i;
-                f(self.link_index(a, at));
-            }
+        for_box_links(lo, hi, default_roots(lo, hi), |a, at| {
+            f(self.link_index(a, at))
         });
     }
 

@@ -7,6 +7,8 @@
 //! path's whatever the force, so each of those boards computes it alone, and adds its part
 //! of the node's force to the reaction.
 
+pub mod trees;
+
 use anyhow::{bail, Result};
 use pe_firmware::image::{Combine, STAGE_NOT_OWNED};
 
@@ -14,6 +16,8 @@ use super::partition::{
     cost_weights, exchanged_nodes, node_board_range, node_elements, partition_weighted, Machine,
 };
 use crate::problem::Problem;
+pub use trees::{box_vectors, default_roots, for_box_links, line_rounds, Roots};
+use trees::{choose_roots, for_node_transfers, half_rounds, last_axis, LineTrees};
 
 /// Faces in image order.
 pub use link_proto::link::FACE_NAMES;
@@ -55,9 +59,9 @@ pub struct Plan {
     /// Owner board of every node.
     pub node_owner: Vec<u32>,
     /// Exchange rounds per axis, of which the last `late_rounds` run after the z exchange
-    /// (the x and y broadcasts of [`for_box_lines`]; none along z). Of the first ones,
+    /// (the x and y broadcasts of [`trees::for_box_lines`]; none along z). Of the first ones,
     /// round 0 holds what waits for no other board and round 1 what waits for the earlier
-    /// axes (see `place_node`); the program, [`pe_firmware::runtime::Program::new`], runs
+    /// axes (see `trees::for_node_transfers`); the program, [`pe_firmware::runtime::Program::new`], runs
     /// them in that order.
     pub rounds: [usize; 3],
     pub late_rounds: [usize; 3],
@@ -84,154 +88,6 @@ impl Balance {
     }
 }
 
-/// One transfer of a node's value along an axis line: in `round`, from line position
-/// `from` to `to` (adjacent), combined at the receiver by `combine`.
-#[derive(Clone, Copy)]
-struct Transfer {
-    round: usize,
-    from: usize,
-    to: usize,
-    combine: Combine,
-}
-
-/// The board of a line of `m + 1` boards (positions 0..=m) that a node's summation tree
-/// reduces to: the middle one.
-pub fn line_root(m: usize) -> usize {
-    m / 2
-}
-
-/// Rounds the reduce half of a line's tree takes, and the broadcast half too.
-fn half_rounds(m: usize) -> usize {
-    m - line_root(m)
-}
-
-/// The reduce half of the summation tree of a line of `m + 1` boards: the left boards'
-/// prefix sums `((p0 + p1) + …)` and the right ones' suffix sums go towards the root
-/// ([`line_root`]), which forms `(left + p_r) + right`. Rounds from 0.
-fn line_reduce(m: usize) -> Vec<Transfer> {
-    let root = line_root(m);
-    let mut v: Vec<Transfer> = (0..root)
-        .map(|i| Transfer {
-            round: i,
-            from: i,
-            to: i + 1,
-            combine: Combine::Before,
-        })
-        .collect();
-    v.extend((root + 1..=m).map(|j| Transfer {
-        round: m - j,
-        from: j,
-        to: j - 1,
-        combine: Combine::After,
-    }));
-    v
-}
-
-/// The broadcast half: the root's total back along the line, replacing the partial sums.
-/// Rounds from 0.
-fn line_broadcast(m: usize) -> Vec<Transfer> {
-    let root = line_root(m);
-    let mut v: Vec<Transfer> = (1..=root)
-        .map(|d| Transfer {
-            round: d - 1,
-            from: root - d + 1,
-            to: root - d,
-            combine: Combine::Replace,
-        })
-        .collect();
-    v.extend((1..=m - root).map(|d| Transfer {
-        round: d - 1,
-        from: root + d - 1,
-        to: root + d,
-        combine: Combine::Replace,
-    }));
-    v
-}
-
-/// The whole summation tree of a line of `m + 1` boards, for a node's last axis.
-/// Two boards: one symmetric exchange (`p0 + p1` on both, exact since `a + b = b + a`).
-/// More: [`line_reduce`], then [`line_broadcast`].
-fn line_transfers(m: usize) -> Vec<Transfer> {
-    if m == 1 {
-        let t = |from, to, combine| Transfer {
-            round: 0,
-            from,
-            to,
-            combine,
-        };
-        return vec![t(0, 1, Combine::Before), t(1, 0, Combine::After)];
-    }
-    let mut v = line_reduce(m);
-    v.extend(line_broadcast(m).into_iter().map(|t| Transfer {
-        round: t.round + half_rounds(m),
-        ..t
-    }));
-    v
-}
-
-/// Rounds the whole tree of a line of `m + 1` boards needs.
-pub fn line_rounds(m: usize) -> usize {
-    match m {
-        0 => 0,
-        1 => 1,
-        _ => 2 * half_rounds(m),
-    }
-}
-
-/// Calls `f(axis, line)` for every line of boards along `axis` that a node held by the box
-/// of boards `lo..=hi` is summed over (`line`: the line's board at `lo[axis]`). The node is
-/// reduced axis by axis, x first: along every x line of its box; then along the y lines
-/// through the x roots ([`line_root`]); then along the z line through the x and y roots.
-/// The last axis the node spans runs its whole tree, which leaves the total on every board
-/// of its lines; then the earlier axes' broadcasts, y then x, retrace their reductions. So
-/// an axis's lines are those with the earlier axes at their roots and the later ones
-/// anywhere in the box.
-pub fn for_box_lines(lo: [usize; 3], hi: [usize; 3], mut f: impl FnMut(usize, [usize; 3])) {
-    for a in 0..3 {
-        if hi[a] == lo[a] {
-            continue;
-        }
-        let mut l = lo;
-        let mut h = hi;
-        for b in 0..a {
-            l[b] = lo[b] + line_root(hi[b] - lo[b]);
-            h[b] = l[b];
-        }
-        l[a] = lo[a];
-        h[a] = lo[a];
-        for z in l[2]..=h[2] {
-            for y in l[1]..=h[1] {
-                for x in l[0]..=h[0] {
-                    f(a, [x, y, z]);
-                }
-            }
-        }
-    }
-}
-
-/// The last axis along which a box of boards spanning `span[a] + 1` boards per axis has
-/// more than one board: the one whose tree runs whole ([`line_transfers`]); the earlier
-/// axes reduce before it and broadcast after it.
-fn last_axis(span: [usize; 3]) -> Option<usize> {
-    (0..3).rev().find(|&a| span[a] > 0)
-}
-
-/// Force vectors one node's tree sends along a line of `m + 1` boards: `m` towards the
-/// root and `m` back (two boards: one each way).
-pub fn line_vectors(m: usize) -> usize {
-    2 * m
-}
-
-/// Force vectors per step of a node held by a box of boards spanning `span[a] + 1` boards
-/// along each axis: the lines of [`for_box_lines`], axis `a` having
-/// `(span[b] + 1)` lines for each later axis `b`:
-/// `2 m_x (m_y + 1)(m_z + 1) + 2 m_y (m_z + 1) + 2 m_z`.
-pub fn box_vectors(span: [usize; 3]) -> usize {
-    (0..3)
-        .map(|a| line_vectors(span[a]) * (a + 1..3).map(|b| span[b] + 1).product::<usize>())
-        .sum()
-}
-
 /// The whole machine's schedule for `problem` on `machine`, the partition balancing the
 /// elements per board.
 pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
@@ -252,10 +108,11 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
     let (node_box, node_owner, trees) =
         node_boxes(problem, machine, &element_board, &around, &exchanged)?;
     let late_rounds = trees.late;
-    // Round 0 of an axis goes first (see `place_node`).
+    // Round 0 of an axis goes first (see `trees::for_node_transfers`).
     let early = trees.early.map(|r| if r > 0 { r + 1 } else { 0 });
     let rounds: [usize; 3] = core::array::from_fn(|a| early[a] + late_rounds[a]);
     let trees = LineTrees::new(machine.dims.iter().copied().max().unwrap_or(1));
+    let roots = choose_roots(machine, &node_box, &exchanged);
     let mut boards: Vec<BoardPlan> = (0..machine.count())
         .map(|b| BoardPlan {
             coords: machine.coords(b),
@@ -275,9 +132,9 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
                 &mut boards,
                 &trees,
                 early,
-                n as u32,
-                node_owner[n],
+                (n as u32, node_owner[n]),
                 node_box,
+                roots[n],
             );
         } else {
             place_held_node(
@@ -304,25 +161,6 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
         boards,
         balance,
     })
-}
-
-/// The trees of lines of `m + 1` boards, indexed by `m` (built once per plan): the whole
-/// tree ([`line_transfers`]) and its two halves ([`line_reduce`], [`line_broadcast`]).
-struct LineTrees {
-    whole: Vec<Vec<Transfer>>,
-    reduce: Vec<Vec<Transfer>>,
-    broadcast: Vec<Vec<Transfer>>,
-}
-
-impl LineTrees {
-    /// Lines of up to `boards` boards.
-    fn new(boards: usize) -> LineTrees {
-        LineTrees {
-            whole: (0..boards).map(line_transfers).collect(),
-            reduce: (0..boards).map(line_reduce).collect(),
-            broadcast: (0..boards).map(line_broadcast).collect(),
-        }
-    }
 }
 
 /// A node's box of boards (low, high corner).
@@ -382,21 +220,16 @@ fn node_boxes(
     Ok((node_box, node_owner, TreeRounds { early, late }))
 }
 
-/// Puts node `n` on every board of its box and its summation tree into the rounds: along
-/// each line of [`for_box_lines`], the whole tree on the node's last axis, else the reduce
-/// half in the axis's first rounds and the broadcast half after the `early[a]` rounds (so
-/// after the z exchange). Round 0 of an axis holds the transfers that wait for no other
-/// board: the first round of a node's first axis. The program sends it as soon as the
-/// axis's batch is done, before the earlier axes' frames are received; the tree's round
-/// `r` is round `r + 1` otherwise.
+/// Puts node `n` (owned by board `owner`) on every board of its box and its summation tree
+/// (with `roots`) into the rounds ([`for_node_transfers`]).
 fn place_node(
     machine: Machine,
     boards: &mut [BoardPlan],
     trees: &LineTrees,
     early: [usize; 3],
-    n: u32,
-    owner: u32,
+    (n, owner): (u32, u32),
     (lo, hi): BoardBox,
+    roots: Roots,
 ) {
     for z in lo[2]..=hi[2] {
         for y in lo[1]..=hi[1] {
@@ -407,36 +240,18 @@ fn place_node(
             }
         }
     }
-    let span: [usize; 3] = core::array::from_fn(|a| hi[a] - lo[a]);
-    let last = last_axis(span);
-    let first = (0..3).find(|&a| span[a] > 0);
-    let early_round = |a: usize, r: usize| if r == 0 && Some(a) == first { 0 } else { r + 1 };
-    for_box_lines(lo, hi, |a, start| {
-        let m = span[a];
-        let at = |t: usize| {
-            let mut c = start;
-            c[a] = lo[a] + t;
-            machine.index(c)
-        };
-        let mut put = |round: usize, tr: &Transfer| {
+    for_node_transfers(
+        trees,
+        early,
+        (lo, hi),
+        roots,
+        |a, from, to, round, combine| {
             // face index within the axis: 0 = +axis, 1 = −axis
-            let (send_face, recv_face) = if tr.to > tr.from { (0, 1) } else { (1, 0) };
-            boards[at(tr.from)].rounds[a][round].send[send_face].push(n);
-            boards[at(tr.to)].rounds[a][round].recv[recv_face].push((n, tr.combine));
-        };
-        if Some(a) == last {
-            for t in &trees.whole[m] {
-                put(early_round(a, t.round), t);
-            }
-        } else {
-            for t in &trees.reduce[m] {
-                put(early_round(a, t.round), t);
-            }
-            for t in &trees.broadcast[m] {
-                put(early[a] + t.round, t);
-            }
-        }
-    });
+            let (send_face, recv_face) = if to[a] > from[a] { (0, 1) } else { (1, 0) };
+            boards[machine.index(from)].rounds[a][round].send[send_face].push(n);
+            boards[machine.index(to)].rounds[a][round].recv[recv_face].push((n, combine));
+        },
+    );
 }
 
 /// Puts held node `n` (fixed or prescribed) on the boards whose elements touch it, and on
@@ -512,22 +327,4 @@ fn order_board(problem: &Problem, bp: &mut BoardPlan) {
             }
         })
         .collect();
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The vector count the partitioner minimises is what the summation trees send.
-    #[test]
-    fn line_vectors_counts_the_trees_transfers() {
-        for m in 0..16 {
-            assert_eq!(
-                line_transfers(m).len(),
-                line_vectors(m),
-                "line of {} boards",
-                m + 1
-            );
-        }
-    }
 }
