@@ -37,6 +37,7 @@ pub mod partition;
 mod plan;
 mod report;
 mod tables;
+pub mod timing;
 
 pub use decode::{decode_image, DecodedImage, DecodedRound};
 pub use fit::{check_fit, fit_problems};

@@ -57,8 +57,10 @@ pub struct CompileReport {
     pub link_utilisation_max: f64,
     /// Per-frame cost of a link (s), beside `link_bandwidth_bytes_per_s`.
     pub link_frame_latency_s: f64,
-    /// Whether the array keeps the scene's step: compute and every link.
+    /// Whether the array keeps the scene's step: compute, every link, and the step as the
+    /// boards run it ([`StepModel`]).
     pub real_time: RealTimeVerdict,
+    pub step_model: StepModel,
     /// What the partition balances, and the other balance's worst time ratio when
     /// [`plan_for_real_time`] compared both.
     pub balance: Balance,
@@ -72,6 +74,20 @@ pub struct CompileReport {
     pub graphics: GraphicsReport,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub contact: Option<ContactCompileReport>,
+}
+
+/// The step as the boards would run it: every board walks the firmware's step program
+/// ([`super::timing`], board-sim's link model), its batches and node update at the
+/// measured instruction counts, each receive waiting for its frame (sent when the
+/// neighbour's program sends it, arriving after the frame's fixed time and its bytes at
+/// the link rate). The per-link figures ask whether each link carries its bytes within the
+/// step; this asks whether the rounds, each waiting for the one before, end within it.
+#[derive(Clone, Debug, Serialize)]
+pub struct StepModel {
+    pub timing: super::timing::StepTiming,
+    /// The least link rate (bytes/s each way) at which the modelled step (and a check
+    /// step) would fit; `None` when no rate would ([`super::timing::link_rate_needed`]).
+    pub link_bytes_per_s_needed: Option<f64>,
 }
 
 /// The graphics stream's cost.
@@ -298,8 +314,15 @@ pub fn report(
         links,
         capacity,
         contact,
-        real_time,
+        mut real_time,
     } = figures(problem, plan, profile)?;
+    let step_model = step_model(problem, plan, images, profile)?;
+    if !step_model.timing.real_time {
+        real_time.keeps_real_time = false;
+        real_time
+            .reasons
+            .push(step_model_reason(&step_model, profile));
+    }
     let frame_bytes_max = links.bytes.iter().copied().max().unwrap_or(0);
     let bytes_total: usize = links.bytes.iter().sum();
     let balance = plan.balance;
@@ -339,6 +362,7 @@ pub fn report(
         link_utilisation_max: frame_bytes_max as f64 * rate / profile.link_bytes_per_s as f64,
         link_frame_latency_s: profile.link_latency_ns as f64 * 1e-9,
         real_time,
+        step_model,
         balance,
         balance_other: None,
         image_bytes_max: images.iter().map(|i| i.bytes.len()).max().unwrap_or(0),
@@ -453,6 +477,63 @@ pub struct RealTimeVerdict {
     pub worst_ratio: f64,
     /// Why not, one line each (empty when it keeps real time).
     pub reasons: Vec<String>,
+}
+
+/// The step model of the compiled images ([`StepModel`]), with the profile's figures and
+/// the scene's precision.
+fn step_model(
+    problem: &Problem,
+    plan: &Plan,
+    images: &[BoardImage],
+    profile: &BoardProfile,
+) -> Result<StepModel> {
+    let decoded = images
+        .iter()
+        .map(|im| {
+            super::decode_image(&im.bytes, None).map_err(|e| {
+                anyhow::anyhow!(
+                    "board {:?}: the step model cannot read its image: {e}",
+                    im.coords
+                )
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let dims = plan.machine.dims;
+    let t = super::timing::SimTiming::for_precision(profile, problem.solver.precision);
+    Ok(StepModel {
+        timing: super::timing::model(&decoded, dims, t)?,
+        link_bytes_per_s_needed: super::timing::link_rate_needed(&decoded, dims, t)?,
+    })
+}
+
+/// The verdict's line for a modelled step over dt.
+fn step_model_reason(m: &StepModel, profile: &BoardProfile) -> String {
+    let t = &m.timing;
+    let (step, [x, y, z]) = match t.check_step_s {
+        Some(c) if c > t.step_s => (c, t.check_slowest_board),
+        _ => (t.step_s, t.slowest_board),
+    };
+    let what = if t.check_step_s.is_some_and(|c| c > t.step_s) {
+        format!("a check step (every {} steps)", t.check_interval_steps)
+    } else {
+        "a step".to_string()
+    };
+    format!(
+        "the step model (the boards' program, each round waiting for its frames): {what} ends at {:.1} us on board ({x},{y},{z}), over dt = {:.1} us by {:.1} us ({:.2}x); {}",
+        step * 1e6,
+        t.dt_s * 1e6,
+        (step - t.dt_s) * 1e6,
+        step / t.dt_s,
+        match m.link_bytes_per_s_needed {
+            Some(r) => format!(
+                "links of {:.3} MB/s each way would keep it ({:.2}x the profile's {:.3} MB/s)",
+                r / 1e6,
+                r / profile.link_bytes_per_s as f64,
+                profile.link_bytes_per_s as f64 / 1e6
+            ),
+            None => "no link rate would: the compute and the frames' fixed time alone exceed dt".to_string(),
+        }
+    )
 }
 
 /// What the verdict is made of, and the verdict: one home for [`report`] and
@@ -959,9 +1040,32 @@ fn real_time_lines(r: &CompileReport) -> String {
         }
         None => s += "  links: nothing exchanged\n",
     }
+    let m = &r.step_model.timing;
+    let [x, y, z] = m.slowest_board;
+    s += &format!(
+        "  step model (every board runs the firmware's step program; a round waits for its frames): a step ends at {:.1} us on board ({x},{y},{z}) ({:.1} us computing){} against dt = {:.1} us; {}\n",
+        m.step_s * 1e6,
+        m.compute_s * 1e6,
+        match m.check_step_s {
+            Some(c) => {
+                let [x, y, z] = m.check_slowest_board;
+                format!(", a check step at {:.1} us on board ({x},{y},{z})", c * 1e6)
+            }
+            None => String::new(),
+        },
+        m.dt_s * 1e6,
+        match r.step_model.link_bytes_per_s_needed {
+            Some(rate) => format!(
+                "it fits with links of {:.3} MB/s each way or faster ({:.2}x this profile's)",
+                rate / 1e6,
+                rate / r.link_bandwidth_bytes_per_s as f64
+            ),
+            None => "no link rate would fit it".to_string(),
+        }
+    );
     if v.keeps_real_time {
         s += &format!(
-            "  verdict: keeps real time (busiest board's compute {:.1} us{} within dt / {COMPUTE_MARGIN} = {:.1} us, every link within dt{})\n",
+            "  verdict: keeps real time (busiest board's compute {:.1} us{} within dt / {COMPUTE_MARGIN} = {:.1} us, every link within dt{}, the modelled step within dt)\n",
             v.compute_s_max * 1e6,
             if v.check_interval_steps > 0 {
                 format!(", {:.1} us at a check step", v.check_step_s_max * 1e6)

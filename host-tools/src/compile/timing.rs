@@ -1,0 +1,283 @@
+//! The step model: would the board array keep the scene's step rate on the real links?
+//! One home for `pe compile`'s verdict and board-sim's link model.
+//!
+//! Replays one step of every board's schedule (the firmware's own step program,
+//! [`pe_firmware::runtime::Program`]) in model time: batches take
+//! `elements × cycles_per_element / clock`, a frame arrives `latency + bytes / bandwidth`
+//! after it is sent (links are full duplex, one frame at a time per direction), a receive
+//! waits for its frame. The cycles per element-step and per node update are the firmware's
+//! instruction counts measured under QEMU (`pe_firmware::profile::MEASURED_COST`, from
+//! `scripts/board-cost.sh`), taking one instruction per cycle. With contact pairs it
+//! replays a check step too: every board that owns a contact node then also searches the
+//! candidates of the whole table (the compile report's charge).
+
+use super::DecodedImage;
+use pe_firmware::image::{Integration, Precision};
+use pe_firmware::profile::{measured_cost, BoardProfile, FirmwareCost};
+use pe_firmware::runtime::{Op, Program, ROUNDS_PER_AXIS_MAX};
+use serde::Serialize;
+
+/// Model inputs.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct SimTiming {
+    pub clock_hz: f64,
+    pub cycles_per_element_reduced: f64,
+    pub cycles_per_element_full: f64,
+    /// A parallelepiped (reduced integration's cheap kernel).
+    pub cycles_per_box_element: f64,
+    /// An axis-aligned cuboid (reduced integration's cheapest kernel).
+    pub cycles_per_cuboid_element: f64,
+    pub cycles_per_node_update: f64,
+    /// Extra per contact-surface node.
+    pub cycles_per_contact_node: f64,
+    /// Per node-face test of a check step's candidate search.
+    pub cycles_per_search_test: f64,
+    pub link_bytes_per_s: f64,
+    pub link_latency_s: f64,
+    /// Bytes link recovery adds to every frame (its envelope, `link_proto::reliable::OVERHEAD`;
+    /// 0 without recovery). Retransmissions are not modelled: at the loss rates recovery is
+    /// for (1e-3 per frame) they add that fraction of a frame per frame.
+    pub frame_overhead_bytes: usize,
+}
+
+impl SimTiming {
+    /// From a board profile, with the measured f64 instruction counts (the seed's double
+    /// precision) at one instruction per cycle.
+    pub fn from_profile(p: &BoardProfile) -> Self {
+        Self::for_precision(p, Precision::F64)
+    }
+
+    /// From a board profile and the measured instruction counts of `precision` (one
+    /// instruction per cycle; the node update is the reduced variant's, the larger).
+    pub fn for_precision(p: &BoardProfile, precision: Precision) -> Self {
+        let reduced = measured_cost(precision, Integration::Reduced);
+        let full = measured_cost(precision, Integration::Full);
+        SimTiming {
+            clock_hz: p.clock_hz as f64,
+            cycles_per_element_reduced: reduced.per_element_step as f64,
+            cycles_per_element_full: full.per_element_step as f64,
+            cycles_per_box_element: reduced.box_per_element_step as f64,
+            cycles_per_cuboid_element: reduced.cuboid_per_element_step as f64,
+            cycles_per_node_update: reduced.per_node_update.max(full.per_node_update) as f64,
+            cycles_per_contact_node: reduced.per_contact_node.max(full.per_contact_node) as f64,
+            cycles_per_search_test: reduced.per_search_test.max(full.per_search_test) as f64,
+            link_bytes_per_s: p.link_bytes_per_s as f64,
+            link_latency_s: p.link_latency_ns as f64 * 1e-9,
+            frame_overhead_bytes: 0,
+        }
+    }
+}
+
+/// Model results.
+#[derive(Clone, Debug, Serialize)]
+pub struct StepTiming {
+    pub inputs: SimTiming,
+    /// Modelled time of one step on the slowest board (s).
+    pub step_s: f64,
+    /// Of which computing (s), on that board.
+    pub compute_s: f64,
+    /// The scene's time step (s) and whether the array keeps up with it (at a check step
+    /// too).
+    pub dt_s: f64,
+    pub real_time: bool,
+    pub slowest_board: [usize; 3],
+    /// With contact pairs: a check step (every `check_interval_steps`) on its slowest
+    /// board (s), and that board.
+    pub check_interval_steps: u32,
+    pub check_step_s: Option<f64>,
+    pub check_slowest_board: [usize; 3],
+}
+
+fn frame_s(t: &SimTiming, values: usize, width: usize) -> f64 {
+    if values == 0 {
+        return 0.0;
+    }
+    let bytes = link_proto::FRAME_HEADER_LEN
+        + link_proto::CRC_LEN
+        + values * width
+        + t.frame_overhead_bytes;
+    t.link_latency_s + bytes as f64 / t.link_bytes_per_s
+}
+
+/// The contact nodes a board's step is charged for ([`FirmwareCost::charged_contact_nodes`]).
+fn charged_contact_nodes(im: &DecodedImage) -> usize {
+    let owned = im.contact_nodes.iter().filter(|(_, p)| p.owned).count();
+    FirmwareCost::charged_contact_nodes(im.contact_nodes.len(), owned)
+}
+
+/// Board `b`'s coordinates on a machine of `dims` (x fastest).
+fn coords(b: usize, dims: [usize; 3]) -> [usize; 3] {
+    [
+        b % dims[0],
+        (b / dims[0]) % dims[1],
+        b / (dims[0] * dims[1]),
+    ]
+}
+
+/// Models one step of the machine of `dims` whose decoded images are `imgs` (one per
+/// board, x fastest).
+pub fn model(imgs: &[DecodedImage], dims: [usize; 3], t: SimTiming) -> anyhow::Result<StepTiming> {
+    let count = dims.iter().product::<usize>();
+    if imgs.len() != count || count == 0 {
+        anyhow::bail!(
+            "the step model needs one image per board: {} for a {}x{}x{} machine",
+            imgs.len(),
+            dims[0],
+            dims[1],
+            dims[2]
+        );
+    }
+    let h = imgs[0].header;
+    let width = if h.precision == Precision::F64 { 8 } else { 4 };
+    let cpe = if h.integration == Integration::Full {
+        t.cycles_per_element_full
+    } else {
+        t.cycles_per_element_reduced
+    };
+    // Every board walks the firmware's own step program in model time. Sends of an
+    // operation happen before the receives that wait for them (the program's order), so
+    // walking it operation by operation across the boards is exact.
+    let program = Program::new(&h.counts.rounds, &h.counts.late_rounds, false, false);
+    // A check step's search per board: the whole table's, on a board that owns a contact
+    // node.
+    let search: Vec<f64> = imgs
+        .iter()
+        .map(|im| {
+            if charged_contact_nodes(im) == 0 {
+                return 0.0;
+            }
+            let nodes: Vec<_> = im.contact_nodes.iter().map(|(n, _)| *n).collect();
+            let m = pe_firmware::physics::contact::ContactModel {
+                nodes: &nodes,
+                faces: &im.contact_faces,
+                pairs: &im.pairs,
+                tools: &im.tools,
+            };
+            pe_firmware::physics::contact::search_tests(&m) as f64 * t.cycles_per_search_test
+                / t.clock_hz
+        })
+        .collect();
+    let (step_s, b, compute_s) = walk(imgs, &program, dims, &t, cpe, width, &vec![0.0; count]);
+    let check = search
+        .iter()
+        .any(|&s| s > 0.0)
+        .then(|| walk(imgs, &program, dims, &t, cpe, width, &search));
+    let dt_s = h.params.dt_s;
+    Ok(StepTiming {
+        inputs: t,
+        step_s,
+        compute_s,
+        dt_s,
+        real_time: step_s <= dt_s && check.is_none_or(|c| c.0 <= dt_s),
+        slowest_board: coords(b, dims),
+        check_interval_steps: if check.is_some() {
+            h.contact.check_interval_steps
+        } else {
+            0
+        },
+        check_step_s: check.map(|c| c.0),
+        check_slowest_board: coords(check.map_or(b, |c| c.1), dims),
+    })
+}
+
+/// The least link rate (bytes/s each way, the frames' fixed time as `t` has it) at which
+/// the modelled step, and a check step, fit within the scene's step: found by bisection
+/// (the step only shortens as the links get faster), to 0.1%. `None` when links of any
+/// rate would not do: the compute and the frames' fixed times alone exceed the step.
+pub fn link_rate_needed(
+    imgs: &[DecodedImage],
+    dims: [usize; 3],
+    t: SimTiming,
+) -> anyhow::Result<Option<f64>> {
+    let fits = |rate: f64| {
+        model(
+            imgs,
+            dims,
+            SimTiming {
+                link_bytes_per_s: rate,
+                ..t
+            },
+        )
+        .map(|m| m.real_time)
+    };
+    let (mut lo, mut hi) = (1.0, 1e15);
+    if !fits(hi)? {
+        return Ok(None);
+    }
+    while hi / lo > 1.001 {
+        let mid = (lo * hi).sqrt();
+        if fits(mid)? {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    Ok(Some(hi))
+}
+
+/// One step of every board in model time, each board computing `extra[b]` (s) more in its
+/// node update: the slowest board's step (s), that board, and its compute (s).
+fn walk(
+    imgs: &[DecodedImage],
+    program: &Program,
+    dims: [usize; 3],
+    t: &SimTiming,
+    cpe: f64,
+    width: usize,
+    extra: &[f64],
+) -> (f64, usize, f64) {
+    let count = imgs.len();
+    let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
+    let mut now = vec![0.0f64; count];
+    let mut compute = vec![0.0f64; count];
+    // Send time per board, axis, round and face.
+    let mut sent = vec![[[[0.0f64; 2]; ROUNDS_PER_AXIS_MAX]; 3]; count];
+    for &op in program.ops() {
+        for b in 0..count {
+            let im = &imgs[b];
+            match op {
+                Op::Batch(k) => {
+                    let k = k as usize;
+                    let size = |e: [u32; 4]| if k == 0 { e[0] } else { e[k] - e[k - 1] } as f64;
+                    let c = (size(im.header.counts.batch_ends) * cpe
+                        + size(im.header.counts.box_batch_ends) * t.cycles_per_box_element
+                        + size(im.header.counts.cuboid_batch_ends) * t.cycles_per_cuboid_element)
+                        / t.clock_hz;
+                    now[b] += c;
+                    compute[b] += c;
+                }
+                Op::Update => {
+                    let c = (im.header.counts.nodes as f64 * t.cycles_per_node_update
+                        + charged_contact_nodes(im) as f64 * t.cycles_per_contact_node)
+                        / t.clock_hz
+                        + extra[b];
+                    now[b] += c;
+                    compute[b] += c;
+                }
+                Op::Send(a, r, f) => sent[b][a as usize][r as usize][f as usize] = now[b],
+                Op::Recv(a, r, f) => {
+                    let (a, r, f) = (a as usize, r as usize, f as usize);
+                    let n_recv = im.rounds[a].get(r).map_or(0, |x| x.recv[f].len());
+                    if n_recv == 0 {
+                        continue;
+                    }
+                    // Face 0 (+axis) receives what the +axis neighbour sent on its −axis face.
+                    let mut d = coords(b, dims);
+                    if f == 0 {
+                        d[a] += 1;
+                    } else {
+                        d[a] -= 1;
+                    }
+                    let from = sent[index(d)][a][r][1 - f];
+                    now[b] = now[b].max(from + frame_s(t, 3 * n_recv, width));
+                }
+                Op::Graphics | Op::Contact | Op::External(_) => {}
+            }
+        }
+    }
+    let (step_s, b) = now
+        .iter()
+        .enumerate()
+        .fold((0.0, 0), |w, (b, &s)| if s > w.0 { (s, b) } else { w });
+    (step_s, b, compute[b])
+}
