@@ -124,10 +124,12 @@ fn exchange_count_matches_an_independent_count() {
 /// The seed's reference case (2000 elements, 20x10x10 box, 4x4x4 boards): the seed counts
 /// 5600 force vectors per step (issue 15's bound). With the balance bound 1.05 (at most 32
 /// elements per board) and the clamped face's nodes not exchanged, the partitioner gets
-/// 4702, the busiest link direction 24 (measured; with a symmetric exchange along every
-/// line of a node's box, the scheme before the reduce-and-broadcast rounds, 5654 and 27).
-/// The bounds here, 4720 vectors and 24 on a link, are the measured figures plus 0.4% and
-/// exact, so that a change of the annealing's parameters that loses ground is caught. No
+/// 4702, the busiest link direction 25 (measured; 24 with every line's default root, which
+/// the roots chosen for the step's chain of rounds trade for a step over a fifth shorter; with a
+/// symmetric exchange along every line of a node's box, the scheme before the
+/// reduce-and-broadcast rounds, 5654 and 27). The bounds here, 4720 vectors and 25 on a
+/// link, are the measured figures plus 0.4% and exact, so that a change of the annealing's
+/// parameters that loses ground is caught. No
 /// relays: rounds 0 and 1 along each axis (x's round 1 empty: nothing is summed before x)
 /// and the broadcast after the z exchange along x and y.
 #[test]
@@ -144,7 +146,7 @@ fn seed_box_on_4x4x4() {
     );
     assert!(b <= BALANCE_MAX, "imbalance {b}");
     assert!(count > 4000 && count <= 4720, "{count} vectors");
-    assert!(link_max > 10 && link_max <= 24, "busiest link {link_max}");
+    assert!(link_max > 10 && link_max <= 25, "busiest link {link_max}");
     assert_eq!(rounds, [3, 3, 2]);
 }
 

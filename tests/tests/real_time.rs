@@ -77,7 +77,7 @@ fn a_scene_over_the_link_rate_names_the_link() {
 /// Links that each carry their bytes within the step do not make the step: every round
 /// waits for the frames of the one before. The seed box in f32 on 4x4x4, compute out of
 /// the way, links at 1.2x the PE board's rate: every link direction fits dt (its busiest
-/// needs 109.7 us at 1x), yet the step model, which runs the boards' program, ends the step
+/// needs 113.5 us at 1x), yet the step model, which runs the boards' program, ends the step
 /// at over 1.5 dt (196 us); the verdict says so, naming the step model alone, and the least link
 /// rate it reports is the threshold: 0.2% above it keeps real time, 1% below does not.
 #[test]

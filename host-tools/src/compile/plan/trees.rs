@@ -282,31 +282,56 @@ const ROOT_PASSES_MAX: usize = 8;
 
 /// The roots of every node's tree (`node_box`: each node's box of boards; only the nodes
 /// `exchanged` marks are sent), chosen among [`root_choices`] on the axes before a node's
-/// last so that no link carries much more than the others: starting from
-/// [`default_roots`], each pass takes every node in turn and gives it the roots whose links
-/// are least loaded (the least increase of `Σ L²` over the links, `L` the vectors a link
-/// carries each way per step); ties keep the current roots, then take the first in
-/// x-fastest order. The total vectors do not change ([`box_vectors`]), nor do the rounds;
-/// every holder of a node still ends with the same bits. (Measured on 4x4x4: the link model's
-/// step of the seed box 290.9 -> 276.4 us in f32 and 499.8 -> 479.7 us in f64, the built-in
-/// medium scene's 689.4 -> 646.2 us. Counting each direction's frames in the cost, at the
-/// PE board's figures, left every node at its default roots: the first node to move always
-/// opens a frame.)
+/// last so that no link, and no round's frame, carries much more than the others. The
+/// loads: each link's vectors per step (one each way per line crossing it), and each link
+/// direction's vectors in each round (the frame a round sends: the step model waits for
+/// it). Starting from [`default_roots`], each pass takes every node in turn and gives it
+/// the roots that least increase `Σ L²` over both kinds of load; ties keep the current
+/// roots, then take the first in x-fastest order. The total vectors do not change
+/// ([`box_vectors`]), nor do the rounds; every holder of a node still ends with the same
+/// bits.
+///
+/// Measured on 4x4x4, the step model's step (`pe compile`'s report) against the default
+/// roots: the seed box 278.1 -> 220.5 us in f32 and 487.0 -> 372.4 us in f64. Against the
+/// links' loads alone (the frames' loads alone): 260.4 (228.1) us and 463.7 (387.2) us; the
+/// built-in medium scene 636.6 (668.1) us against 652.8 us here, `scenes/liver.toml`
+/// 658.2 (533.6) against 556.6 us. Counting each direction's frames in the cost, at the PE
+/// board's figures, left every node at its default roots: the first node to move always
+/// opens a frame.
 pub(super) fn choose_roots(
     machine: Machine,
+    trees: &LineTrees,
+    early: [usize; 3],
     node_box: &[([usize; 3], [usize; 3])],
     exchanged: &[bool],
 ) -> Vec<Roots> {
     let count = machine.count();
-    let link = |a: usize, c: [usize; 3]| a * count + machine.index(c);
+    // Rounds per axis: the first ones, then the broadcasts (at most half a line's).
+    let rounds_max =
+        early.iter().max().copied().unwrap_or(0) + machine.dims.iter().max().copied().unwrap_or(1);
+    // The loads a node with roots `r` adds to: its links (`3 * count` of them), then its
+    // transfers' directions (+axis, −axis of each link) and rounds.
+    let keys = |b: ([usize; 3], [usize; 3]), r: Roots, out: &mut Vec<usize>| {
+        out.clear();
+        for_box_links(b.0, b.1, r, |a, c| out.push(a * count + machine.index(c)));
+        for_node_transfers(trees, early, b, r, |a, from, to, round, _| {
+            let low = if to[a] > from[a] { from } else { to };
+            let d = 2 * (a * count + machine.index(low)) + usize::from(to[a] < from[a]);
+            out.push(3 * count + d * rounds_max + round);
+        });
+    };
     let mut roots: Vec<Roots> = node_box
         .iter()
         .map(|&(lo, hi)| default_roots(lo, hi))
         .collect();
-    let mut load = vec![0i64; 3 * count];
-    for (n, &(lo, hi)) in node_box.iter().enumerate() {
+    let mut load = vec![0i64; 3 * count + 6 * count * rounds_max];
+    let mut k = Vec::new();
+    for (n, &b) in node_box.iter().enumerate() {
         if exchanged[n] {
-            for_box_links(lo, hi, roots[n], |a, c| load[link(a, c)] += 1);
+            keys(b, roots[n], &mut k);
+            for &i in &k {
+                load[i] += 1;
+            }
         }
     }
     // The roots each node may take: the choices of its axes before its last.
@@ -336,12 +361,14 @@ pub(super) fn choose_roots(
     for _ in 0..ROOT_PASSES_MAX {
         let mut changed = false;
         for (n, all) in &options {
-            let (lo, hi) = node_box[*n];
-            for_box_links(lo, hi, roots[*n], |a, c| load[link(a, c)] -= 1);
-            let cost = |r: Roots| {
-                let mut s = 0;
-                for_box_links(lo, hi, r, |a, c| s += 2 * load[link(a, c)] + 1);
-                s
+            let b = node_box[*n];
+            keys(b, roots[*n], &mut k);
+            for &i in &k {
+                load[i] -= 1;
+            }
+            let mut cost = |r: Roots| {
+                keys(b, r, &mut k);
+                k.iter().map(|&i| 2 * load[i] + 1).sum::<i64>()
             };
             let mut best = (cost(roots[*n]), roots[*n]);
             for &r in all {
@@ -352,7 +379,10 @@ pub(super) fn choose_roots(
             }
             changed |= best.1 != roots[*n];
             roots[*n] = best.1;
-            for_box_links(lo, hi, roots[*n], |a, c| load[link(a, c)] += 1);
+            keys(b, roots[*n], &mut k);
+            for &i in &k {
+                load[i] += 1;
+            }
         }
         if !changed {
             break;
@@ -367,7 +397,7 @@ mod tests {
 
     /// Nodes all held by the same 2x2 block of boards (x and y): with the default roots
     /// every one is exchanged along y through the x = 0 column; the chosen roots send half
-    /// of them through each column's y link, the least `Σ L²` (one load per link).
+    /// of them through each column's y link, the least `Σ L²`.
     #[test]
     fn chosen_roots_spread_a_block_over_both_columns() {
         let machine = Machine::parse("2x2x1").expect("machine");
@@ -386,7 +416,9 @@ mod tests {
             .iter()
             .map(|&(lo, hi)| default_roots(lo, hi))
             .collect();
-        let chosen = choose_roots(machine, &boxes, &vec![true; nodes]);
+        // x: reduce (rounds 0, 1) and broadcast (round 2); y: the whole tree.
+        let (trees, early) = (LineTrees::new(2), [2, 2, 0]);
+        let chosen = choose_roots(machine, &trees, early, &boxes, &vec![true; nodes]);
         assert_eq!(chosen.len(), nodes);
         let (before, after) = (loads(&default), loads(&chosen));
         assert_eq!(before.len(), after.len());
@@ -397,7 +429,7 @@ mod tests {
         assert_eq!((after[0], after[2]), (nodes, nodes));
         assert_eq!(before.iter().sum::<usize>(), after.iter().sum::<usize>());
         // A node not exchanged keeps its default roots and loads nothing.
-        let held = choose_roots(machine, &boxes, &vec![false; nodes]);
+        let held = choose_roots(machine, &trees, early, &boxes, &vec![false; nodes]);
         assert_eq!(held, default);
     }
 
