@@ -596,3 +596,37 @@ fn every_replica_ends_with_every_partial_once() {
         );
     }
 }
+
+/// `pe inspect` counts every kernel's elements: the seed box is a regular 20x10x10 box,
+/// so every element is an axis-aligned cuboid (the cheapest kernel), and each board's
+/// line must give the plan's element count for that board, all of them cuboids, split
+/// over the four batches. (It used to count the general kernel's elements only: 0 here.)
+#[test]
+fn inspect_counts_every_kernels_elements() {
+    let p = repo_scene("seed-box.toml");
+    let machine = Machine::parse("2x2x2").expect("machine");
+    let dir = temp_dir("inspect-kernels");
+    host_tools::compile::compile_to_dir("seed", "seed-box.toml", &p, machine, &PE_BOARD, &dir)
+        .expect("compiles");
+    let pl = plan(&p, machine).expect("plans");
+    assert_eq!(pl.boards.len(), 8);
+    for b in &pl.boards {
+        let n = b.elements.len();
+        assert!(n > 200, "board {:?}: {n} elements", b.coords);
+        let text = host_tools::compile::inspect(&dir, b.coords).expect("inspects");
+        let line = text
+            .lines()
+            .find(|l| l.contains(" elements ("))
+            .unwrap_or_else(|| panic!("no elements line in:\n{text}"));
+        let numbers: Vec<usize> = line
+            .split(|c: char| !c.is_ascii_digit())
+            .filter(|w| !w.is_empty())
+            .map(|w| w.parse().expect("a count"))
+            .collect();
+        // total, general, parallelepipeds, cuboids, batch x, y, z, inner
+        assert_eq!(numbers.len(), 8, "{line}");
+        assert_eq!(numbers[0], n, "{line}");
+        assert_eq!(&numbers[1..4], &[0, 0, n], "{line}");
+        assert_eq!(numbers[4..].iter().sum::<usize>(), n, "{line}");
+    }
+}

@@ -35,14 +35,23 @@ pub fn inspect(dir: &Path, board: [usize; 3]) -> Result<String> {
         "  dt = {:.4e} s, {} steps, damping {} 1/s\n",
         h.params.dt_s, h.params.steps, h.params.damping_per_s
     );
-    let b = c.batch_ends;
+    // Every kernel's elements per batch (general, parallelepiped, cuboid).
+    let per_batch = |k: usize| {
+        [c.batch_ends, c.box_batch_ends, c.cuboid_batch_ends]
+            .iter()
+            .map(|e| e[k] - if k == 0 { 0 } else { e[k - 1] })
+            .sum::<u32>()
+    };
     s += &format!(
-        "  {} elements: batch x {}, batch y {}, batch z {}, inner {}\n",
+        "  {} elements ({} general, {} parallelepipeds, {} cuboids): batch x {}, batch y {}, batch z {}, inner {}\n",
+        c.elements + c.boxes + c.cuboids,
         c.elements,
-        b[0],
-        b[1] - b[0],
-        b[2] - b[1],
-        b[3] - b[2]
+        c.boxes,
+        c.cuboids,
+        per_batch(0),
+        per_batch(1),
+        per_batch(2),
+        per_batch(3)
     );
     let owned = d.nodes.iter().filter(|n| n.owner).count();
     s += &format!(
