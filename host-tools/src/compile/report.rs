@@ -509,14 +509,13 @@ fn step_model(
 /// The verdict's line for a modelled step over dt.
 fn step_model_reason(m: &StepModel, profile: &BoardProfile) -> String {
     let t = &m.timing;
-    let (step, [x, y, z]) = match t.check_step_s {
-        Some(c) if c > t.step_s => (c, t.check_slowest_board),
-        _ => (t.step_s, t.slowest_board),
-    };
-    let what = if t.check_step_s.is_some_and(|c| c > t.step_s) {
-        format!("a check step (every {} steps)", t.check_interval_steps)
-    } else {
-        "a step".to_string()
+    let (what, step, [x, y, z]) = match t.check_step_s {
+        Some(c) if c > t.step_s => (
+            format!("a check step (every {} steps)", t.check_interval_steps),
+            c,
+            t.check_slowest_board,
+        ),
+        _ => ("a step".to_string(), t.step_s, t.slowest_board),
     };
     format!(
         "the step model (the boards' program, each round waiting for its frames): {what} ends at {:.1} us on board ({x},{y},{z}), over dt = {:.1} us by {:.1} us ({:.2}x); {}",

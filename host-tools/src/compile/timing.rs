@@ -11,6 +11,7 @@
 //! replays a check step too: every board that owns a contact node then also searches the
 //! candidates of the whole table (the compile report's charge).
 
+use super::partition::Machine;
 use super::DecodedImage;
 use pe_firmware::image::{Integration, Precision};
 use pe_firmware::profile::{measured_cost, BoardProfile, FirmwareCost};
@@ -105,79 +106,10 @@ fn charged_contact_nodes(im: &DecodedImage) -> usize {
     FirmwareCost::charged_contact_nodes(im.contact_nodes.len(), owned)
 }
 
-/// Board `b`'s coordinates on a machine of `dims` (x fastest).
-fn coords(b: usize, dims: [usize; 3]) -> [usize; 3] {
-    [
-        b % dims[0],
-        (b / dims[0]) % dims[1],
-        b / (dims[0] * dims[1]),
-    ]
-}
-
 /// Models one step of the machine of `dims` whose decoded images are `imgs` (one per
 /// board, x fastest).
 pub fn model(imgs: &[DecodedImage], dims: [usize; 3], t: SimTiming) -> anyhow::Result<StepTiming> {
-    let count = dims.iter().product::<usize>();
-    if imgs.len() != count || count == 0 {
-        anyhow::bail!(
-            "the step model needs one image per board: {} for a {}x{}x{} machine",
-            imgs.len(),
-            dims[0],
-            dims[1],
-            dims[2]
-        );
-    }
-    let h = imgs[0].header;
-    let width = if h.precision == Precision::F64 { 8 } else { 4 };
-    let cpe = if h.integration == Integration::Full {
-        t.cycles_per_element_full
-    } else {
-        t.cycles_per_element_reduced
-    };
-    // Every board walks the firmware's own step program in model time. Sends of an
-    // operation happen before the receives that wait for them (the program's order), so
-    // walking it operation by operation across the boards is exact.
-    let program = Program::new(&h.counts.rounds, &h.counts.late_rounds, false, false);
-    // A check step's search per board: the whole table's, on a board that owns a contact
-    // node.
-    let search: Vec<f64> = imgs
-        .iter()
-        .map(|im| {
-            if charged_contact_nodes(im) == 0 {
-                return 0.0;
-            }
-            let nodes: Vec<_> = im.contact_nodes.iter().map(|(n, _)| *n).collect();
-            let m = pe_firmware::physics::contact::ContactModel {
-                nodes: &nodes,
-                faces: &im.contact_faces,
-                pairs: &im.pairs,
-                tools: &im.tools,
-            };
-            pe_firmware::physics::contact::search_tests(&m) as f64 * t.cycles_per_search_test
-                / t.clock_hz
-        })
-        .collect();
-    let (step_s, b, compute_s) = walk(imgs, &program, dims, &t, cpe, width, &vec![0.0; count]);
-    let check = search
-        .iter()
-        .any(|&s| s > 0.0)
-        .then(|| walk(imgs, &program, dims, &t, cpe, width, &search));
-    let dt_s = h.params.dt_s;
-    Ok(StepTiming {
-        inputs: t,
-        step_s,
-        compute_s,
-        dt_s,
-        real_time: step_s <= dt_s && check.is_none_or(|c| c.0 <= dt_s),
-        slowest_board: coords(b, dims),
-        check_interval_steps: if check.is_some() {
-            h.contact.check_interval_steps
-        } else {
-            0
-        },
-        check_step_s: check.map(|c| c.0),
-        check_slowest_board: coords(check.map_or(b, |c| c.1), dims),
-    })
+    Ok(Replay::new(imgs, dims)?.run(t))
 }
 
 /// The least link rate (bytes/s each way, the frames' fixed time as `t` has it) at which
@@ -189,24 +121,22 @@ pub fn link_rate_needed(
     dims: [usize; 3],
     t: SimTiming,
 ) -> anyhow::Result<Option<f64>> {
+    let replay = Replay::new(imgs, dims)?;
     let fits = |rate: f64| {
-        model(
-            imgs,
-            dims,
-            SimTiming {
+        replay
+            .run(SimTiming {
                 link_bytes_per_s: rate,
                 ..t
-            },
-        )
-        .map(|m| m.real_time)
+            })
+            .real_time
     };
     let (mut lo, mut hi) = (1.0, 1e15);
-    if !fits(hi)? {
+    if !fits(hi) {
         return Ok(None);
     }
     while hi / lo > 1.001 {
         let mid = (lo * hi).sqrt();
-        if fits(mid)? {
+        if fits(mid) {
             hi = mid;
         } else {
             lo = mid;
@@ -215,69 +145,153 @@ pub fn link_rate_needed(
     Ok(Some(hi))
 }
 
-/// One step of every board in model time, each board computing `extra[b]` (s) more in its
-/// node update: the slowest board's step (s), that board, and its compute (s).
-fn walk(
-    imgs: &[DecodedImage],
-    program: &Program,
-    dims: [usize; 3],
-    t: &SimTiming,
-    cpe: f64,
-    width: usize,
-    extra: &[f64],
-) -> (f64, usize, f64) {
-    let count = imgs.len();
-    let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
-    let mut now = vec![0.0f64; count];
-    let mut compute = vec![0.0f64; count];
-    // Send time per board, axis, round and face.
-    let mut sent = vec![[[[0.0f64; 2]; ROUNDS_PER_AXIS_MAX]; 3]; count];
-    for &op in program.ops() {
-        for b in 0..count {
-            let im = &imgs[b];
-            match op {
-                Op::Batch(k) => {
-                    let k = k as usize;
-                    let size = |e: [u32; 4]| if k == 0 { e[0] } else { e[k] - e[k - 1] } as f64;
-                    let c = (size(im.header.counts.batch_ends) * cpe
-                        + size(im.header.counts.box_batch_ends) * t.cycles_per_box_element
-                        + size(im.header.counts.cuboid_batch_ends) * t.cycles_per_cuboid_element)
-                        / t.clock_hz;
-                    now[b] += c;
-                    compute[b] += c;
+/// What replaying a step needs besides the timing figures, worked out once from the
+/// images: the step program, and each board's candidate search at a check step.
+struct Replay<'a> {
+    imgs: &'a [DecodedImage],
+    machine: Machine,
+    /// Every board walks the firmware's own step program in model time. Sends of an
+    /// operation happen before the receives that wait for them (the program's order), so
+    /// walking it operation by operation across the boards is exact.
+    program: Program,
+    /// Node-face tests of a check step's search per board: the whole table's, on a board
+    /// that owns a contact node (0 elsewhere, and without pairs).
+    search_tests: Vec<usize>,
+}
+
+impl<'a> Replay<'a> {
+    fn new(imgs: &'a [DecodedImage], dims: [usize; 3]) -> anyhow::Result<Replay<'a>> {
+        let machine = Machine { dims };
+        let Some(first) = imgs.first().filter(|_| imgs.len() == machine.count()) else {
+            anyhow::bail!(
+                "the step model needs one image per board: {} for a {}x{}x{} machine",
+                imgs.len(),
+                dims[0],
+                dims[1],
+                dims[2]
+            );
+        };
+        let c = &first.header.counts;
+        let search_tests = imgs
+            .iter()
+            .map(|im| {
+                if charged_contact_nodes(im) == 0 {
+                    return 0;
                 }
-                Op::Update => {
-                    let c = (im.header.counts.nodes as f64 * t.cycles_per_node_update
-                        + charged_contact_nodes(im) as f64 * t.cycles_per_contact_node)
-                        / t.clock_hz
-                        + extra[b];
-                    now[b] += c;
-                    compute[b] += c;
-                }
-                Op::Send(a, r, f) => sent[b][a as usize][r as usize][f as usize] = now[b],
-                Op::Recv(a, r, f) => {
-                    let (a, r, f) = (a as usize, r as usize, f as usize);
-                    let n_recv = im.rounds[a].get(r).map_or(0, |x| x.recv[f].len());
-                    if n_recv == 0 {
-                        continue;
-                    }
-                    // Face 0 (+axis) receives what the +axis neighbour sent on its −axis face.
-                    let mut d = coords(b, dims);
-                    if f == 0 {
-                        d[a] += 1;
-                    } else {
-                        d[a] -= 1;
-                    }
-                    let from = sent[index(d)][a][r][1 - f];
-                    now[b] = now[b].max(from + frame_s(t, 3 * n_recv, width));
-                }
-                Op::Graphics | Op::Contact | Op::External(_) => {}
-            }
+                let nodes: Vec<_> = im.contact_nodes.iter().map(|(n, _)| *n).collect();
+                pe_firmware::physics::contact::search_tests(
+                    &pe_firmware::physics::contact::ContactModel {
+                        nodes: &nodes,
+                        faces: &im.contact_faces,
+                        pairs: &im.pairs,
+                        tools: &im.tools,
+                    },
+                )
+            })
+            .collect();
+        Ok(Replay {
+            imgs,
+            machine,
+            program: Program::new(&c.rounds, &c.late_rounds, false, false),
+            search_tests,
+        })
+    }
+
+    /// One step, and a check step if any board searches, with the figures of `t`.
+    fn run(&self, t: SimTiming) -> StepTiming {
+        let h = self.imgs[0].header;
+        let search: Vec<f64> = self
+            .search_tests
+            .iter()
+            .map(|&n| n as f64 * t.cycles_per_search_test / t.clock_hz)
+            .collect();
+        let (step_s, b, compute_s) = self.walk(&t, &vec![0.0; search.len()]);
+        let check = search
+            .iter()
+            .any(|&s| s > 0.0)
+            .then(|| self.walk(&t, &search));
+        let dt_s = h.params.dt_s;
+        StepTiming {
+            inputs: t,
+            step_s,
+            compute_s,
+            dt_s,
+            real_time: step_s <= dt_s && check.is_none_or(|c| c.0 <= dt_s),
+            slowest_board: self.machine.coords(b),
+            check_interval_steps: if check.is_some() {
+                h.contact.check_interval_steps
+            } else {
+                0
+            },
+            check_step_s: check.map(|c| c.0),
+            check_slowest_board: self.machine.coords(check.map_or(b, |c| c.1)),
         }
     }
-    let (step_s, b) = now
-        .iter()
-        .enumerate()
-        .fold((0.0, 0), |w, (b, &s)| if s > w.0 { (s, b) } else { w });
-    (step_s, b, compute[b])
+
+    /// One step of every board in model time, each board computing `extra[b]` (s) more in
+    /// its node update: the slowest board's step (s), that board, and its compute (s).
+    fn walk(&self, t: &SimTiming, extra: &[f64]) -> (f64, usize, f64) {
+        let (imgs, program, machine) = (self.imgs, &self.program, self.machine);
+        let h = imgs[0].header;
+        let width = if h.precision == Precision::F64 { 8 } else { 4 };
+        let cpe = if h.integration == Integration::Full {
+            t.cycles_per_element_full
+        } else {
+            t.cycles_per_element_reduced
+        };
+        let count = imgs.len();
+        let mut now = vec![0.0f64; count];
+        let mut compute = vec![0.0f64; count];
+        // Send time per board, axis, round and face.
+        let mut sent = vec![[[[0.0f64; 2]; ROUNDS_PER_AXIS_MAX]; 3]; count];
+        for &op in program.ops() {
+            for b in 0..count {
+                let im = &imgs[b];
+                match op {
+                    Op::Batch(k) => {
+                        let k = k as usize;
+                        let size = |e: [u32; 4]| if k == 0 { e[0] } else { e[k] - e[k - 1] } as f64;
+                        let c = (size(im.header.counts.batch_ends) * cpe
+                            + size(im.header.counts.box_batch_ends) * t.cycles_per_box_element
+                            + size(im.header.counts.cuboid_batch_ends)
+                                * t.cycles_per_cuboid_element)
+                            / t.clock_hz;
+                        now[b] += c;
+                        compute[b] += c;
+                    }
+                    Op::Update => {
+                        let c = (im.header.counts.nodes as f64 * t.cycles_per_node_update
+                            + charged_contact_nodes(im) as f64 * t.cycles_per_contact_node)
+                            / t.clock_hz
+                            + extra[b];
+                        now[b] += c;
+                        compute[b] += c;
+                    }
+                    Op::Send(a, r, f) => sent[b][a as usize][r as usize][f as usize] = now[b],
+                    Op::Recv(a, r, f) => {
+                        let (a, r, f) = (a as usize, r as usize, f as usize);
+                        let n_recv = im.rounds[a].get(r).map_or(0, |x| x.recv[f].len());
+                        if n_recv == 0 {
+                            continue;
+                        }
+                        // Face 0 (+axis) receives what the +axis neighbour sent on its −axis face.
+                        let mut d = machine.coords(b);
+                        if f == 0 {
+                            d[a] += 1;
+                        } else {
+                            d[a] -= 1;
+                        }
+                        let from = sent[machine.index(d)][a][r][1 - f];
+                        now[b] = now[b].max(from + frame_s(t, 3 * n_recv, width));
+                    }
+                    Op::Graphics | Op::Contact | Op::External(_) => {}
+                }
+            }
+        }
+        let (step_s, b) = now
+            .iter()
+            .enumerate()
+            .fold((0.0, 0), |w, (b, &s)| if s > w.0 { (s, b) } else { w });
+        (step_s, b, compute[b])
+    }
 }

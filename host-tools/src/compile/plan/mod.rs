@@ -17,7 +17,7 @@ use super::partition::{
 };
 use crate::problem::Problem;
 pub use trees::{box_vectors, default_roots, for_box_links, line_rounds, Roots};
-use trees::{choose_roots, for_node_transfers, half_rounds, last_axis, LineTrees};
+use trees::{choose_roots, for_node_transfers, half_rounds, last_axis, BoardBox, LineTrees};
 
 /// Faces in image order.
 pub use link_proto::link::FACE_NAMES;
@@ -162,9 +162,6 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
         balance,
     })
 }
-
-/// A node's box of boards (low, high corner).
-type BoardBox = ([usize; 3], [usize; 3]);
 
 /// The rounds per axis the nodes' trees need: their reduce halves and whole trees, and
 /// their broadcast halves after the z exchange.

@@ -36,6 +36,9 @@ pub fn root_choices(m: usize) -> core::ops::RangeInclusive<usize> {
     m / 2..=m.div_ceil(2)
 }
 
+/// A node's box of boards (low, high corner).
+pub type BoardBox = ([usize; 3], [usize; 3]);
+
 /// A node's root along each axis, as an offset from its box's low corner.
 pub type Roots = [usize; 3];
 
@@ -246,7 +249,7 @@ impl LineTrees {
 pub(super) fn for_node_transfers(
     trees: &LineTrees,
     early: [usize; 3],
-    (lo, hi): ([usize; 3], [usize; 3]),
+    (lo, hi): BoardBox,
     roots: Roots,
     mut f: impl FnMut(usize, [usize; 3], [usize; 3], usize, Combine),
 ) {
@@ -302,7 +305,7 @@ pub(super) fn choose_roots(
     machine: Machine,
     trees: &LineTrees,
     early: [usize; 3],
-    node_box: &[([usize; 3], [usize; 3])],
+    node_box: &[BoardBox],
     exchanged: &[bool],
 ) -> Vec<Roots> {
     let count = machine.count();
@@ -311,7 +314,7 @@ pub(super) fn choose_roots(
         early.iter().max().copied().unwrap_or(0) + machine.dims.iter().max().copied().unwrap_or(1);
     // The loads a node with roots `r` adds to: its links (`3 * count` of them), then its
     // transfers' directions (+axis, −axis of each link) and rounds.
-    let keys = |b: ([usize; 3], [usize; 3]), r: Roots, out: &mut Vec<usize>| {
+    let keys = |b: BoardBox, r: Roots, out: &mut Vec<usize>| {
         out.clear();
         for_box_links(b.0, b.1, r, |a, c| out.push(a * count + machine.index(c)));
         for_node_transfers(trees, early, b, r, |a, from, to, round, _| {
@@ -325,13 +328,12 @@ pub(super) fn choose_roots(
         .map(|&(lo, hi)| default_roots(lo, hi))
         .collect();
     let mut load = vec![0i64; 3 * count + 6 * count * rounds_max];
+    let shift = |load: &mut [i64], k: &[usize], by: i64| k.iter().for_each(|&i| load[i] += by);
     let mut k = Vec::new();
     for (n, &b) in node_box.iter().enumerate() {
         if exchanged[n] {
             keys(b, roots[n], &mut k);
-            for &i in &k {
-                load[i] += 1;
-            }
+            shift(&mut load, &k, 1);
         }
     }
     // The roots each node may take: the choices of its axes before its last.
@@ -363,9 +365,7 @@ pub(super) fn choose_roots(
         for (n, all) in &options {
             let b = node_box[*n];
             keys(b, roots[*n], &mut k);
-            for &i in &k {
-                load[i] -= 1;
-            }
+            shift(&mut load, &k, -1);
             let mut cost = |r: Roots| {
                 keys(b, r, &mut k);
                 k.iter().map(|&i| 2 * load[i] + 1).sum::<i64>()
@@ -380,9 +380,7 @@ pub(super) fn choose_roots(
             changed |= best.1 != roots[*n];
             roots[*n] = best.1;
             keys(b, roots[*n], &mut k);
-            for &i in &k {
-                load[i] += 1;
-            }
+            shift(&mut load, &k, 1);
         }
         if !changed {
             break;
