@@ -143,6 +143,74 @@ fn the_verdict_waits_for_the_step_model() {
     assert!(below.step_model.timing.step_s > below.dt_s);
 }
 
+/// The other half of the step model's needs: the least clock on the profile's links, and
+/// the frames' chain alone when no clock would do. The seed box in f32 on 4x4x4:
+/// - on links of 12.5 MB/s (4x the PE board's; the step needs 11.6 MB/s at 480 MHz) some
+///   clock below the PE board's fits it, and that clock is the threshold: 0.2% above it
+///   the modelled step fits dt, 1% below it does not;
+/// - on the PE board's own links no clock fits it: the frames alone take more than dt, the
+///   summary says so, and a board 1000x faster than the PE board ends the step within
+///   0.1 us of that figure (it is the limit of the step as the clock grows: the compute of
+///   47 us at 480 MHz shrinks to 0.05 us), never below it.
+#[test]
+fn the_step_model_says_what_clock_would_do() {
+    let mut p = repo_scene("seed-box.toml");
+    p.solver.precision = Precision::F32;
+    let pl = plan(&p, Machine::parse("4x4x4").expect("machine")).expect("plans");
+    let images = compile_images(&p, &pl).expect("images");
+    let on =
+        |profile: &BoardProfile| report("seed f32", &p, &pl, &images, profile).expect("report");
+    let links_4x = BoardProfile {
+        link_bytes_per_s: 4 * PE_BOARD.link_bytes_per_s,
+        ..PE_BOARD
+    };
+    let r = on(&links_4x);
+    let clock = r.step_model.clock_hz_needed.expect("a clock that fits it");
+    assert!(
+        clock > 1e6 && clock < PE_BOARD.clock_hz as f64,
+        "{clock} Hz"
+    );
+    assert!(r.step_model.frames_alone_s < r.dt_s && r.step_model.frames_alone_s > 0.0);
+    let with_clock = |hz: f64| BoardProfile {
+        clock_hz: hz as u64,
+        ..links_4x
+    };
+    let above = on(&with_clock(clock * 1.002)).step_model.timing;
+    assert!(
+        above.step_s <= above.dt_s,
+        "{} against {}",
+        above.step_s,
+        above.dt_s
+    );
+    let below = on(&with_clock(clock / 1.01)).step_model.timing;
+    assert!(
+        below.step_s.max(below.check_step_s.unwrap_or(0.0)) > below.dt_s,
+        "{} against {}",
+        below.step_s,
+        below.dt_s
+    );
+
+    let r = on(&PE_BOARD);
+    let m = &r.step_model;
+    assert!(m.clock_hz_needed.is_none());
+    assert!(m.frames_alone_s > r.dt_s, "{} s", m.frames_alone_s);
+    assert!(m.frames_alone_s < m.timing.step_s);
+    let text = summary(&r);
+    let said = format!(
+        "no clock would fit it on the profile's links: with the compute free, the frames alone end a step at {:.1} us",
+        m.frames_alone_s * 1e6
+    );
+    assert!(text.contains(&said), "{said} missing in:\n{text}");
+    let fast = on(&fast_clock(&PE_BOARD)).step_model.timing;
+    assert!(fast.compute_s < 1e-7, "{} s computing", fast.compute_s);
+    assert!(
+        fast.step_s >= m.frames_alone_s && fast.step_s - m.frames_alone_s < 1e-7,
+        "{} s against {} s",
+        fast.step_s,
+        m.frames_alone_s
+    );
+}
+
 /// The verdict against one computed here from the plan's send lists and the measured cost
 /// (not from the report's link table): per board and face, bytes = sum over rounds of 3
 /// components x the precision's width x the vectors sent, plus one frame header and CRC

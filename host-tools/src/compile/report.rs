@@ -86,8 +86,13 @@ pub struct CompileReport {
 pub struct StepModel {
     pub timing: super::timing::StepTiming,
     /// The least link rate (bytes/s each way) at which the modelled step (and a check
-    /// step) would fit; `None` when no rate would ([`super::timing::link_rate_needed`]).
+    /// step) would fit; `None` when no rate would ([`super::timing::Needs`]).
     pub link_bytes_per_s_needed: Option<f64>,
+    /// The least clock (Hz, one instruction per cycle) at which they would fit on the
+    /// profile's links; `None` when no clock would: the frames alone take longer than dt.
+    pub clock_hz_needed: Option<f64>,
+    /// The modelled step with the compute free: the frames' chain alone (s).
+    pub frames_alone_s: f64,
 }
 
 /// The graphics stream's cost.
@@ -319,9 +324,7 @@ pub fn report(
     let step_model = step_model(problem, plan, images, profile)?;
     if !step_model.timing.real_time {
         real_time.keeps_real_time = false;
-        real_time
-            .reasons
-            .push(step_model_reason(&step_model, profile));
+        real_time.reasons.push(step_model_reason(&step_model));
     }
     let frame_bytes_max = links.bytes.iter().copied().max().unwrap_or(0);
     let bytes_total: usize = links.bytes.iter().sum();
@@ -500,14 +503,17 @@ fn step_model(
         .collect::<Result<Vec<_>>>()?;
     let dims = plan.machine.dims;
     let t = super::timing::SimTiming::for_precision(profile, problem.solver.precision);
+    let needs = super::timing::needs(&decoded, dims, t)?;
     Ok(StepModel {
         timing: super::timing::model(&decoded, dims, t)?,
-        link_bytes_per_s_needed: super::timing::link_rate_needed(&decoded, dims, t)?,
+        link_bytes_per_s_needed: needs.link_bytes_per_s,
+        clock_hz_needed: needs.clock_hz,
+        frames_alone_s: needs.frames_alone_s,
     })
 }
 
 /// The verdict's line for a modelled step over dt.
-fn step_model_reason(m: &StepModel, profile: &BoardProfile) -> String {
+fn step_model_reason(m: &StepModel) -> String {
     let t = &m.timing;
     let (what, step, [x, y, z]) = match t.check_step_s {
         Some(c) if c > t.step_s => (
@@ -523,16 +529,38 @@ fn step_model_reason(m: &StepModel, profile: &BoardProfile) -> String {
         t.dt_s * 1e6,
         (step - t.dt_s) * 1e6,
         step / t.dt_s,
-        match m.link_bytes_per_s_needed {
-            Some(r) => format!(
-                "links of {:.3} MB/s each way would keep it ({:.2}x the profile's {:.3} MB/s)",
-                r / 1e6,
-                r / profile.link_bytes_per_s as f64,
-                profile.link_bytes_per_s as f64 / 1e6
-            ),
-            None => "no link rate would: the compute and the frames' fixed time alone exceed dt".to_string(),
-        }
+        step_model_needs(m)
     )
+}
+
+/// What the modelled step would need to fit dt, on its own or at the profile's other
+/// figure: a link rate at the profile's clock, a clock at the profile's links (or why
+/// none would). One home for the verdict's line and the summary's.
+fn step_model_needs(m: &StepModel) -> String {
+    let t = &m.timing.inputs;
+    let links = match m.link_bytes_per_s_needed {
+        Some(r) => format!(
+            "it fits with links of {:.3} MB/s each way or faster ({:.2}x the profile's {:.3} MB/s)",
+            r / 1e6,
+            r / t.link_bytes_per_s,
+            t.link_bytes_per_s / 1e6
+        ),
+        None => "no link rate would fit it: the compute and the frames' fixed time alone exceed dt"
+            .to_string(),
+    };
+    let clock = match m.clock_hz_needed {
+        Some(c) => format!(
+            "on the profile's links it fits with a clock of {:.0} MHz or faster ({:.2}x the profile's {:.0} MHz; the step model only, not the compute margin)",
+            c / 1e6,
+            c / t.clock_hz,
+            t.clock_hz / 1e6
+        ),
+        None => format!(
+            "no clock would fit it on the profile's links: with the compute free, the frames alone end a step at {:.1} us",
+            m.frames_alone_s * 1e6
+        ),
+    };
+    format!("{links}; {clock}")
 }
 
 /// What the verdict is made of, and the verdict: one home for [`report`] and
@@ -1053,14 +1081,7 @@ fn real_time_lines(r: &CompileReport) -> String {
             None => String::new(),
         },
         m.dt_s * 1e6,
-        match r.step_model.link_bytes_per_s_needed {
-            Some(rate) => format!(
-                "it fits with links of {:.3} MB/s each way or faster ({:.2}x this profile's)",
-                rate / 1e6,
-                rate / r.link_bandwidth_bytes_per_s as f64
-            ),
-            None => "no link rate would fit it".to_string(),
-        }
+        step_model_needs(&r.step_model)
     );
     if v.keeps_real_time {
         s += &format!(

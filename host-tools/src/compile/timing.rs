@@ -112,27 +112,29 @@ pub fn model(imgs: &[DecodedImage], dims: [usize; 3], t: SimTiming) -> anyhow::R
     Ok(Replay::new(imgs, dims)?.run(t))
 }
 
-/// The least link rate (bytes/s each way, the frames' fixed time as `t` has it) at which
-/// the modelled step, and a check step, fit within the scene's step: found by bisection
-/// (the step only shortens as the links get faster), to 0.1%. `None` when links of any
-/// rate would not do: the compute and the frames' fixed times alone exceed the step.
-pub fn link_rate_needed(
-    imgs: &[DecodedImage],
-    dims: [usize; 3],
-    t: SimTiming,
-) -> anyhow::Result<Option<f64>> {
-    let replay = Replay::new(imgs, dims)?;
-    let fits = |rate: f64| {
-        replay
-            .run(SimTiming {
-                link_bytes_per_s: rate,
-                ..t
-            })
-            .real_time
-    };
-    let (mut lo, mut hi) = (1.0, 1e15);
+/// What the step model says the scene needs to keep its step, each figure with the other
+/// inputs of `t` as they are ([`needs`]).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct Needs {
+    /// The least link rate (bytes/s each way, the frames' fixed time as `t` has it) at
+    /// which the modelled step, and a check step, fit within the scene's step; `None` when
+    /// no rate would: the compute and the frames' fixed times alone exceed the step.
+    pub link_bytes_per_s: Option<f64>,
+    /// The least clock (Hz, one instruction per cycle) at which they fit at `t`'s links;
+    /// `None` when no clock would: the frames alone exceed the step.
+    pub clock_hz: Option<f64>,
+    /// The modelled step (the longer of a step and a check step) with the compute taken
+    /// as free (an infinite clock): the chain of frames alone, each round waiting for the
+    /// one before (s).
+    pub frames_alone_s: f64,
+}
+
+/// The least `x` in `[1, 1e15]` for which `fits(x)` holds, to 0.1% (by bisection on a
+/// log scale: `fits` must hold from some `x` on); `None` when not even `1e15` fits.
+fn least(fits: impl Fn(f64) -> bool) -> Option<f64> {
+    let (mut lo, mut hi) = (1.0f64, 1e15f64);
     if !fits(hi) {
-        return Ok(None);
+        return None;
     }
     while hi / lo > 1.001 {
         let mid = (lo * hi).sqrt();
@@ -142,7 +144,30 @@ pub fn link_rate_needed(
             lo = mid;
         }
     }
-    Ok(Some(hi))
+    Some(hi)
+}
+
+/// The step model's needs ([`Needs`]): the least link rate at `t`'s clock and the least
+/// clock at `t`'s links (the modelled step only shortens as either grows), and the frames'
+/// chain with the compute free.
+pub fn needs(imgs: &[DecodedImage], dims: [usize; 3], t: SimTiming) -> anyhow::Result<Needs> {
+    let replay = Replay::new(imgs, dims)?;
+    let free = replay.run(SimTiming {
+        clock_hz: f64::INFINITY,
+        ..t
+    });
+    Ok(Needs {
+        link_bytes_per_s: least(|rate| {
+            replay
+                .run(SimTiming {
+                    link_bytes_per_s: rate,
+                    ..t
+                })
+                .real_time
+        }),
+        clock_hz: least(|clock_hz| replay.run(SimTiming { clock_hz, ..t }).real_time),
+        frames_alone_s: free.check_step_s.unwrap_or(0.0).max(free.step_s),
+    })
 }
 
 /// What replaying a step needs besides the timing figures, worked out once from the
