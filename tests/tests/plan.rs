@@ -316,6 +316,116 @@ fn a_planned_shared_mesh_with_a_load_stays_within_its_budget() {
     assert!(u_err <= 0.02, "displacement error {u_err:e}");
 }
 
+/// A voxel mesh is coarsened when the budget allows it: `scenes/liver.toml` (the shared
+/// voxelised liver, 1997 voxels of 8.4 mm, under gravity).
+/// - Budget 2%: the coarsening is tried and measured (its row compares at least 90% of
+///   the reference's nodes, it doubles the step), and accepted exactly when its errors
+///   are within the budget.
+/// - Budget 25%: the plan keeps a coarsened model: at most a quarter of the elements on
+///   16.8 mm voxels (or coarser), at least 8x fewer element-steps per simulated second, its
+///   error within the budget by the planner's measure and by this test's own: both models
+///   run here, their final displacements compared at the planned nodes that are nodes of
+///   the full mesh (no interpolation), against the largest there.
+#[test]
+fn a_voxel_mesh_is_coarsened_when_its_budget_allows() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenes/liver.toml");
+    let dir = path.parent().expect("scenes dir").to_path_buf();
+    let scene = Scene::from_file(&path).expect("scene");
+    let out = temp_dir("plan-voxels");
+    let tight = plan::run(&scene, &dir, "liver", &options(0.02), &out.join("tight")).expect("plan");
+    let full = &tight.rows[0];
+    let row = tight
+        .rows
+        .iter()
+        .find(|r| r.choice.starts_with("voxels coarsened 2x"))
+        .expect("coarsening tried");
+    assert!(
+        row.elements * 4 <= full.elements,
+        "{} of {}",
+        row.elements,
+        full.elements
+    );
+    assert!(
+        row.compared_nodes * 10 >= 9 * full.nodes,
+        "{} of {} nodes compared",
+        row.compared_nodes,
+        full.nodes
+    );
+    assert!(
+        row.dt_s > 1.9 * full.dt_s,
+        "{} s against {} s",
+        row.dt_s,
+        full.dt_s
+    );
+    assert!(row.displacement_err_rel.is_finite() && row.displacement_err_rel > 0.0);
+    assert_eq!(row.accepted, row.displacement_err_rel <= 0.02);
+
+    let budget = 0.25;
+    let wide = out.join("wide");
+    let r = plan::run(&scene, &dir, "liver", &options(budget), &wide).expect("plan");
+    assert!(r.within_budget, "{:?}", r.final_model);
+    assert!(r.final_model.displacement_err_rel <= budget);
+    assert!(
+        r.final_model.elements * 4 <= full.elements,
+        "{} of {}",
+        r.final_model.elements,
+        full.elements
+    );
+    assert!(r.saving_factor >= 8.0, "{}x", r.saving_factor);
+    let a = Problem::from_scene(&scene, &dir).expect("full");
+    let planned_scene = Scene::from_file(&wide.join("scene.toml")).expect("written scene parses");
+    let b = Problem::from_scene(&planned_scene, &wide).expect("written scene resolves");
+    let lat = host_tools::mesh::coarsen::lattice(&b.mesh).expect("still a voxel mesh");
+    assert!(
+        lat.h_m
+            > 1.9
+                * host_tools::mesh::coarsen::lattice(&a.mesh)
+                    .expect("voxels")
+                    .h_m
+    );
+    let ua = solver::run(&a, "full", &mut ())
+        .expect("full run")
+        .displacements;
+    let ub = solver::run(&b, "planned", &mut ())
+        .expect("planned run")
+        .displacements;
+    assert_eq!(ua.len(), a.mesh.nodes.len());
+    assert_eq!(ub.len(), b.mesh.nodes.len());
+    let key = |x: [f64; 3]| -> [i64; 3] { core::array::from_fn(|i| (x[i] * 1e7).round() as i64) };
+    let full_at: HashMap<[i64; 3], usize> = a
+        .mesh
+        .nodes
+        .iter()
+        .enumerate()
+        .map(|(n, &x)| (key(x), n))
+        .collect();
+    let pairs: Vec<(usize, usize)> = b
+        .mesh
+        .nodes
+        .iter()
+        .enumerate()
+        .filter_map(|(k, &x)| full_at.get(&key(x)).map(|&n| (n, k)))
+        .collect();
+    assert!(
+        pairs.len() * 2 >= b.mesh.nodes.len(),
+        "{} of {} planned nodes are full-mesh nodes",
+        pairs.len(),
+        b.mesh.nodes.len()
+    );
+    let u_ref = pairs.iter().map(|&(n, _)| norm(ua[n])).fold(0.0, f64::max);
+    assert!(u_ref > 1e-3, "the liver sagged: {u_ref:e} m");
+    let e = pairs
+        .iter()
+        .map(|&(n, k)| norm(core::array::from_fn(|i| ua[n][i] - ub[k][i])))
+        .fold(0.0, f64::max)
+        / u_ref;
+    println!(
+        "liver: {} of {} elements, planner's error {:.4}, this test's {e:.4}",
+        r.final_model.elements, full.elements, r.final_model.displacement_err_rel
+    );
+    assert!(e <= budget, "displacement error {e:e}");
+}
+
 /// Budget 0: nothing may change, so the written model is the full one, run to the same
 /// bits.
 #[test]

@@ -2,6 +2,7 @@
 //! generator produces.
 
 pub mod builtin;
+pub mod coarsen;
 pub mod io;
 pub mod ovary;
 

@@ -17,7 +17,9 @@
 //! The search is greedy, every step measured against the reference with everything
 //! accepted before it, and a choice is accepted only when both errors stay within the
 //! budget:
-//! 1. resolution: a coarser built-in level (the coarsest that passes), then the model
+//! 1. resolution: a coarser built-in level (the coarsest that passes), or a voxel mesh
+//!    coarsened 2x while it passes ([`crate::mesh::coarsen`]; the model's field read at
+//!    the reference's nodes as for a level), then the model
 //!    without each contact pair in turn (with the surfaces nothing else names): a pair that
 //!    never touches costs every step for nothing;
 //! 2. pruning: the elements whose motion and stored energy in the current model's run stay
@@ -285,6 +287,18 @@ struct Held {
     view: View,
 }
 
+impl Held {
+    /// The scene of a model nothing has pruned yet (the scene as given, or on a coarsened
+    /// mesh of its own), which pruning starts from; `None` once pruned or trimmed.
+    fn unpruned_scene(&self) -> Option<Scene> {
+        match &self.model {
+            Model::Full { scene } => Some((**scene).clone()),
+            Model::Pruned(r) if r.fraction.is_none() && r.coarsened => Some(r.scene.clone()),
+            Model::Pruned(_) => None,
+        }
+    }
+}
+
 /// A problem on an array, from the schedule compiler.
 struct ArrayFigures {
     boards_needed_at_10_khz: usize,
@@ -400,6 +414,30 @@ impl Search<'_> {
                 format!("over the budget of {:.3}%", 100.0 * self.budget)
             },
         })
+    }
+
+    /// Records a choice that was not run, and why.
+    fn not_run(&mut self, choice: &str, mesh: &Mesh, why: String) {
+        self.rows.push(Row {
+            choice: choice.into(),
+            accepted: false,
+            elements: mesh.cells.len(),
+            nodes: mesh.nodes.len(),
+            precision: String::new(),
+            mass_scaling: 0.0,
+            dt_s: 0.0,
+            steps: 0,
+            element_steps_per_sim_s: 0.0,
+            boards_needed_at_10_khz: None,
+            bytes_per_step: None,
+            array_keeps_real_time: None,
+            host_wall_s: 0.0,
+            host_real_time_factor: 0.0,
+            tool_force_err_rel: None,
+            displacement_err_rel: f64::NAN,
+            compared_nodes: 0,
+            note: why,
+        });
     }
 
     /// Runs `p`, measures it, records the row; the trace when it is accepted.
@@ -684,18 +722,20 @@ fn try_trim(s: &mut Search<'_>, held: &Held, watch: &[String], k: f64) -> Result
     let Some(c) = &p.contact else {
         return Ok(None);
     };
-    let (mut r, view) = match &held.model {
-        Model::Pruned(r) => ((**r).clone(), held.view.clone()),
-        Model::Full { scene } => {
+    let (mut r, view) = match (&held.model, held.unpruned_scene()) {
+        (Model::Pruned(r), None) => ((**r).clone(), held.view.clone()),
+        (_, Some(scene)) => {
             let d = prune::driven_nodes(p, watch)?;
             let pilot = prune::Pilot {
                 motion_m: &held.trace.motion_m,
                 energy_j: &held.trace.energy_j,
             };
-            let r = prune::prune(p, scene, pilot, &d, None)?;
+            let r = prune::prune(p, &scene, pilot, &d, None)?;
             let v = held.view.then_pruned(&r.node_map);
             (r, v)
         }
+        // (A full model is its scene: not reached.)
+        (Model::Full { .. }, None) => return Ok(None),
     };
     let margin = k * c.face_diameter_max_m;
     let at = |n: usize, smp: usize| -> [f64; 3] {
@@ -857,12 +897,16 @@ fn search(s: &mut Search<'_>, held: &mut Held, scene: &Scene, watch: &[String]) 
             }
         }
     }
+    // 1a. Resolution of a user mesh: a voxel mesh coarsened 2x, again while it passes.
+    if scene.mesh.builtin.is_none() {
+        try_coarsen(s, held, scene)?;
+    }
     // 1b. Contact pairs the scene's quantities do not need (a pair that never touches, or
     // whose force the budget can do without), before the pilot run pruning reads.
     drop_pairs(s, held)?;
     // 2. Pruning: the first fraction that passes, then bisected (geometric mean) towards
     // the last that failed.
-    if let Model::Full { scene: sc } = held.model.clone() {
+    if let Some(sc) = held.unpruned_scene() {
         let driven = prune::driven_nodes(&held.problem, watch)?;
         let mut tried: Vec<usize> = Vec::new();
         let mut failed: Option<f64> = None;
@@ -989,6 +1033,58 @@ fn search(s: &mut Search<'_>, held: &mut Held, scene: &Scene, watch: &[String]) 
                 view,
             };
         }
+    }
+    Ok(())
+}
+
+/// Resolution of a user mesh: a voxel mesh ([`crate::mesh::coarsen`]) coarsened 2x, and
+/// again while the coarser model stays within the budget. Each try is a row, with what the
+/// coarsening changed; a coarse mesh the scene cannot be set on (a node set it names left
+/// empty) is a row that says so, not run.
+fn try_coarsen(s: &mut Search<'_>, held: &mut Held, scene: &Scene) -> Result<()> {
+    if !matches!(held.model, Model::Full { .. }) {
+        return Ok(());
+    }
+    let mut mesh = held.problem.mesh.clone();
+    while let Some(c) = crate::mesh::coarsen::coarsen(&mesh) {
+        let choice = format!(
+            "voxels coarsened 2x ({:.2} to {:.2} mm): {} elements of {}, volume {:.3}x ({} fine cells left out, {} added, {} loose coarse cells left out)",
+            1e3 * c.h_fine_m,
+            1e3 * c.h_coarse_m,
+            c.mesh.cells.len(),
+            mesh.cells.len(),
+            c.volume_ratio(mesh.cells.len()),
+            c.fine_cells_left_out,
+            c.fine_cells_added,
+            c.loose_cells_left_out
+        );
+        let mut r = Reduced::whole(scene, c.mesh.clone());
+        r.coarsened = true;
+        let p = match r.problem() {
+            Ok(p) => p,
+            Err(e) => {
+                s.not_run(
+                    &choice,
+                    &c.mesh,
+                    format!("the scene does not fit the coarse mesh: {e:#}"),
+                );
+                break;
+            }
+        };
+        let view = View::Level {
+            mesh: c.mesh.clone(),
+            node_map: None,
+        };
+        let Some(t) = s.try_model(&choice, &p, &view)? else {
+            break;
+        };
+        *held = Held {
+            model: Model::Pruned(Box::new(r)),
+            problem: p,
+            trace: t,
+            view,
+        };
+        mesh = c.mesh;
     }
     Ok(())
 }

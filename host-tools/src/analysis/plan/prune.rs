@@ -53,6 +53,8 @@ pub struct Reduced {
     pub held_nodes: usize,
     /// Pruned below this fraction of the largest motion and element energy.
     pub fraction: Option<f64>,
+    /// On a coarsened mesh ([`crate::mesh::coarsen`]), its scene's selections as given.
+    pub coarsened: bool,
 }
 
 /// File name of the reduced mesh beside the reduced scene.
@@ -268,14 +270,7 @@ pub fn prune(
         }
     }
     let mut out = scene.clone();
-    out.mesh = MeshSpec {
-        file: Some(MESH_FILE.into()),
-        unit: None,
-        generate: None,
-        builtin: None,
-        level: None,
-        blocks: vec![],
-    };
+    out.mesh = written_mesh();
     let fixed = set_of(&|n| held[n] || p.node_kind[n] == NodeKind::Fixed);
     out.fixed = if fixed.is_empty() {
         vec![]
@@ -357,6 +352,7 @@ pub fn prune(
         cell_kind,
         full_mesh: mesh.clone(),
         fraction,
+        coarsened: false,
     })
 }
 
@@ -368,7 +364,37 @@ fn set_spec(name: &str) -> FixedSpec {
     }
 }
 
+/// The mesh spec of a written model: [`MESH_FILE`] beside its scene, in metres.
+fn written_mesh() -> MeshSpec {
+    MeshSpec {
+        file: Some(MESH_FILE.into()),
+        unit: None,
+        generate: None,
+        builtin: None,
+        level: None,
+        blocks: vec![],
+    }
+}
+
 impl Reduced {
+    /// `scene` on another mesh of its own (a coarsened one), nothing pruned: every cell
+    /// kept, the mesh's node sets the ones its selections by name read.
+    pub fn whole(scene: &Scene, mesh: Mesh) -> Reduced {
+        let mut out = scene.clone();
+        out.mesh = written_mesh();
+        Reduced {
+            scene: out,
+            node_sets: mesh.node_sets.clone(),
+            node_map: (0..mesh.nodes.len() as u32).map(Some).collect(),
+            cell_kind: vec![CellKind::Kept; mesh.cells.len()],
+            full_mesh: mesh.clone(),
+            mesh,
+            held_nodes: 0,
+            fraction: None,
+            coarsened: false,
+        }
+    }
+
     /// The reduced problem, resolved from the in-memory mesh as the written files give it.
     pub fn problem(&self) -> Result<Problem> {
         let mut mesh = self.mesh.clone();
