@@ -1245,6 +1245,14 @@ pub fn run(
         spec.check(dims)?;
     }
     let count = images.len();
+    // The scene's tools: the most any image holds (a board that owns no contact node
+    // carries no contact tables).
+    let tools = images
+        .iter()
+        .filter_map(|im| ImageReader::new(im, None).ok())
+        .map(|r| r.header.counts.tools as usize)
+        .max()
+        .unwrap_or(0);
     let steps = opts
         .steps
         .unwrap_or(header.params.steps)
@@ -1390,7 +1398,6 @@ pub fn run(
     if let Some(h) = host_check.as_mut() {
         h.finish(&net)?;
     }
-    let tools = header.counts.tools as usize;
     let (graphics, tool_force) = collect_sinks(&net, steps, tools)?;
     let sink_recovery = opts
         .global_recovery

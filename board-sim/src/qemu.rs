@@ -470,7 +470,9 @@ pub fn run_array(dir: &Path, opts: &ArrayOptions) -> Result<ArrayOutput> {
         let h = ImageReader::new(&bytes, Some(b.board.map(|v| v as u8)))
             .map_err(|e| anyhow!("board {}: {}: {e}", name(b.board), p.display()))?
             .header;
-        tools = h.counts.tools as usize;
+        // The scene's tools: the most any image holds (a board that owns no contact
+        // node carries no contact tables).
+        tools = tools.max(h.counts.tools as usize);
         let l = h.linked_faces();
         let u = mps2_uarts::face_uarts(l).map_err(|n| {
             anyhow!(

@@ -36,8 +36,9 @@ pub struct BoardProfile {
     pub image_origin: u64,
     /// probe-rs `--chip` of the board's MCU (empty for an emulation profile).
     pub probe_chip: &'static str,
-    /// Contact tables the firmware holds (the same on every board): surface nodes and
-    /// faces of all declared contact surfaces.
+    /// Contact tables the firmware holds (the same on every board that owns a contact node;
+    /// a board that owns none gets none): surface nodes and faces of all declared contact
+    /// surfaces.
     pub contact_nodes_max: u32,
     pub contact_faces_max: u32,
     /// The rest of the firmware's capacity table (see
@@ -285,14 +286,14 @@ impl FirmwareCost {
 
     /// The contact-surface nodes a board's step is charged [`Self::per_contact_node`] for
     /// (the one rule of the compile report and board-sim's timing model), from the
-    /// contact table's length (every board holds the whole table) and the contact nodes
-    /// the board owns:
+    /// contact table's length (every board that owns a contact node holds the whole table)
+    /// and the contact nodes the board owns:
     /// - a board that owns a contact node evaluates the contact problem of the whole
     ///   table: its positions and, at each check, the candidate groups that give one of
     ///   its nodes a force, which on a small contact surface are most of them (measured by
     ///   `scripts/contact-cost.sh`: see the README's board-cost section);
-    /// - a board that owns none skips the evaluation (every result would be zero), and is
-    ///   charged nothing.
+    /// - a board that owns none has no contact tables and no contact operation in its step
+    ///   (every result would be zero), and is charged nothing.
     pub fn charged_contact_nodes(table_nodes: usize, owned_contact_nodes: usize) -> usize {
         if owned_contact_nodes > 0 {
             table_nodes

@@ -275,9 +275,9 @@ fn contact_tables_too_large_for_the_firmware_are_refused_at_compile_time() {
     };
     let e = check_fit(&images, &small).unwrap_err().to_string();
     println!("{e}");
-    // Two 5 x 5 node grids: 50 contact nodes in the table every board holds.
+    // Two 5 x 5 node grids: 50 contact nodes in the table every board that owns one holds.
     assert!(
-        e.contains("every board: 50 contact-surface nodes exceed the 40 the small firmware holds"),
+        e.contains("every board that owns a contact node: 50 contact-surface nodes exceed the 40 the small firmware holds"),
         "{e}"
     );
 }

@@ -45,7 +45,7 @@ pub fn fit_problems(images: &[BoardImage], profile: &BoardProfile) -> Vec<String
         let caps = board_capacities(profile, &im.header);
         for (what, n, max) in caps.shortfalls(c) {
             if what.starts_with("contact") {
-                continue; // the same on every board: said once below
+                continue; // the same on every board that has them: said once below
             }
             let why = if what == "elements" {
                 " (the RAM left after the fixed tables)"
@@ -93,14 +93,15 @@ pub fn fit_problems(images: &[BoardImage], profile: &BoardProfile) -> Vec<String
             }
         }
     }
-    // The contact tables are the same on every board.
-    if let Some(im) = images.first() {
+    // The contact tables are the same on every board that has them (the boards that own a
+    // contact node).
+    if let Some(im) = images.iter().find(|im| im.header.counts.contact_nodes > 0) {
         let caps = board_capacities(profile, &im.header);
         for (what, n, max) in caps.shortfalls(&im.header.counts) {
             if what.starts_with("contact") {
                 let what = what.replace("contact ", "contact-surface ");
                 problems.push(format!(
-                    "every board: {n} {what} exceed the {max} the {} firmware holds (declare smaller [[surface]]s)",
+                    "every board that owns a contact node: {n} {what} exceed the {max} the {} firmware holds (declare smaller [[surface]]s)",
                     profile.name
                 ));
             }

@@ -326,8 +326,11 @@ fn external_tables<T: ImageReal, E>(
     Ok(counts)
 }
 
-/// The contact tables (the same on every board) and where each contact node lives on
-/// board `b`.
+/// The contact tables (the whole scene's, the same on every board that has them) and
+/// where each contact node lives on board `b`, for a board that owns a contact node. A
+/// board that owns none gets none: it computes no contact force, tool force or statistic
+/// (each is for owned nodes), exchanges no contact node and takes part in no check, so its
+/// step program has no contact operation and its image and storage no contact tables.
 fn contact_tables_of_board<T, E>(
     shared: &Shared,
     plan: &Plan,
@@ -338,6 +341,13 @@ fn contact_tables_of_board<T, E>(
     let Some((run, boards)) = &shared.contact else {
         return;
     };
+    if !run
+        .nodes
+        .iter()
+        .any(|n| plan.node_owner[n.global as usize] as usize == b)
+    {
+        return;
+    }
     t.contact_nodes = run.nodes.clone();
     t.faces = run.faces.clone();
     t.pairs = run.pairs.clone();
