@@ -56,7 +56,7 @@ for SCENE in builtin regular turned; do
     for INTEG in reduced full; do
         [ "$SCENE" != builtin ] && [ "$INTEG" = full ] && continue
         V=$PREC-$INTEG
-        FEATURES=qemu
+        FEATURES=qemu,contact,graphics,loads
         [ "$PREC" = f32 ] && FEATURES=$FEATURES,f32
         [ "$INTEG" = full ] && FEATURES=$FEATURES,full
         D=$OUT/$SCENE-$V

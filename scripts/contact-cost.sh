@@ -27,7 +27,7 @@ PLUGIN_SRC=${PLUGIN_SRC:-$ROOT/../shared/tools/insncount/insncount.c}
 rm -rf "$OUT" && mkdir -p "$OUT"
 source scripts/qemu-lib.sh
 build_plugin "$PLUGIN_SRC" "$OUT/libinsncount.so"
-ELF=$(build_firmware qemu,cost-marks)
+ELF=$(build_firmware qemu,cost-marks,contact,graphics,loads)
 MARK=$(cost_mark_address "$ELF")
 
 # board-sim starts QEMU through this wrapper: the plugin, one log per board.

@@ -38,7 +38,7 @@ if [ -z "$ADDR2LINE" ]; then
     ADDR2LINE=$(ls "$(rustc --print sysroot)"/lib/rustlib/*/bin/llvm-addr2line 2>/dev/null | head -1)
 fi
 [ -n "$ADDR2LINE" ] || { echo "firmware-profile: no llvm-addr2line (rustup component add llvm-tools)" >&2; exit 1; }
-ELF=$(build_firmware qemu,cost-marks)
+ELF=$(build_firmware qemu,cost-marks,contact,graphics,loads)
 MARK=$(cost_mark_address "$ELF")
 cat >"$OUT/qemu.sh" <<WRAP
 #!/usr/bin/env bash

@@ -25,8 +25,8 @@ STEPS=${STEPS:-80}
 OUT=${OUT:-$TARGET_DIR/qemu-array}
 rm -rf "$OUT" && mkdir -p "$OUT"
 source scripts/qemu-lib.sh
-ELF_F64=$(build_firmware qemu)
-ELF_F32=$(build_firmware qemu,f32)
+ELF_F64=$(build_firmware qemu,contact,graphics,loads)
+ELF_F32=$(build_firmware qemu,f32,contact,graphics,loads)
 
 sed 's/cells = \[20, 10, 10\]/cells = [10, 5, 5]/' scenes/seed-box.toml >"$OUT/box.toml"
 grep -q 'cells = \[10, 5, 5\]' "$OUT/box.toml"

@@ -15,7 +15,9 @@ rustup target add thumbv7em-none-eabihf >/dev/null 2>&1 || rustup target add thu
 TARGET_DIR=${TARGET_DIR:-${CARGO_TARGET_DIR:-$(pwd)/target}}
 source scripts/host-bins.sh
 
-build_firmware() { # FEATURES -> prints the ELF path (a copy per variant, in $OUT)
+build_firmware() { # FEATURES -> prints the ELF path (a copy per variant, in $OUT); FEATURES
+    # are the board crate's, exactly (no defaults): the parts an image needs (contact,
+    # graphics, loads) too
     cargo build --release -q --target thumbv7em-none-eabihf \
         --manifest-path pe-firmware/board/Cargo.toml --target-dir "$TARGET_DIR" \
         --bin pe-board --no-default-features --features "$1"

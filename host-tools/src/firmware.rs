@@ -13,7 +13,7 @@ use std::process::Command;
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
-use pe_firmware::image::blob;
+use pe_firmware::image::{blob, Feature, ImageHeader};
 
 use crate::compile::{image_file_name, read_manifest};
 
@@ -125,6 +125,20 @@ pub fn firmware_features(precision: &str, integration: &str, profile: &str) -> V
     f
 }
 
+/// The firmware's parts ([`Feature`]: contact, graphics, loads; cargo features of the
+/// board crate) that some image of `headers` needs, in [`Feature::ALL`] order: the build
+/// `pe image` makes carries no other (a scene without contact gets a firmware without its
+/// code and tables; a board's image without contact tables runs none of it either way).
+pub fn parts_needed<'h>(
+    headers: impl Iterator<Item = &'h ImageHeader> + Clone,
+) -> Vec<&'static str> {
+    Feature::ALL
+        .into_iter()
+        .filter(|&f| headers.clone().any(|h| h.uses(f).is_some()))
+        .map(Feature::name)
+        .collect()
+}
+
 /// Builds the firmware with cargo (release, thumbv7em-none-eabihf, -C target-cpu=cortex-m7
 /// from the repository's .cargo/config.toml); returns the ELF's path.
 pub fn build_firmware(features: &[&str], bin: &str) -> Result<PathBuf> {
@@ -188,16 +202,8 @@ pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<Imag
     let m = read_manifest(dir)?;
     let profile = pe_firmware::profile::profile(&m.profile)
         .with_context(|| format!("{}: unknown profile {:?}", dir.display(), m.profile))?;
-    let features = firmware_features(&m.precision, &m.integration, &m.profile);
-    let elf_path = match firmware {
-        Some(p) => p.to_path_buf(),
-        None => build_firmware(&features, "pe-board")?,
-    };
-    let elf = std::fs::read(&elf_path)
-        .with_context(|| format!("reading the firmware {}", elf_path.display()))?;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     // Every image decoded and the set checked against the manifest (one compilation, the
-    // CRCs it recorded) before anything is written.
+    // CRCs it recorded) before anything is built or written.
     let mut files = Vec::new();
     for b in &m.boards {
         let c = b.board;
@@ -216,6 +222,16 @@ pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<Imag
         });
     }
     crate::compile::check_image_set(&m, &files)?;
+    // The firmware carries the parts some board's image needs, and no other.
+    let mut features = firmware_features(&m.precision, &m.integration, &m.profile);
+    features.extend(parts_needed(files.iter().map(|f| &f.header)));
+    let elf_path = match firmware {
+        Some(p) => p.to_path_buf(),
+        None => build_firmware(&features, "pe-board")?,
+    };
+    let elf = std::fs::read(&elf_path)
+        .with_context(|| format!("reading the firmware {}", elf_path.display()))?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut boards = Vec::new();
     for f in &files {
         let (c, image) = (f.board, &f.bytes);

@@ -281,3 +281,79 @@ fn contact_tables_too_large_for_the_firmware_are_refused_at_compile_time() {
         "{e}"
     );
 }
+
+/// Only a board that owns a contact node carries the contact tables (the whole table): the
+/// others' images have none (no tools, pairs, nodes or faces), so their step has no contact
+/// operation and a firmware built without `contact` would run them. On the built-in coarse
+/// scene on 4x4x4 both kinds of board exist; the firmware parts the set needs are contact
+/// and graphics (no loads), and the seed box's only graphics; the compile summary counts
+/// the boards that need each part. (That the trimmed set computes the serial run's
+/// displacements and probe force: `builtin_scene_probe_tube_and_ovary_on_64_boards_equal_serial`.)
+#[test]
+fn only_the_boards_that_own_contact_nodes_carry_the_contact_tables() {
+    use host_tools::compile::partition::Machine;
+    use host_tools::compile::{compile_images, decode_image, plan, report, summary};
+    use host_tools::firmware::parts_needed;
+    use pe_firmware::image::Feature;
+    let p = builtin_problem("coarse", 10);
+    let table = p.contact.as_ref().expect("contact").node_globals.len();
+    assert!(table > 50, "{table} contact nodes");
+    let pl = plan(&p, Machine::parse("4x4x4").expect("machine")).expect("plans");
+    let images = compile_images(&p, &pl).expect("images");
+    assert_eq!(images.len(), 64);
+    assert_eq!(pl.boards.len(), images.len());
+    let on_contact = &p.contact.as_ref().expect("contact").node_globals;
+    let (mut with, mut without) = (0, 0);
+    for (im, b) in images.iter().zip(&pl.boards) {
+        assert_eq!(im.coords, b.coords);
+        let d = decode_image(&im.bytes, Some(im.header.board)).expect("decodes");
+        let owns = (b.nodes.iter().zip(&b.owner)).any(|(n, &o)| o && on_contact.contains(n));
+        if owns {
+            with += 1;
+            assert_eq!(d.contact_nodes.len(), table, "board {:?}", im.coords);
+            assert!(d.contact_nodes.iter().any(|(_, place)| place.owned));
+            assert!(im.header.uses(Feature::Contact).is_some());
+        } else {
+            without += 1;
+            let c = im.header.counts;
+            assert_eq!(
+                (
+                    c.contact_nodes,
+                    c.contact_faces,
+                    c.tools,
+                    c.pairs,
+                    c.contact_boards
+                ),
+                (0, 0, 0, 0, 0),
+                "board {:?}",
+                im.coords
+            );
+            assert!(im.header.uses(Feature::Contact).is_none());
+        }
+    }
+    println!("{with} boards with the contact tables, {without} without");
+    assert!(with > 0 && without > 0);
+    assert_eq!(
+        parts_needed(images.iter().map(|im| &im.header)),
+        vec!["contact", "graphics"]
+    );
+    let r = report(
+        "builtin coarse",
+        &p,
+        &pl,
+        &images,
+        &pe_firmware::profile::PE_BOARD,
+    )
+    .expect("report");
+    let text = summary(&r);
+    let said = format!("contact on {with} of 64 boards");
+    assert!(text.contains(&said), "{said} missing in:\n{text}");
+
+    let seed = repo_scene("seed-box.toml");
+    let pl = plan(&seed, Machine::parse("2x2x2").expect("machine")).expect("plans");
+    let images = compile_images(&seed, &pl).expect("images");
+    assert_eq!(
+        parts_needed(images.iter().map(|im| &im.header)),
+        vec!["graphics"]
+    );
+}

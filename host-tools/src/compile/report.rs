@@ -301,6 +301,10 @@ pub struct BoardSummary {
     pub exchange: [usize; 6],
     pub image_bytes: usize,
     pub ram_bytes: u64,
+    /// The firmware's parts its image needs (`pe_firmware::image::Feature`: contact,
+    /// graphics, loads): a board that owns no contact node, surface node or loaded node
+    /// runs none of that part's code.
+    pub firmware_parts: Vec<&'static str>,
 }
 
 pub fn report(
@@ -893,6 +897,7 @@ fn board_summaries(problem: &Problem, plan: &Plan, images: &[BoardImage]) -> Vec
                 exchange: core::array::from_fn(|f| b.exchange[f].len()),
                 image_bytes: im.bytes.len(),
                 ram_bytes: im.ram_bytes,
+                firmware_parts: crate::firmware::parts_needed(std::iter::once(&im.header)),
             },
         )
         .collect()
@@ -999,6 +1004,21 @@ pub fn summary(r: &CompileReport) -> String {
     s += &format!(
         "  largest image {} bytes, largest run-time state {} bytes ({} profile)\n",
         r.image_bytes_max, r.ram_bytes_max, r.profile
+    );
+    let parts: Vec<String> = pe_firmware::image::Feature::ALL
+        .iter()
+        .map(|f| {
+            let n = r
+                .boards
+                .iter()
+                .filter(|b| b.firmware_parts.contains(&f.name()))
+                .count();
+            format!("{} on {n} of {} boards", f.name(), r.boards.len())
+        })
+        .collect();
+    s += &format!(
+        "  firmware parts the images need (cargo features; `pe image` builds the firmware with those some board needs, and no other): {}\n",
+        parts.join(", ")
     );
     let c = &r.capacity;
     s += &format!(

@@ -37,8 +37,22 @@ pub const VARIANT: &str = if cfg!(feature = "full") {
     "f64 reduced"
 };
 
-/// What this firmware holds.
-pub const CAPACITIES: Capacities = Capacities::for_board::<Scalar, Element>(&PROFILE);
+/// What this firmware holds: the profile's table, without the tables of a feature the
+/// build leaves out (its images are refused before they are read).
+pub const CAPACITIES: Capacities =
+    without_absent_features(Capacities::for_board::<Scalar, Element>(&PROFILE));
+
+const fn without_absent_features(c: Capacities) -> Capacities {
+    let contact = cfg!(feature = "contact");
+    Capacities {
+        contact_nodes: if contact { c.contact_nodes } else { 0 },
+        contact_faces: if contact { c.contact_faces } else { 0 },
+        contact_candidates: if contact { c.contact_candidates } else { 0 },
+        contact_sends: if contact { c.contact_sends } else { 0 },
+        loads: if cfg!(feature = "loads") { c.loads } else { 0 },
+        ..c
+    }
+}
 
 /// The firmware's storage: fixed-capacity vectors of exactly [`CAPACITIES`].
 pub type BoardStorage = StorageBuf<

@@ -10,7 +10,7 @@
 #![deny(unsafe_op_in_unsafe_fn)]
 
 #[cfg(all(feature = "qemu", feature = "stm32h743"))]
-compile_error!("features `qemu` and `stm32h743` are two boards: build with one (the board build: --no-default-features --features stm32h743,defmt)");
+compile_error!("features `qemu` and `stm32h743` are two boards: build with one (the board build: --no-default-features --features stm32h743,defmt,contact,graphics,loads)");
 
 pub mod fmt;
 

@@ -160,6 +160,61 @@ pub struct Counts {
     pub graphics_nodes: u16,
 }
 
+/// A part of the firmware a board's image may need, each a cargo feature of `pe-firmware`
+/// and of the board crate (all on by default). A build without one holds none of its code
+/// and refuses an image that needs it ([`ImageError::Unsupported`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Feature {
+    /// Tools and contact pairs: the contact tables and the contact protocol on the global
+    /// network (a board that owns a contact node).
+    Contact,
+    /// The surface-node stream to the graphics engine (a board that owns a surface node).
+    Graphics,
+    /// External loads (a board that owns a loaded node).
+    Loads,
+}
+
+impl Feature {
+    pub const ALL: [Feature; 3] = [Feature::Contact, Feature::Graphics, Feature::Loads];
+
+    /// Its cargo feature's name.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Feature::Contact => "contact",
+            Feature::Graphics => "graphics",
+            Feature::Loads => "loads",
+        }
+    }
+
+    /// Whether this build of the crate has it.
+    pub const fn built(self) -> bool {
+        match self {
+            Feature::Contact => cfg!(feature = "contact"),
+            Feature::Graphics => cfg!(feature = "graphics"),
+            Feature::Loads => cfg!(feature = "loads"),
+        }
+    }
+}
+
+impl ImageHeader {
+    /// How much of feature `f` this image holds, and of what (`None`: it needs none of the
+    /// feature's code): the one rule of the loader's refusal, of the step program's
+    /// contact and graphics operations and of the firmware build `pe image` makes.
+    pub const fn uses(&self, f: Feature) -> Option<(u32, &'static str)> {
+        let c = &self.counts;
+        match f {
+            Feature::Contact if c.tools > 0 || c.pairs > 0 || c.contact_nodes > 0 => {
+                Some((c.contact_nodes, "contact nodes"))
+            }
+            Feature::Graphics if c.graphics_nodes > 0 && self.graphics.interval_steps > 0 => {
+                Some((c.graphics_nodes as u32, "graphics nodes"))
+            }
+            Feature::Loads if c.loads > 0 => Some((c.loads as u32, "loads")),
+            _ => None,
+        }
+    }
+}
+
 impl Counts {
     /// Send/receive lists ([`ExchangeList`]): two faces per round of every axis.
     pub fn exchange_lists(&self) -> usize {
@@ -432,6 +487,12 @@ pub enum ImageError {
     },
     /// Writing: the output buffer is too small.
     BufferFull,
+    /// The image needs a part of the firmware ([`Feature`]) this build was made without.
+    Unsupported {
+        feature: &'static str,
+        what: &'static str,
+        count: u32,
+    },
 }
 
 impl core::fmt::Display for ImageError {
@@ -464,6 +525,14 @@ impl core::fmt::Display for ImageError {
                 write!(f, "image refers to {what} {index}, which does not exist")
             }
             ImageError::BufferFull => write!(f, "output buffer too small for the image"),
+            ImageError::Unsupported {
+                feature,
+                what,
+                count,
+            } => write!(
+                f,
+                "image has {count} {what}, but this firmware was built without `{feature}` (build it with the cargo feature `{feature}`)"
+            ),
         }
     }
 }

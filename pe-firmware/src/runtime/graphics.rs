@@ -10,6 +10,11 @@ use crate::image::ElementRecord;
 impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
     /// The graphics operation; `Ok(false)` while the port's queue is full.
     pub(super) fn graphics_poll(&mut self, links: &mut impl Links) -> Result<bool, Fault> {
+        // A build without graphics loads no image that streams (its program has no
+        // graphics operation): nothing below is in it.
+        if !cfg!(feature = "graphics") {
+            return Ok(true);
+        }
         let g = self.header.graphics;
         let len = self.header.counts.graphics_nodes as usize;
         let interval = g.interval_steps.max(1) as u64;

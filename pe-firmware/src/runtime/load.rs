@@ -10,7 +10,7 @@ use super::storage::SmallTables;
 use super::{
     global, LinkStats, Program, Runtime, RuntimeConfig, Storage, WireReal, ROUNDS_PER_AXIS_MAX,
 };
-use crate::image::{read_image, ElementRecord, ImageError, STAGES};
+use crate::image::{read_image, ElementRecord, Feature, ImageError, ImageReader, STAGES};
 use crate::physics::CentralDifference;
 
 impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
@@ -22,6 +22,18 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         mut st: Storage<'a, T, E>,
         config: RuntimeConfig,
     ) -> Result<Self, ImageError> {
+        // What the image needs of this build, before anything is read into storage (whose
+        // tables a build without a feature does not hold).
+        let needs = ImageReader::new(image, Some(board))?.header;
+        for f in Feature::ALL {
+            if let (false, Some((count, what))) = (f.built(), needs.uses(f)) {
+                return Err(ImageError::Unsupported {
+                    feature: f.name(),
+                    what,
+                    count,
+                });
+            }
+        }
         let mut exchange = Exchange::<T>::new();
         let mut contact = ContactState::new();
         let header = {
@@ -87,7 +99,7 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
             .position(|&b| b == address);
         contact.owns_nodes = st.contact.places.iter().take(nc).any(|p| p.owned);
         let has_contact = c.tools > 0 || c.pairs > 0;
-        let has_graphics = c.graphics_nodes > 0 && header.graphics.interval_steps > 0;
+        let has_graphics = header.uses(Feature::Graphics).is_some();
         Ok(Runtime {
             header,
             program: Program::new(&c.rounds, &c.late_rounds, has_contact, has_graphics),

@@ -519,16 +519,21 @@ fn external_force<T: Real>(
     t: f64,
 ) -> [T; 3] {
     let mut fe = x.gravity;
-    let first = x.first_load as usize;
-    for l in loads.get(first..first + x.loads as usize).unwrap_or(&[]) {
-        let s = l.ramp.map_or(1.0, |p| path_value(points, p, t)[0]);
-        for i in 0..3 {
-            fe[i] += T::from_f64(l.force[i] * s);
+    // (A build without loads or contact loads no image that has them.)
+    if cfg!(feature = "loads") {
+        let first = x.first_load as usize;
+        for l in loads.get(first..first + x.loads as usize).unwrap_or(&[]) {
+            let s = l.ramp.map_or(1.0, |p| path_value(points, p, t)[0]);
+            for i in 0..3 {
+                fe[i] += T::from_f64(l.force[i] * s);
+            }
         }
     }
-    if let Some(f) = x.contact.and_then(|cn| contact_force.get(cn as usize)) {
-        for i in 0..3 {
-            fe[i] += T::from_f64(f[i]);
+    if cfg!(feature = "contact") {
+        if let Some(f) = x.contact.and_then(|cn| contact_force.get(cn as usize)) {
+            for i in 0..3 {
+                fe[i] += T::from_f64(f[i]);
+            }
         }
     }
     fe
