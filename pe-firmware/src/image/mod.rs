@@ -186,6 +186,15 @@ impl Feature {
         }
     }
 
+    /// What [`ImageHeader::uses`] counts of it.
+    pub const fn counted(self) -> &'static str {
+        match self {
+            Feature::Contact => "contact nodes",
+            Feature::Graphics => "graphics nodes",
+            Feature::Loads => "loads",
+        }
+    }
+
     /// Whether this build of the crate has it.
     pub const fn built(self) -> bool {
         match self {
@@ -197,19 +206,19 @@ impl Feature {
 }
 
 impl ImageHeader {
-    /// How much of feature `f` this image holds, and of what (`None`: it needs none of the
-    /// feature's code): the one rule of the loader's refusal, of the step program's
-    /// contact and graphics operations and of the firmware build `pe image` makes.
-    pub const fn uses(&self, f: Feature) -> Option<(u32, &'static str)> {
+    /// How much of feature `f` this image holds ([`Feature::counted`]; `None`: it needs
+    /// none of the feature's code): the one rule of the loader's refusal, of the step
+    /// program's graphics operation and of the firmware build `pe image` makes.
+    pub const fn uses(&self, f: Feature) -> Option<u32> {
         let c = &self.counts;
         match f {
             Feature::Contact if c.tools > 0 || c.pairs > 0 || c.contact_nodes > 0 => {
-                Some((c.contact_nodes, "contact nodes"))
+                Some(c.contact_nodes)
             }
             Feature::Graphics if c.graphics_nodes > 0 && self.graphics.interval_steps > 0 => {
-                Some((c.graphics_nodes as u32, "graphics nodes"))
+                Some(c.graphics_nodes as u32)
             }
-            Feature::Loads if c.loads > 0 => Some((c.loads as u32, "loads")),
+            Feature::Loads if c.loads > 0 => Some(c.loads as u32),
             _ => None,
         }
     }
@@ -487,10 +496,11 @@ pub enum ImageError {
     },
     /// Writing: the output buffer is too small.
     BufferFull,
-    /// The image needs a part of the firmware ([`Feature`]) this build was made without.
+    /// The image needs a part of the firmware ([`Feature`]) this build was made without:
+    /// `count` of what [`ImageHeader::uses`] counts. (No larger than the other variants:
+    /// every step's `Result` carries a `Fault`, which can carry an `ImageError`.)
     Unsupported {
-        feature: &'static str,
-        what: &'static str,
+        feature: Feature,
         count: u32,
     },
 }
@@ -525,13 +535,12 @@ impl core::fmt::Display for ImageError {
                 write!(f, "image refers to {what} {index}, which does not exist")
             }
             ImageError::BufferFull => write!(f, "output buffer too small for the image"),
-            ImageError::Unsupported {
-                feature,
-                what,
-                count,
-            } => write!(
+            ImageError::Unsupported { feature, count } => write!(
                 f,
-                "image has {count} {what}, but this firmware was built without `{feature}` (build it with the cargo feature `{feature}`)"
+                "image has {count} {}, but this firmware was built without `{}` (build it with the cargo feature `{}`)",
+                feature.counted(),
+                feature.name(),
+                feature.name()
             ),
         }
     }

@@ -25,13 +25,9 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         // What the image needs of this build, before anything is read into storage (whose
         // tables a build without a feature does not hold).
         let needs = ImageReader::new(image, Some(board))?.header;
-        for f in Feature::ALL {
-            if let (false, Some((count, what))) = (f.built(), needs.uses(f)) {
-                return Err(ImageError::Unsupported {
-                    feature: f.name(),
-                    what,
-                    count,
-                });
+        for feature in Feature::ALL {
+            if let (false, Some(count)) = (feature.built(), needs.uses(feature)) {
+                return Err(ImageError::Unsupported { feature, count });
             }
         }
         let mut exchange = Exchange::<T>::new();

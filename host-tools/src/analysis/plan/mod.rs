@@ -416,16 +416,17 @@ impl Search<'_> {
         })
     }
 
-    /// Records a choice that was not run, and why.
-    fn not_run(&mut self, choice: &str, mesh: &Mesh, why: String) {
+    /// Records a choice that did not run to the end (or was not run), and why: its mesh,
+    /// and the settings of its problem when it has one.
+    fn not_run(&mut self, choice: &str, mesh: &Mesh, p: Option<&Problem>, why: String) {
         self.rows.push(Row {
             choice: choice.into(),
             accepted: false,
             elements: mesh.cells.len(),
             nodes: mesh.nodes.len(),
-            precision: String::new(),
-            mass_scaling: 0.0,
-            dt_s: 0.0,
+            precision: p.map_or(String::new(), |p| p.solver.precision.name().into()),
+            mass_scaling: p.map_or(0.0, |p| p.solver.mass_scaling),
+            dt_s: p.map_or(0.0, |p| p.time_step.dt_s),
             steps: 0,
             element_steps_per_sim_s: 0.0,
             boards_needed_at_10_khz: None,
@@ -446,26 +447,7 @@ impl Search<'_> {
         let t = match trace::run(p, &format!("{} [{choice}]", self.name)) {
             Ok(t) => t,
             Err(e) => {
-                self.rows.push(Row {
-                    choice: choice.into(),
-                    accepted: false,
-                    elements: p.mesh.cells.len(),
-                    nodes: p.mesh.nodes.len(),
-                    precision: p.solver.precision.name().into(),
-                    mass_scaling: p.solver.mass_scaling,
-                    dt_s: p.time_step.dt_s,
-                    steps: 0,
-                    element_steps_per_sim_s: 0.0,
-                    boards_needed_at_10_khz: None,
-                    bytes_per_step: None,
-                    array_keeps_real_time: None,
-                    host_wall_s: 0.0,
-                    host_real_time_factor: 0.0,
-                    tool_force_err_rel: None,
-                    displacement_err_rel: f64::NAN,
-                    compared_nodes: 0,
-                    note: format!("the run failed: {e:#}"),
-                });
+                self.not_run(choice, &p.mesh, Some(p), format!("the run failed: {e:#}"));
                 return Ok(None);
             }
         };
@@ -1066,6 +1048,7 @@ fn try_coarsen(s: &mut Search<'_>, held: &mut Held, scene: &Scene) -> Result<()>
                 s.not_run(
                     &choice,
                     &c.mesh,
+                    None,
                     format!("the scene does not fit the coarse mesh: {e:#}"),
                 );
                 break;
