@@ -492,6 +492,7 @@ fn pe_compile_keeps_the_balance_with_the_smaller_worst_ratio() {
     if let Some(g) = &v.global_busiest {
         expect = expect.max(g.time_per_step_s / r.dt_s);
     }
+    expect = expect.max(r.step_model.timing.step_s / r.dt_s);
     assert!(expect > 0.0);
     assert!(
         (v.worst_ratio - expect).abs() <= 1e-12 * expect,

@@ -326,6 +326,9 @@ pub fn report(
         mut real_time,
     } = figures(problem, plan, profile)?;
     let step_model = step_model(problem, plan, images, profile)?;
+    real_time.worst_ratio = real_time
+        .worst_ratio
+        .max(step_model.timing.step_s / step_model.timing.dt_s);
     if !step_model.timing.real_time {
         real_time.keeps_real_time = false;
         real_time.reasons.push(step_model_reason(&step_model));
@@ -477,10 +480,11 @@ pub struct RealTimeVerdict {
     pub global_busiest: Option<GlobalPortLoad>,
     pub global_fits: bool,
     /// The largest of a steady step's compute over its budget, the busiest link's and the
-    /// busiest global port's time over the step (at most 1 when it keeps real time; the
-    /// check step's ratio is `check_step_s_max / compute_budget_s`, which the search of the
-    /// whole table on each contact board makes nearly the same whatever the partition, so
-    /// the balances are compared on this).
+    /// busiest global port's time over the step and, in a compile report, the step model's
+    /// steady step over the step (at most 1 when it keeps real time; the check step's ratio
+    /// is `check_step_s_max / compute_budget_s`, which the search of the whole table on
+    /// each contact board makes nearly the same whatever the partition, so the balances
+    /// are compared on this).
     pub worst_ratio: f64,
     /// Why not, one line each (empty when it keeps real time).
     pub reasons: Vec<String>,
@@ -494,17 +498,7 @@ fn step_model(
     images: &[BoardImage],
     profile: &BoardProfile,
 ) -> Result<StepModel> {
-    let decoded = images
-        .iter()
-        .map(|im| {
-            super::decode_image(&im.bytes, None).map_err(|e| {
-                anyhow::anyhow!(
-                    "board {:?}: the step model cannot read its image: {e}",
-                    im.coords
-                )
-            })
-        })
-        .collect::<Result<Vec<_>>>()?;
+    let decoded = decoded(images)?;
     let dims = plan.machine.dims;
     let t = super::timing::SimTiming::for_precision(profile, problem.solver.precision);
     let needs = super::timing::needs(&decoded, dims, t)?;
@@ -514,6 +508,21 @@ fn step_model(
         clock_hz_needed: needs.clock_hz,
         frames_alone_s: needs.frames_alone_s,
     })
+}
+
+/// The images as the step model reads them.
+fn decoded(images: &[BoardImage]) -> Result<Vec<super::DecodedImage>> {
+    images
+        .iter()
+        .map(|im| {
+            super::decode_image(&im.bytes, None).map_err(|e| {
+                anyhow::anyhow!(
+                    "board {:?}: the step model cannot read its image: {e}",
+                    im.coords
+                )
+            })
+        })
+        .collect()
 }
 
 /// The verdict's line for a modelled step over dt.
@@ -628,8 +637,9 @@ pub struct BalanceTried {
 }
 
 /// The schedule `pe compile` uses: the partition balancing elements and the one balancing
-/// cost (when the elements' costs differ), the one whose verdict's worst time ratio
-/// ([`RealTimeVerdict::worst_ratio`]) is smaller (elements on a tie); with the other's.
+/// cost (when the elements' costs differ), the one whose worst time ratio
+/// ([`RealTimeVerdict::worst_ratio`], with the step model's steady step: each is compiled
+/// and replayed) is smaller (elements on a tie); with the other's.
 pub fn plan_for_real_time(
     problem: &Problem,
     machine: Machine,
@@ -640,8 +650,16 @@ pub fn plan_for_real_time(
         return Ok((by_elements, None));
     }
     let by_cost = plan_balanced(problem, machine, Balance::Cost)?;
-    let re = real_time_of(problem, &by_elements, profile)?.worst_ratio;
-    let rc = real_time_of(problem, &by_cost, profile)?.worst_ratio;
+    // The report's worst ratio: the verdict's figures and the step model's steady step.
+    let worst_ratio = |plan: &Plan| -> Result<f64> {
+        let v = real_time_of(problem, plan, profile)?;
+        let images = decoded(&super::compile_images(problem, plan)?)?;
+        let t = super::timing::SimTiming::for_precision(profile, problem.solver.precision);
+        let m = super::timing::model(&images, plan.machine.dims, t)?;
+        Ok(v.worst_ratio.max(m.step_s / m.dt_s))
+    };
+    let re = worst_ratio(&by_elements)?;
+    let rc = worst_ratio(&by_cost)?;
     Ok(if rc < re {
         (
             by_cost,
