@@ -1038,12 +1038,13 @@ fn run_worker<T: WireReal + 'static, E: ElementRecord<T> + 'static>(
 
 /// Reads every board's image named in the manifest, in board-index order, checking each
 /// against its position and the machine (and, with `check_manifest`, the set against the
-/// manifest: [`check_image_set`]); returns them with the first header.
+/// manifest: [`check_image_set`]); returns them with the first header and the scene's tool
+/// count.
 fn read_images(
     dir: &Path,
     manifest: &Manifest,
     check_manifest: bool,
-) -> Result<(Vec<Vec<u8>>, ImageHeader)> {
+) -> Result<(Vec<Vec<u8>>, ImageHeader, usize)> {
     let dims = manifest.machine;
     let count = dims.iter().product::<usize>();
     if manifest.boards.len() != count {
@@ -1100,12 +1101,19 @@ fn read_images(
         .first()
         .map(|f| f.header)
         .ok_or_else(|| anyhow!("{}: no boards", dir.display()))?;
+    // The scene's tools: the most any image holds (a board that owns no contact node
+    // carries no contact tables).
+    let tools = files
+        .iter()
+        .map(|f| f.header.counts.tools as usize)
+        .max()
+        .unwrap_or(0);
     let mut images = vec![Vec::new(); count];
     for f in files {
         let i = f.board[0] + dims[0] * (f.board[1] + dims[1] * f.board[2]);
         images[i] = f.bytes;
     }
-    Ok((images, header))
+    Ok((images, header, tools))
 }
 
 fn add3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -1239,20 +1247,12 @@ pub fn run(
     on_progress: &mut dyn FnMut(u64, u64),
 ) -> Result<SimOutput> {
     let manifest = read_manifest(dir)?;
-    let (images, header) = read_images(dir, &manifest, opts.check_manifest)?;
+    let (images, header, tools) = read_images(dir, &manifest, opts.check_manifest)?;
     let dims = manifest.machine;
     if let Some(spec) = &opts.faults {
         spec.check(dims)?;
     }
     let count = images.len();
-    // The scene's tools: the most any image holds (a board that owns no contact node
-    // carries no contact tables).
-    let tools = images
-        .iter()
-        .filter_map(|im| ImageReader::new(im, None).ok())
-        .map(|r| r.header.counts.tools as usize)
-        .max()
-        .unwrap_or(0);
     let steps = opts
         .steps
         .unwrap_or(header.params.steps)

@@ -341,19 +341,7 @@ fn contact_tables_of_board<T, E>(
     let Some((run, boards)) = &shared.contact else {
         return;
     };
-    if !run
-        .nodes
-        .iter()
-        .any(|n| plan.node_owner[n.global as usize] as usize == b)
-    {
-        return;
-    }
-    t.contact_nodes = run.nodes.clone();
-    t.faces = run.faces.clone();
-    t.pairs = run.pairs.clone();
-    t.tools = run.tools.clone();
-    t.contact_boards = boards.clone();
-    t.places = run
+    let places: Vec<ContactNodePlace> = run
         .nodes
         .iter()
         .map(|n| ContactNodePlace {
@@ -361,6 +349,15 @@ fn contact_tables_of_board<T, E>(
             owned: plan.node_owner[n.global as usize] as usize == b,
         })
         .collect();
+    if !places.iter().any(|p| p.owned) {
+        return;
+    }
+    t.contact_nodes = run.nodes.clone();
+    t.faces = run.faces.clone();
+    t.pairs = run.pairs.clone();
+    t.tools = run.tools.clone();
+    t.contact_boards = boards.clone();
+    t.places = places;
 }
 
 /// An upper bound of an image's length: every record at most its in-memory size plus

@@ -9,10 +9,7 @@ use pe_firmware::profile::BoardProfile;
 use serde::Serialize;
 
 use super::partition::Machine;
-use super::{
-    check_fit, compile_images, image_file_name, plan_for_real_time, report, write_images,
-    CompileReport,
-};
+use super::{check_fit, image_file_name, plan_for_real_time, report, write_images, CompileReport};
 use crate::problem::Problem;
 
 /// `DIR/manifest.json`.
@@ -53,8 +50,7 @@ pub fn compile_to_dir(
     profile: &BoardProfile,
     dir: &Path,
 ) -> Result<CompileReport> {
-    let (plan, balance_other) = plan_for_real_time(problem, machine, profile)?;
-    let images = compile_images(problem, &plan)?;
+    let (plan, images, balance_other) = plan_for_real_time(problem, machine, profile)?;
     check_fit(&images, profile)?;
     write_images(dir, &images)?;
     let dt = problem.time_step.dt_s;

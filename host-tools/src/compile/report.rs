@@ -501,9 +501,9 @@ fn step_model(
     let decoded = decoded(images)?;
     let dims = plan.machine.dims;
     let t = super::timing::SimTiming::for_precision(profile, problem.solver.precision);
-    let needs = super::timing::needs(&decoded, dims, t)?;
+    let (timing, needs) = super::timing::model_and_needs(&decoded, dims, t)?;
     Ok(StepModel {
-        timing: super::timing::model(&decoded, dims, t)?,
+        timing,
         link_bytes_per_s_needed: needs.link_bytes_per_s,
         clock_hz_needed: needs.clock_hz,
         frames_alone_s: needs.frames_alone_s,
@@ -639,43 +639,40 @@ pub struct BalanceTried {
 /// The schedule `pe compile` uses: the partition balancing elements and the one balancing
 /// cost (when the elements' costs differ), the one whose worst time ratio
 /// ([`RealTimeVerdict::worst_ratio`], with the step model's steady step: each is compiled
-/// and replayed) is smaller (elements on a tie); with the other's.
+/// and replayed) is smaller (elements on a tie); with its images and the other's ratio.
 pub fn plan_for_real_time(
     problem: &Problem,
     machine: Machine,
     profile: &BoardProfile,
-) -> Result<(Plan, Option<BalanceTried>)> {
+) -> Result<(Plan, Vec<BoardImage>, Option<BalanceTried>)> {
     let by_elements = plan_balanced(problem, machine, Balance::Elements)?;
     if super::partition::equal_weights(&super::partition::cost_weights(problem)) {
-        return Ok((by_elements, None));
+        let images = super::compile_images(problem, &by_elements)?;
+        return Ok((by_elements, images, None));
     }
     let by_cost = plan_balanced(problem, machine, Balance::Cost)?;
     // The report's worst ratio: the verdict's figures and the step model's steady step.
-    let worst_ratio = |plan: &Plan| -> Result<f64> {
-        let v = real_time_of(problem, plan, profile)?;
-        let images = decoded(&super::compile_images(problem, plan)?)?;
+    let compiled = |plan: Plan| -> Result<(Plan, Vec<BoardImage>, f64)> {
+        let v = real_time_of(problem, &plan, profile)?;
+        let images = super::compile_images(problem, &plan)?;
         let t = super::timing::SimTiming::for_precision(profile, problem.solver.precision);
-        let m = super::timing::model(&images, plan.machine.dims, t)?;
-        Ok(v.worst_ratio.max(m.step_s / m.dt_s))
+        let m = super::timing::model(&decoded(&images)?, plan.machine.dims, t)?;
+        Ok((plan, images, v.worst_ratio.max(m.step_s / m.dt_s)))
     };
-    let re = worst_ratio(&by_elements)?;
-    let rc = worst_ratio(&by_cost)?;
+    let (pe, ie, re) = compiled(by_elements)?;
+    let (pc, ic, rc) = compiled(by_cost)?;
     Ok(if rc < re {
-        (
-            by_cost,
-            Some(BalanceTried {
-                balance: Balance::Elements,
-                worst_ratio: re,
-            }),
-        )
+        let other = BalanceTried {
+            balance: Balance::Elements,
+            worst_ratio: re,
+        };
+        (pc, ic, Some(other))
     } else {
-        (
-            by_elements,
-            Some(BalanceTried {
-                balance: Balance::Cost,
-                worst_ratio: rc,
-            }),
-        )
+        let other = BalanceTried {
+            balance: Balance::Cost,
+            worst_ratio: rc,
+        };
+        (pe, ie, Some(other))
     })
 }
 

@@ -113,7 +113,7 @@ pub fn model(imgs: &[DecodedImage], dims: [usize; 3], t: SimTiming) -> anyhow::R
 }
 
 /// What the step model says the scene needs to keep its step, each figure with the other
-/// inputs of `t` as they are ([`needs`]).
+/// inputs of `t` as they are ([`model_and_needs`]).
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct Needs {
     /// The least link rate (bytes/s each way, the frames' fixed time as `t` has it) at
@@ -147,16 +147,20 @@ fn least(fits: impl Fn(f64) -> bool) -> Option<f64> {
     Some(hi)
 }
 
-/// The step model's needs ([`Needs`]): the least link rate at `t`'s clock and the least
-/// clock at `t`'s links (the modelled step only shortens as either grows), and the frames'
-/// chain with the compute free.
-pub fn needs(imgs: &[DecodedImage], dims: [usize; 3], t: SimTiming) -> anyhow::Result<Needs> {
+/// One step of the model at `t` ([`model`]) and its needs ([`Needs`]): the least link
+/// rate at `t`'s clock and the least clock at `t`'s links (the modelled step only shortens
+/// as either grows), and the frames' chain with the compute free. One replay for all.
+pub fn model_and_needs(
+    imgs: &[DecodedImage],
+    dims: [usize; 3],
+    t: SimTiming,
+) -> anyhow::Result<(StepTiming, Needs)> {
     let replay = Replay::new(imgs, dims)?;
     let free = replay.run(SimTiming {
         clock_hz: f64::INFINITY,
         ..t
     });
-    Ok(Needs {
+    let needs = Needs {
         link_bytes_per_s: least(|rate| {
             replay
                 .run(SimTiming {
@@ -167,7 +171,8 @@ pub fn needs(imgs: &[DecodedImage], dims: [usize; 3], t: SimTiming) -> anyhow::R
         }),
         clock_hz: least(|clock_hz| replay.run(SimTiming { clock_hz, ..t }).real_time),
         frames_alone_s: free.check_step_s.unwrap_or(0.0).max(free.step_s),
-    })
+    };
+    Ok((replay.run(t), needs))
 }
 
 /// What replaying a step needs besides the timing figures, worked out once from the

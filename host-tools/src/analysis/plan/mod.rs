@@ -317,8 +317,7 @@ fn array_figures(
     profile: &pe_firmware::profile::BoardProfile,
 ) -> Result<ArrayFigures> {
     // The schedule `pe compile` would make (the better of the two balances).
-    let (plan, other) = crate::compile::plan_for_real_time(p, machine, profile)?;
-    let images = crate::compile::compile_images(p, &plan)?;
+    let (plan, images, other) = crate::compile::plan_for_real_time(p, machine, profile)?;
     let mut r = crate::compile::report("plan", p, &plan, &images, profile)?;
     r.balance_other = other;
     let boards = plan
@@ -1040,8 +1039,7 @@ fn try_coarsen(s: &mut Search<'_>, held: &mut Held, scene: &Scene) -> Result<()>
             c.fine_cells_added,
             c.loose_cells_left_out
         );
-        let mut r = Reduced::whole(scene, c.mesh.clone());
-        r.coarsened = true;
+        let r = Reduced::coarsened(scene, c.mesh.clone());
         let p = match r.problem() {
             Ok(p) => p,
             Err(e) => {

@@ -377,9 +377,9 @@ fn written_mesh() -> MeshSpec {
 }
 
 impl Reduced {
-    /// `scene` on another mesh of its own (a coarsened one), nothing pruned: every cell
-    /// kept, the mesh's node sets the ones its selections by name read.
-    pub fn whole(scene: &Scene, mesh: Mesh) -> Reduced {
+    /// `scene` on a coarsened mesh of its own, nothing pruned: every cell kept, the mesh's
+    /// node sets the ones its selections by name read.
+    pub fn coarsened(scene: &Scene, mesh: Mesh) -> Reduced {
         let mut out = scene.clone();
         out.mesh = written_mesh();
         Reduced {
@@ -391,7 +391,7 @@ impl Reduced {
             mesh,
             held_nodes: 0,
             fraction: None,
-            coarsened: false,
+            coarsened: true,
         }
     }
 
