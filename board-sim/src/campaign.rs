@@ -12,7 +12,7 @@ use anyhow::{bail, Result};
 use board_sim::links::{FaultSpec, Rng};
 use board_sim::{run, SimFault, SimOptions};
 use host_tools::compile::image_file_name;
-use pe_firmware::runtime::fault::neighbour;
+use link_proto::machine::across;
 use pe_firmware::runtime::FaultKind;
 
 /// How a run ended.
@@ -112,9 +112,11 @@ fn names_swap(result: &Result<board_sim::SimOutput>, b: [usize; 3]) -> bool {
                     .observed
                     .iter()
                     .filter_map(|o| match o.fault.kind {
-                        FaultKind::CompilationMismatch { face, .. } => {
-                            Some(o.fault.board == b8 || neighbour(o.fault.board, face) == Some(b8))
-                        }
+                        FaultKind::CompilationMismatch { face, .. } => Some(
+                            o.fault.board == b8
+                                || across(o.fault.board.map(usize::from), face)
+                                    == Some(b8.map(usize::from)),
+                        ),
                         _ => None,
                     })
                     .collect();

@@ -281,10 +281,8 @@ impl HostCheck {
 
     /// The board (coordinates) at a global address, if it is one of this machine's.
     fn coords(&self, address: u8) -> Option<[usize; 3]> {
-        let d = self.dims;
-        (0..self.said.len())
-            .map(|b| [b % d[0], (b / d[0]) % d[1], b / (d[0] * d[1])])
-            .find(|c| link_proto::link::board_at(c[0], c[1], c[2]) == Some(address))
+        link_proto::Machine::from_address(address)
+            .filter(|&c| c.iter().zip(self.dims).all(|(&c, d)| c < d))
     }
 
     /// Looks at the host packets that arrived since the last call.
@@ -553,14 +551,7 @@ impl std::error::Error for SimFault {}
 
 /// The board across `face` of `board` on a `dims` machine.
 fn neighbour(dims: [usize; 3], board: [u8; 3], face: link_proto::Face) -> Option<[usize; 3]> {
-    let mut c = board.map(|v| v as usize);
-    let a = face.index() / 2;
-    if face.sign() > 0 {
-        c[a] += 1;
-    } else {
-        c[a] = c[a].checked_sub(1)?;
-    }
-    (c[a] < dims[a]).then_some(c)
+    link_proto::Machine::new(dims)?.neighbour(board.map(usize::from), face)
 }
 
 /// The damaged packets the sinks received (without global recovery), as observations (taken
@@ -574,8 +565,8 @@ fn sink_observations(net: &links::GlobalNet) -> Vec<Observed> {
         .into_iter()
         .map(|f| Observed {
             fault: Fault {
-                board: link_proto::link::board_coords(f.src)
-                    .map_or([u8::MAX; 3], |(x, y, z)| [x as u8, y as u8, z as u8]),
+                board: link_proto::Machine::from_address(f.src)
+                    .map_or([u8::MAX; 3], |c| c.map(|v| v as u8)),
                 step: f.step.map_or(0, u64::from),
                 kind: pe_firmware::runtime::FaultKind::BadPacket { error: f.error },
             },
@@ -603,7 +594,7 @@ fn missing_sink_packets(
     };
     let mut out = Vec::new();
     for b in boards {
-        let Some(addr) = link_proto::link::board_at(b.board[0], b.board[1], b.board[2]) else {
+        let Some(addr) = link_proto::Machine::address(b.board) else {
             continue;
         };
         for (sink, m, sent) in [
@@ -639,8 +630,8 @@ fn explains_global<'a>(o: &Observed, injected: &'a [Injected]) -> Option<&'a Inj
     use pe_firmware::runtime::FaultKind as K;
     let to_usize = |b: [u8; 3]| b.map(|v| v as usize);
     let me = o.fault.board;
-    let me_addr = link_proto::link::board_at(me[0] as usize, me[1] as usize, me[2] as usize);
-    let coords = |a: u8| link_proto::link::board_coords(a).map(|(x, y, z)| [x, y, z]);
+    let me_addr = link_proto::Machine::address(me.map(usize::from));
+    let coords = link_proto::Machine::from_address;
     let in_time = |i: &&Injected| i.step as u64 <= o.fault.step + 1 && i.face.starts_with("global");
     let latest = |f: &dyn Fn(&Injected) -> bool| {
         injected

@@ -269,8 +269,8 @@ pub fn address_name(addr: u8) -> String {
         ADDR_GRAPHICS => "graphics".into(),
         ADDR_HOST => "host".into(),
         ADDR_BROADCAST => "broadcast".into(),
-        a => match link_proto::link::board_coords(a) {
-            Some((x, y, z)) => format!("({x},{y},{z})"),
+        a => match link_proto::Machine::from_address(a) {
+            Some([x, y, z]) => format!("({x},{y},{z})"),
             None => format!("address {a}"),
         },
     }
@@ -370,7 +370,7 @@ pub fn build_links(
     let mut addresses = vec![u8::MAX; count];
     for b in 0..count {
         let c = coords(b);
-        if let Some(a) = link_proto::link::board_at(c[0], c[1], c[2]) {
+        if let Some(a) = link_proto::Machine::address(c) {
             inboxes[a as usize] = Some(Arc::new(Channel {
                 queue: Mutex::new(Queue::default()),
                 len: AtomicUsize::new(0),

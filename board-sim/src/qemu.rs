@@ -172,7 +172,7 @@ impl std::error::Error for ArrayFault {}
 
 /// The global address of a board.
 fn address(c: [usize; 3]) -> u8 {
-    link_proto::link::board_at(c[0], c[1], c[2]).unwrap_or(u8::MAX)
+    link_proto::Machine::address(c).unwrap_or(u8::MAX)
 }
 
 fn name(c: [usize; 3]) -> String {
@@ -194,11 +194,10 @@ fn timed_out_neighbour(text: &str) -> Option<[usize; 3]> {
     if !text.contains("no frame within the timeout") {
         return None;
     }
-    let [x, y, z] = parse_board(text.strip_prefix("board (")?.split(')').next()?)?;
+    let board = parse_board(text.strip_prefix("board (")?.split(')').next()?)?;
     let face = text.split(": link ").nth(1)?.split(':').next()?;
     let f = Face::ALL.into_iter().find(|f| format!("{f:?}") == face)?;
-    let n = pe_firmware::runtime::fault::neighbour([x as u8, y as u8, z as u8], f)?;
-    Some(n.map(usize::from))
+    link_proto::machine::across(board, f)
 }
 
 /// One board's QEMU and what it said.

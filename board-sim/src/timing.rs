@@ -7,7 +7,8 @@ use host_tools::compile::{decode_image, image_file_name, DecodedImage};
 
 /// Models one step of the machine of `dims` whose images are in `dir`.
 pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::Result<StepTiming> {
-    let machine = Machine { dims };
+    let machine =
+        Machine::new(dims).ok_or_else(|| anyhow::anyhow!("{dims:?}: 1..16 boards per axis"))?;
     let mut imgs: Vec<DecodedImage> = Vec::with_capacity(machine.count());
     for b in 0..machine.count() {
         let p = dir.join(image_file_name(machine.coords(b)));

@@ -71,6 +71,7 @@ pub mod frame;
 pub mod framing;
 pub mod limits;
 pub mod link;
+pub mod machine;
 pub mod packet;
 pub mod payload;
 pub mod reliable;
@@ -82,5 +83,6 @@ pub use frame::{emit_values, Frame, FrameKind, FrameRepr, Payload, Precision, Va
 pub use framing::{encode_wire, StreamDecoder};
 pub use limits::*;
 pub use link::{Axis, Face, Links, Peek, RecvError, SendError};
+pub use machine::Machine;
 pub use packet::{Control, Packet, PacketKind, PacketRepr};
 pub use stream::{FacePort, GlobalPort, StreamLinks, StreamPort};

@@ -12,8 +12,6 @@
 use core::fmt;
 
 use crate::error::Error;
-use crate::limits::GRID_DIM;
-use crate::packet::BoardId;
 
 /// A spatial axis.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -107,44 +105,6 @@ impl Face {
 
 /// The faces' names in [`Face::index`] order (reports, command lines).
 pub const FACE_NAMES: [&str; Face::COUNT] = ["+x", "-x", "+y", "-y", "+z", "-z"];
-
-/// Grid coordinates `(x, y, z)` of a board id (`x + 4y + 16z`), or `None`
-/// for an id outside the array.
-pub const fn board_coords(board: BoardId) -> Option<(usize, usize, usize)> {
-    let b = board as usize;
-    if b >= GRID_DIM * GRID_DIM * GRID_DIM {
-        return None;
-    }
-    Some((
-        b % GRID_DIM,
-        (b / GRID_DIM) % GRID_DIM,
-        b / (GRID_DIM * GRID_DIM),
-    ))
-}
-
-/// The board id at grid coordinates, or `None` outside the array.
-pub const fn board_at(x: usize, y: usize, z: usize) -> Option<BoardId> {
-    if x >= GRID_DIM || y >= GRID_DIM || z >= GRID_DIM {
-        return None;
-    }
-    Some((x + GRID_DIM * (y + GRID_DIM * z)) as BoardId)
-}
-
-/// The neighbour of `board` across `face`, or `None` at the array's edge.
-pub const fn neighbour(board: BoardId, face: Face) -> Option<BoardId> {
-    let Some((x, y, z)) = board_coords(board) else {
-        return None;
-    };
-    match face {
-        Face::PosX => board_at(x + 1, y, z),
-        Face::NegX if x > 0 => board_at(x - 1, y, z),
-        Face::PosY => board_at(x, y + 1, z),
-        Face::NegY if y > 0 => board_at(x, y - 1, z),
-        Face::PosZ => board_at(x, y, z + 1),
-        Face::NegZ if z > 0 => board_at(x, y, z - 1),
-        _ => None,
-    }
-}
 
 /// Why a send did not happen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -6,8 +6,8 @@ use std::collections::VecDeque;
 use std::rc::Rc;
 
 use embedded_io::{ErrorKind, ErrorType, Read, ReadReady, Write, WriteReady};
-use link_proto::link::{board_at, board_coords, neighbour};
 use link_proto::packet::ADDR_HOST;
+use link_proto::Machine;
 use link_proto::{
     emit_values, Axis, Error, Face, FrameKind, FrameRepr, Links, PacketKind, PacketRepr, RecvError,
     SendError, StreamLinks, Values, BOARD_COUNT, FRAME_LEN_MAX, PACKET_LEN_MAX,
@@ -131,10 +131,17 @@ fn face_geometry() {
 // ends through opposite faces; ids outside the grid have no neighbours.
 #[test]
 fn grid_neighbours() {
+    // The address space is the 4x4x4 machine: addresses and neighbours through it.
+    let m = Machine::ADDRESSES;
+    let neighbour = |b: u8, f: Face| {
+        Machine::from_address(b)
+            .and_then(|c| m.neighbour(c, f))
+            .and_then(Machine::address)
+    };
     let mut directed = 0;
     for b in 0..BOARD_COUNT as u8 {
-        let (x, y, z) = board_coords(b).unwrap();
-        assert_eq!(board_at(x, y, z), Some(b));
+        let c = Machine::from_address(b).unwrap();
+        assert_eq!(Machine::address(c), Some(b));
         for f in Face::ALL {
             if let Some(n) = neighbour(b, f) {
                 directed += 1;

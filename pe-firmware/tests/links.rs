@@ -1,7 +1,7 @@
 //! Which faces a board links, which UART each takes under QEMU, and the Hello frame that
 //! checks the cables: against independent constructions.
 
-use link_proto::link::{board_at, neighbour};
+use link_proto::machine::{across, Machine};
 use link_proto::Face;
 use pe_firmware::image::{linked_faces, CompilationId};
 use pe_firmware::profile::mps2_uarts::{face_uarts, FACE_UARTS, GLOBAL_UART, UART_BASES};
@@ -27,12 +27,9 @@ fn linked_faces_are_the_machine_neighbours_on_axes_with_rounds() {
         for rounds in [[1, 1, 1], [1, 0, 2], [0, 0, 0]] {
             for b in boards(m) {
                 let l = linked_faces(b, m, rounds);
-                let id = board_at(b[0] as usize, b[1] as usize, b[2] as usize).unwrap();
+                let machine = Machine::new(m.map(usize::from)).expect("a machine");
                 for f in Face::ALL {
-                    let inside = neighbour(id, f).is_some_and(|n| {
-                        let (x, y, z) = link_proto::link::board_coords(n).unwrap();
-                        x < m[0] as usize && y < m[1] as usize && z < m[2] as usize
-                    });
+                    let inside = machine.neighbour(b.map(usize::from), f).is_some();
                     let axis = f.index() / 2;
                     assert_eq!(
                         l[f.index()],
@@ -40,7 +37,7 @@ fn linked_faces_are_the_machine_neighbours_on_axes_with_rounds() {
                         "{b:?} of {m:?} {f:?}"
                     );
                     if l[f.index()] {
-                        let n = pe_firmware::runtime::fault::neighbour(b, f).unwrap();
+                        let n = across(b.map(usize::from), f).unwrap().map(|c| c as u8);
                         assert!(linked_faces(n, m, rounds)[f.opposite().index()]);
                         checked += 1;
                     }

@@ -70,7 +70,7 @@ pub fn repo_scene(name: &str) -> Problem {
 pub fn compile(problem: &Problem, source: &str, machine: &str, name: &str) -> TempDir {
     let dir = temp_dir(name);
     let m = Machine::parse(machine).expect("machine");
-    let profile = if m.dims.iter().all(|&d| d <= 2) {
+    let profile = if m.dims().iter().all(|&d| d <= 2) {
         pe_firmware::profile::QEMU_MPS2_AN500
     } else {
         pe_firmware::profile::PE_BOARD

@@ -179,9 +179,7 @@ fn a_dropped_global_packet_stops_the_run_naming_it() {
             assert_global_cause(&f, "drop");
             let d = &f.observed[f.cause.detected];
             let face = f.cause.face.as_deref().unwrap();
-            let src =
-                link_proto::link::board_at(f.cause.board[0], f.cause.board[1], f.cause.board[2])
-                    .unwrap();
+            let src = link_proto::Machine::address(f.cause.board).unwrap();
             match (d.sink, d.fault.kind) {
                 (Some(sink), _) => {
                     assert_eq!(

@@ -12,9 +12,9 @@ use host_tools::compile::{
 };
 use host_tools::problem::Problem;
 use host_tools::scene::builtin::builtin_scene;
+use link_proto::machine::across;
 use link_proto::FrameKind;
 use pe_firmware::image::{stamp_compilation, CompilationId, ImageError};
-use pe_firmware::runtime::fault::neighbour;
 use pe_firmware::runtime::FaultKind;
 use system_tests::*;
 
@@ -167,9 +167,8 @@ fn a_mixed_set_is_refused_by_the_host_and_by_the_boards() {
         let FaultKind::CompilationMismatch { face, ours, theirs } = root.kind else {
             panic!("the root cause is the mismatch, not a timeout: {f}");
         };
-        let other = neighbour(root.board, face).expect("a neighbour");
-        let odd8 = odd.map(|c| c as u8);
-        assert!(root.board == odd8 || other == odd8, "{root}");
+        let other = across(root.board.map(usize::from), face).expect("a neighbour");
+        assert!(root.board.map(usize::from) == odd || other == odd, "{root}");
         let mut ids = [ours.to_string(), theirs.to_string()];
         ids.sort();
         let mut want = [id_a.clone(), id_b.clone()];
@@ -178,8 +177,8 @@ fn a_mixed_set_is_refused_by_the_host_and_by_the_boards() {
         assert!(root.to_string().contains(&format!("{face:?}")), "{root}");
         for x in f.observed.iter().map(|o| &o.fault) {
             if let FaultKind::CompilationMismatch { face, .. } = x.kind {
-                let n = neighbour(x.board, face).expect("a neighbour");
-                assert!(x.board == odd8 || n == odd8, "{x}");
+                let n = across(x.board.map(usize::from), face).expect("a neighbour");
+                assert!(x.board.map(usize::from) == odd || n == odd, "{x}");
             }
         }
         assert_eq!(root.step, 0, "before step 0's exchange");

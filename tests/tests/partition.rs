@@ -26,7 +26,7 @@ fn independent_vectors(problem: &Problem, machine: Machine, element_board: &[u32
     assert_eq!(element_board.len(), mesh.cells.len());
     let coords = |b: u32| -> [usize; 3] {
         let b = b as usize;
-        let [dx, dy, _] = machine.dims;
+        let [dx, dy, _] = machine.dims();
         [b % dx, (b / dx) % dy, b / (dx * dy)]
     };
     let mut lo = vec![[usize::MAX; 3]; mesh.nodes.len()];

@@ -92,7 +92,7 @@ fn send_order_equals_receive_order_on_every_link() {
         for (b, d) in dec.iter().enumerate() {
             let c = m.coords(b);
             for a in 0..3 {
-                if c[a] + 1 >= m.dims[a] {
+                if c[a] + 1 >= m.dims()[a] {
                     continue;
                 }
                 let mut nc = c;

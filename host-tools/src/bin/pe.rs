@@ -574,7 +574,8 @@ fn compile(
 ) -> Result<()> {
     let (mut sc, dir, name) = scene.load()?;
     overrides.apply(&mut sc);
-    let machine = host_tools::compile::partition::Machine::parse(boards)?;
+    let machine = host_tools::compile::partition::Machine::parse(boards)
+        .map_err(|e| anyhow::anyhow!("--boards {boards:?}: {e}"))?;
     let prof = pe_firmware::profile::profile(profile).with_context(|| {
         let known: Vec<&str> = pe_firmware::profile::PROFILES
             .iter()

@@ -160,7 +160,7 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
         // Stamped by `compile_images` once every image of the set is written.
         compilation: CompilationId::UNSET,
         board: bp.coords.map(|c| c as u8),
-        machine: plan.machine.dims.map(|c| c as u8),
+        machine: plan.machine.dims().map(|c| c as u8),
         precision: T::PRECISION,
         integration: E::INTEGRATION,
         counts: t.counts(
@@ -401,7 +401,7 @@ pub fn contact_tables(
     let mut boards = Vec::new();
     for b in owners {
         let c = plan.machine.coords(b);
-        let id = link_proto::link::board_at(c[0], c[1], c[2]).ok_or_else(|| {
+        let id = link_proto::Machine::address(c).ok_or_else(|| {
             anyhow!(
                 "board {c:?} owns contact nodes but has no global-network address: contact needs a machine of at most {g}x{g}x{g} boards",
                 g = link_proto::GRID_DIM

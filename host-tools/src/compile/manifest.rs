@@ -62,7 +62,7 @@ pub fn compile_to_dir(
             .map(|im| im.header.compilation.to_string())
             .unwrap_or_default(),
         scene_source: scene_source.to_string(),
-        machine: machine.dims,
+        machine: machine.dims(),
         profile: profile.name.to_string(),
         precision: problem.solver.precision.name().to_string(),
         integration: problem.solver.integration.name().to_string(),

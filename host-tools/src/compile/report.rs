@@ -169,10 +169,7 @@ fn contact_report(
     };
     let board_index: Vec<usize> = boards
         .iter()
-        .map(|&a| {
-            let (x, y, z) = link_proto::link::board_coords(a).unwrap_or((0, 0, 0));
-            plan.machine.index([x, y, z])
-        })
+        .map(|&a| link_proto::Machine::from_address(a).map_or(0, |c| plan.machine.index(c)))
         .collect();
     let pair_nodes = |b: usize| {
         run.nodes
@@ -499,7 +496,7 @@ fn step_model(
     profile: &BoardProfile,
 ) -> Result<StepModel> {
     let decoded = decoded(images)?;
-    let dims = plan.machine.dims;
+    let dims = plan.machine.dims();
     let t = super::timing::SimTiming::for_precision(profile, problem.solver.precision);
     let (timing, needs) = super::timing::model_and_needs(&decoded, dims, t)?;
     Ok(StepModel {
@@ -656,7 +653,7 @@ pub fn plan_for_real_time(
         let v = real_time_of(problem, &plan, profile)?;
         let images = super::compile_images(problem, &plan)?;
         let t = super::timing::SimTiming::for_precision(profile, problem.solver.precision);
-        let m = super::timing::model(&decoded(&images)?, plan.machine.dims, t)?;
+        let m = super::timing::model(&decoded(&images)?, plan.machine.dims(), t)?;
         Ok((plan, images, v.worst_ratio.max(m.step_s / m.dt_s)))
     };
     let (pe, ie, re) = compiled(by_elements)?;

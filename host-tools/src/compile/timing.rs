@@ -191,7 +191,14 @@ struct Replay<'a> {
 
 impl<'a> Replay<'a> {
     fn new(imgs: &'a [DecodedImage], dims: [usize; 3]) -> anyhow::Result<Replay<'a>> {
-        let machine = Machine { dims };
+        let machine = Machine::new(dims).ok_or_else(|| {
+            anyhow::anyhow!(
+                "a {}x{}x{} machine: 1..16 boards per axis",
+                dims[0],
+                dims[1],
+                dims[2]
+            )
+        })?;
         let Some(first) = imgs.first().filter(|_| imgs.len() == machine.count()) else {
             anyhow::bail!(
                 "the step model needs one image per board: {} for a {}x{}x{} machine",

@@ -61,8 +61,7 @@ pub fn message(args: core::fmt::Arguments) -> Message {
 /// Sends `text` as a fault packet from `board` on the global port, spinning at most a
 /// bounded number of times per byte.
 fn send_fault_packet(board: [u8; 3], text: &str) {
-    let src = link_proto::link::board_at(board[0] as usize, board[1] as usize, board[2] as usize)
-        .unwrap_or(0xFE);
+    let src = link_proto::Machine::address(board.map(usize::from)).unwrap_or(0xFE);
     let repr = PacketRepr {
         dst: ADDR_HOST,
         src,

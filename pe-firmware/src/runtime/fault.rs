@@ -1,6 +1,7 @@
 //! Faults: what went wrong on a board, where (link, element, node) and at which step.
 //! Every failure of the runtime is one of these; nothing panics.
 
+use link_proto::machine::across;
 use link_proto::Face;
 
 use crate::image::{CompilationId, ImageError};
@@ -125,7 +126,7 @@ impl core::fmt::Display for Fault {
             }
             FaultKind::CompilationMismatch { face, ours, theirs } => {
                 write!(f, "link {face:?}")?;
-                if let Some([nx, ny, nz]) = neighbour(self.board, face) {
+                if let Some([nx, ny, nz]) = across(self.board.map(usize::from), face) {
                     write!(f, " (to board ({nx},{ny},{nz}))")?;
                 }
                 write!(
@@ -138,7 +139,7 @@ impl core::fmt::Display for Fault {
                     f,
                     "link {face:?}: the cable goes to board ({tx},{ty},{tz})'s {theirs_face:?} connector ({mx}x{my}x{mz} machine)"
                 )?;
-                match neighbour(self.board, face) {
+                match across(self.board.map(usize::from), face) {
                     Some([nx, ny, nz]) => write!(
                         f,
                         "; the schedule expects board ({nx},{ny},{nz})'s {:?}: cables crossed",
@@ -153,16 +154,4 @@ impl core::fmt::Display for Fault {
             ),
         }
     }
-}
-
-/// The board across `face` of `board` (`None` below 0 or past 255).
-pub fn neighbour(board: [u8; 3], face: Face) -> Option<[u8; 3]> {
-    let mut n = board;
-    let a = face.index() / 2;
-    n[a] = if face.sign() > 0 {
-        n[a].checked_add(1)?
-    } else {
-        n[a].checked_sub(1)?
-    };
-    Some(n)
 }

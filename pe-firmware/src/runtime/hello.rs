@@ -178,8 +178,8 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                     theirs: theirs.compilation,
                 }));
             }
-            let expected = super::fault::neighbour(self.header.board, face);
-            if expected != Some(theirs.board)
+            let expected = link_proto::machine::across(self.header.board.map(usize::from), face);
+            if expected != Some(theirs.board.map(usize::from))
                 || theirs.machine != self.header.machine
                 || theirs.face != face.opposite()
             {

@@ -88,9 +88,7 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
             u.iter_mut().take(nn).for_each(|x| *x = [T::ZERO; 3]);
         }
         clear_contact(&mut st, nc)?;
-        let address =
-            link_proto::link::board_at(board[0] as usize, board[1] as usize, board[2] as usize)
-                .unwrap_or(u8::MAX);
+        let address = link_proto::Machine::address(board.map(usize::from)).unwrap_or(u8::MAX);
         let n_boards = c.contact_boards as usize;
         contact.slot = contact.boards[..n_boards]
             .iter()

@@ -74,7 +74,9 @@ impl std::str::FromStr for Target {
             "cheapest" => Ok(Target::Cheapest),
             "real-time" => Ok(Target::RealTime),
             _ => match s.strip_prefix("boards=") {
-                Some(m) => Ok(Target::Boards(Machine::parse(m)?)),
+                Some(m) => Ok(Target::Boards(
+                    Machine::parse(m).map_err(|e| anyhow::anyhow!("--target {s:?}: {e}"))?,
+                )),
                 None => bail!(
                     "--target {s:?}: expected real-time, boards=XxYxZ (e.g. boards=4x4x4) or cheapest"
                 ),
@@ -498,7 +500,7 @@ pub fn run(
         .with_context(|| format!("--profile {:?}: not a known board profile", opts.profile))?;
     let machine = match opts.target {
         Target::Boards(m) => m,
-        _ => Machine { dims: [4, 4, 4] },
+        _ => Machine::new([4, 4, 4]).expect("a machine of 1..16 boards per axis"),
     };
     let mut scene = scene.clone();
     // Candidates change dt: hold the simulated time fixed, not the step count.
@@ -1163,7 +1165,9 @@ mod tests {
         assert_eq!("cheapest".parse::<Target>().ok(), Some(Target::Cheapest));
         assert_eq!(
             "boards=2x3x4".parse::<Target>().ok(),
-            Some(Target::Boards(Machine { dims: [2, 3, 4] }))
+            Some(Target::Boards(
+                Machine::new([2, 3, 4]).expect("a machine of 1..16 boards per axis")
+            ))
         );
         for bad in ["boards", "boards=4x4", "fast"] {
             let e = bad.parse::<Target>().expect_err(bad).to_string();

@@ -31,44 +31,8 @@ pub mod refine;
 /// Most elements a board may hold, over the mean (the load balance the partition keeps).
 pub const BALANCE_MAX: f64 = 1.05;
 
-/// Machine size (boards per axis).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Machine {
-    pub dims: [usize; 3],
-}
-
-impl Machine {
-    pub fn parse(s: &str) -> Result<Machine> {
-        let parts: Vec<&str> = s.split(['x', 'X']).collect();
-        let dims: Vec<usize> = parts.iter().filter_map(|p| p.trim().parse().ok()).collect();
-        if parts.len() != 3 || dims.len() != 3 || dims.iter().any(|&d| d == 0 || d > 16) {
-            bail!("--boards {s:?}: expected X x Y x Z with 1..16 boards per axis, e.g. 4x4x4");
-        }
-        Ok(Machine {
-            dims: [dims[0], dims[1], dims[2]],
-        })
-    }
-    pub fn count(&self) -> usize {
-        self.dims.iter().product()
-    }
-    /// Linear index of board coordinates (x fastest).
-    pub fn index(&self, c: [usize; 3]) -> usize {
-        c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])
-    }
-    pub fn coords(&self, i: usize) -> [usize; 3] {
-        [
-            i % self.dims[0],
-            (i / self.dims[0]) % self.dims[1],
-            i / (self.dims[0] * self.dims[1]),
-        ]
-    }
-}
-
-impl std::fmt::Display for Machine {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}x{}x{}", self.dims[0], self.dims[1], self.dims[2])
-    }
-}
+/// The board array (its one home is [`link_proto::machine`]).
+pub use link_proto::Machine;
 
 /// Splits `items` (sorted by key) into `parts` runs of equal length (±1).
 fn split_even<T: Copy>(items: &[T], parts: usize) -> Vec<Vec<T>> {
@@ -262,9 +226,9 @@ pub fn slabs_weighted(mesh: &Mesh, machine: Machine, weight: &[u64]) -> Result<V
             split_by_weight(items, parts, min_len, weight)
         }
     };
-    let [_, dy, dz] = machine.dims;
+    let [_, dy, dz] = machine.dims();
     let all = sorted((0..n).collect(), 0);
-    for (x, slab) in split(&all, machine.dims[0], dy * dz)
+    for (x, slab) in split(&all, machine.dims()[0], dy * dz)
         .into_iter()
         .enumerate()
     {

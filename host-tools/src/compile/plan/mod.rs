@@ -111,7 +111,7 @@ pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> R
     // Round 0 of an axis goes first (see `trees::for_node_transfers`).
     let early = trees.early.map(|r| if r > 0 { r + 1 } else { 0 });
     let rounds: [usize; 3] = core::array::from_fn(|a| early[a] + late_rounds[a]);
-    let trees = LineTrees::new(machine.dims.iter().copied().max().unwrap_or(1));
+    let trees = LineTrees::new(machine.dims().iter().copied().max().unwrap_or(1));
     let roots = choose_roots(machine, &trees, early, &node_box, &exchanged);
     let mut boards: Vec<BoardPlan> = (0..machine.count())
         .map(|b| BoardPlan {

@@ -310,8 +310,8 @@ pub(super) fn choose_roots(
 ) -> Vec<Roots> {
     let count = machine.count();
     // Rounds per axis: the first ones, then the broadcasts (at most half a line's).
-    let rounds_max =
-        early.iter().max().copied().unwrap_or(0) + machine.dims.iter().max().copied().unwrap_or(1);
+    let rounds_max = early.iter().max().copied().unwrap_or(0)
+        + machine.dims().iter().max().copied().unwrap_or(1);
     // The loads a node with roots `r` adds to: its links (`3 * count` of them), then its
     // transfers' directions (+axis, −axis of each link) and rounds.
     let keys = |b: BoardBox, r: Roots, out: &mut Vec<usize>| {
