@@ -38,12 +38,12 @@
 //! | 8       | `n`  | payload                                                      |
 //! | 8 + `n` | 4    | CRC-32                                                       |
 //!
-//! ## Recovery envelope ([`reliable`])
+//! ## Recovery envelope ([`recovery`])
 //!
 //! With link recovery, every frame on a face travels in a 10-byte envelope: type, sequence
 //! number, piggybacked acknowledgement, the frame, and a CRC-32 of the header and the
-//! frame's own CRC; acks, nacks and statuses are envelopes without a frame. Global packets
-//! travel in the same way ([`reliable_global`]). See [`reliable`].
+//! frame's own CRC; acks, nacks and statuses are envelopes without a frame
+//! ([`recovery::face`]). Global packets travel in the same way ([`recovery::global`]).
 //!
 //! ## Byte stream ([`framing`])
 //!
@@ -57,6 +57,13 @@
 //! most 1536 values and is at most [`FRAME_LEN_MAX`] = 12 300 bytes
 //! ([`FRAME_WIRE_LEN_MAX`] on the stream); a packet carries at most
 //! [`PACKET_PAYLOAD_LEN_MAX`] = 12 288 bytes (1024 surface nodes × 3 f32).
+//!
+//! # Wire lengths
+//!
+//! One home each, as `const fn`s usable without building a frame (the table is in
+//! [`limits`]): [`frame::frame_len`], [`packet::packet_len`], the payloads' `payload_len`
+//! and `LEN` in [`payload`], [`enveloped_len`] for recovery's envelope and
+//! [`wire_len_max`] for the byte stream.
 //!
 //! # Panics
 //!
@@ -74,15 +81,31 @@ pub mod link;
 pub mod machine;
 pub mod packet;
 pub mod payload;
-pub mod reliable;
-pub mod reliable_global;
+pub mod recovery;
 pub mod stream;
 
 pub use error::{Error, Result};
 pub use frame::{emit_values, Frame, FrameKind, FrameRepr, Payload, Precision, Values};
 pub use framing::{encode_wire, StreamDecoder};
 pub use limits::*;
-pub use link::{Axis, Face, Links, Peek, RecvError, SendError};
+pub use link::{Axis, Clock, Face, Links, Peek, RecvError, SendError};
 pub use machine::Machine;
 pub use packet::{Control, Packet, PacketKind, PacketRepr};
 pub use stream::{FacePort, GlobalPort, StreamLinks, StreamPort};
+
+/// Former path of [`recovery::face`] (with the envelope's constants and [`Clock`]), kept
+/// while board-sim still names it; new code uses [`recovery`].
+#[doc(hidden)]
+pub mod reliable {
+    pub use crate::link::Clock;
+    pub use crate::recovery::face::*;
+    pub use crate::recovery::{FaceRecovery, HEADER_LEN, OVERHEAD, WINDOW_MAX};
+}
+
+/// Former path of [`recovery::global`] (with the envelope's constants), kept while
+/// board-sim still names it; new code uses [`recovery`].
+#[doc(hidden)]
+pub mod reliable_global {
+    pub use crate::recovery::global::*;
+    pub use crate::recovery::{GlobalRecovery, HEADER_LEN, OVERHEAD, WINDOW_MAX};
+}

@@ -1,4 +1,5 @@
-//! The link interface firmware uses: six faces and the global port.
+//! The link interface firmware uses: six faces and the global port, and the clock passed
+//! in beside them.
 //!
 //! Sending and receiving never block. A send that finds the outgoing queue
 //! full returns [`SendError::WouldBlock`] and leaves the frame with the caller
@@ -115,7 +116,7 @@ pub enum SendError {
     TooLong,
     /// No link on this face (edge of the array).
     NoLink,
-    /// Shorter than the CRC a link frame ends with: link recovery ([`crate::reliable`])
+    /// Shorter than the CRC a link frame ends with: link recovery ([`crate::recovery::face`])
     /// carries frames only.
     NotAFrame,
     /// The underlying stream failed.
@@ -136,7 +137,7 @@ pub enum RecvError {
     NoLink,
     /// The underlying stream failed.
     Io(embedded_io::ErrorKind),
-    /// Link recovery ([`crate::reliable`]) asked the neighbour for frame `seq` `requests`
+    /// Link recovery ([`crate::recovery::face`]) asked the neighbour for frame `seq` `requests`
     /// times without getting it: the link is given up.
     RetriesExhausted {
         /// The frame's sequence number on this link.
@@ -144,7 +145,7 @@ pub enum RecvError {
         /// Requests (negative acknowledgements) sent for it.
         requests: u8,
     },
-    /// Global-network recovery ([`crate::reliable_global`]) sent packet `seq` to `peer`
+    /// Global-network recovery ([`crate::recovery::global`]) sent packet `seq` to `peer`
     /// `requests` times again without an acknowledgement: the flow is given up.
     GlobalRetriesExhausted {
         /// The peer's global address.
@@ -196,6 +197,14 @@ impl fmt::Display for RecvError {
     }
 }
 
+/// Monotonic time, passed in (never read globally): what link recovery
+/// ([`crate::recovery`]) times its requests by, and what the board runtime's environment
+/// extends.
+pub trait Clock {
+    /// Now, in ns.
+    fn now_ns(&mut self) -> u64;
+}
+
 /// Non-blocking access to the six face links and the global port.
 ///
 /// Frames are opaque bytes here (one [`crate::frame::Frame`] or
@@ -222,7 +231,7 @@ pub trait Links {
 
     /// The first byte of the next whole frame on a face, without taking it, for a link
     /// that can tell (a wrapper reads control frames ahead of data this way:
-    /// [`crate::reliable`]). Default: [`Peek::Unknown`].
+    /// [`crate::recovery::face`]). Default: [`Peek::Unknown`].
     fn peek(&mut self, face: Face) -> Peek {
         let _ = face;
         Peek::Unknown

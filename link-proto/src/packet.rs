@@ -33,7 +33,7 @@ use crate::limits::{
     BOARD_COUNT, CRC_LEN, PACKET_HEADER_LEN, PACKET_LEN_MAX, PACKET_PAYLOAD_LEN_MAX,
 };
 
-mod field {
+pub(crate) mod field {
     use core::ops::Range;
     pub const DST: usize = 0;
     pub const SRC: usize = 1;

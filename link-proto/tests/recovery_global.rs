@@ -1,4 +1,4 @@
-//! Global-network recovery ([`link_proto::reliable_global`]) between several boards over a
+//! Global recovery ([`link_proto::recovery::global`]) between several boards over a
 //! scripted lossy network: lost, corrupted, duplicated and reordered envelopes, several
 //! peers, retries exhausted, broadcast and a full peer table refused.
 
@@ -6,9 +6,8 @@ use std::cell::{Cell, RefCell};
 use std::collections::{HashMap, VecDeque};
 use std::rc::Rc;
 
-use link_proto::reliable::Clock;
-use link_proto::reliable_global::{GlobalConfig, GlobalReliable};
-use link_proto::{Face, Links, RecvError, SendError};
+use link_proto::recovery::global::{GlobalConfig, GlobalReliable};
+use link_proto::{Clock, Face, Links, RecvError, SendError};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Fate {
@@ -246,7 +245,7 @@ fn lossy_exchange(config: GlobalConfig) {
     let mut boards: Vec<Board> = (0..4).map(|a| board(a, &net, &time, config)).collect();
     let (got, _) = exchange(&mut boards, &time, 200);
     check_in_order(&got, 200);
-    let sum = |f: fn(&link_proto::reliable_global::GlobalRecovery) -> u64| {
+    let sum = |f: fn(&link_proto::recovery::GlobalRecovery) -> u64| {
         boards.iter().map(|b| f(b.stats())).sum::<u64>()
     };
     let fates = &net.borrow().fates;
@@ -363,7 +362,7 @@ fn broadcast_and_a_full_peer_table_are_refused() {
 /// for the same packet do not each start a retransmission of the window) and gives up.
 #[test]
 fn a_packet_always_corrupted_is_given_up_without_a_retransmission_storm() {
-    use link_proto::reliable_global::code;
+    use link_proto::recovery::global::code;
     let time = Rc::new(Cell::new(0));
     let net = Net::new(Box::new(|_, p| {
         if p[1] == 0 && p[2] == code::DATA && p[4] == 0 && p[5] == 0 {
@@ -417,7 +416,8 @@ fn a_packet_always_corrupted_is_given_up_without_a_retransmission_storm() {
 /// are refused however the envelope was made.
 #[test]
 fn every_bit_of_a_global_data_envelope_is_checked() {
-    use link_proto::reliable_global::{emit_data, parse, Envelope, OVERHEAD};
+    use link_proto::recovery::global::{emit_data, parse, Envelope};
+    use link_proto::recovery::OVERHEAD;
     let p = packet(3, 9, 41);
     let mut e = vec![0u8; p.len() + OVERHEAD];
     assert_eq!(emit_data(&p, 7, &mut e), Some(e.len()));

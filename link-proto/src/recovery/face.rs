@@ -1,6 +1,6 @@
-//! Link-level recovery: a [`Links`] wrapper that numbers the frames of every face,
-//! acknowledges them, asks again for a frame lost or damaged (negative acknowledgement)
-//! and retransmits it, within bounded retries.
+//! Face recovery, on the point-to-point links: a [`Links`] wrapper that numbers the frames
+//! of every face, acknowledges them, asks again for a frame lost or damaged (negative
+//! acknowledgement) and retransmits it, within bounded retries.
 //!
 //! Every frame on a face goes out in an envelope (little-endian):
 //!
@@ -13,7 +13,8 @@
 //! | 6       | `n`  | (data) the frame, whose last four bytes are the CRC-32 of the rest   |
 //! | 6 + `n` | 4    | CRC-32 of bytes `0 .. 6` followed by (data) the frame's last four    |
 //!
-//! [`OVERHEAD`] = 10 bytes per frame. The type codes lie outside the frame kinds (a link
+//! [`OVERHEAD`] = 10 bytes per frame ([`super::envelope`]: shared with global recovery,
+//! as is the CRC rule below). The type codes lie outside the frame kinds (a link
 //! carries envelopes only, or frames only; [`data_frame`] finds the frame in an envelope).
 //!
 //! A data envelope carries a link frame, which ends with the CRC-32 of its other bytes
@@ -49,17 +50,24 @@
 //! Time comes in through [`Clock`] (never read globally). Storage is the caller's: one
 //! buffer of [`Reliable::buffer_len`] bytes. No allocation, no panics.
 
-use crate::error::Error;
-use crate::frame::{crc32, CRC32};
-use crate::limits::CRC_LEN;
-use crate::link::{Face, Links, Peek, RecvError, SendError};
+use core::ops::Range;
 
-/// Envelope header length.
-pub const HEADER_LEN: usize = 6;
-/// Bytes an envelope adds to a frame.
-pub const OVERHEAD: usize = HEADER_LEN + CRC_LEN;
-/// Largest window (frames kept per face for retransmission, and received ahead of delivery).
-pub const WINDOW_MAX: usize = 16;
+use super::envelope::{check_envelope, diff, seal, u16_at, HEADER_LEN, OVERHEAD, WINDOW_MAX};
+use super::stats::FaceRecovery;
+use crate::error::Error;
+use crate::limits::CRC_LEN;
+use crate::link::{Clock, Face, Links, Peek, RecvError, SendError};
+
+/// The fields of a face envelope's header.
+mod field {
+    use core::ops::Range;
+    pub const TYPE: usize = 0;
+    pub const RESERVED: usize = 1;
+    pub const SEQ: Range<usize> = 2..4;
+    pub const ACK: Range<usize> = 4..6;
+}
+
+const _: () = assert!(field::ACK.end == HEADER_LEN);
 
 /// Envelope type codes.
 pub mod code {
@@ -76,16 +84,18 @@ pub mod code {
 /// The frame inside a data envelope (unchecked: for observers such as fault injectors),
 /// or `None` for anything else.
 pub fn data_frame(envelope: &[u8]) -> Option<&[u8]> {
-    if envelope.first() != Some(&code::DATA) {
+    if envelope.get(field::TYPE) != Some(&code::DATA) {
         return None;
     }
-    envelope.get(HEADER_LEN..envelope.len().checked_sub(CRC_LEN)?)
+    super::envelope::carried(envelope)
 }
 
-/// Monotonic time, passed in.
-pub trait Clock {
-    /// Now, in ns.
-    fn now_ns(&mut self) -> u64;
+/// Writes the header of a face envelope at the start of `e`.
+fn write_header(e: &mut [u8], kind: u8, seq: u16, ack: u16) {
+    e[field::TYPE] = kind;
+    e[field::RESERVED] = 0;
+    e[field::SEQ].copy_from_slice(&seq.to_le_bytes());
+    e[field::ACK].copy_from_slice(&ack.to_le_bytes());
 }
 
 /// Settings.
@@ -113,35 +123,6 @@ impl Default for ReliableConfig {
             nack_backoff_max_ns: 64_000_000,
         }
     }
-}
-
-/// What recovery cost on one face (this board's side).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct FaceRecovery {
-    /// Data envelopes sent the first time.
-    pub data_frames: u64,
-    /// Their bytes (envelope included).
-    pub data_bytes: u64,
-    /// Data envelopes sent again.
-    pub retransmitted_frames: u64,
-    /// Their bytes.
-    pub retransmitted_bytes: u64,
-    /// Acks sent.
-    pub acks_sent: u64,
-    /// Nacks sent.
-    pub nacks_sent: u64,
-    /// Statuses sent.
-    pub statuses_sent: u64,
-    /// Bytes of the acks, nacks and statuses.
-    pub control_bytes: u64,
-    /// Nacks received from the neighbour.
-    pub nacks_received: u64,
-    /// Envelopes received that failed their CRC or length.
-    pub damaged: u64,
-    /// Data envelopes received beyond the next expected (one before was lost).
-    pub gaps: u64,
-    /// Data envelopes received twice.
-    pub duplicates: u64,
 }
 
 #[derive(Clone, Copy, Default)]
@@ -172,48 +153,13 @@ struct RxState {
     ack_owed: bool,
 }
 
-/// The CRC an envelope ends with: over its header, then (data) the carried frame's own
-/// CRC, its last four bytes. Ten bytes at most: the byte-wise table, on the host too (no
-/// set-up per call). The global network's envelopes ([`crate::reliable_global`]) follow
-/// the same rule for their packets.
-pub(crate) fn envelope_crc(header: &[u8], carried_crc: &[u8]) -> u32 {
-    let mut d = CRC32.digest();
-    d.update(header);
-    d.update(carried_crc);
-    d.finalize()
-}
-
-/// Checks envelope `e`: a header of `header_len` bytes, then (`data`) a frame or packet
-/// that ends with the CRC-32 of its other bytes, or nothing, then the envelope's CRC
-/// ([`envelope_crc`]). The carried bytes, or `None` if too short or a CRC fails.
-pub(crate) fn check_envelope(e: &[u8], header_len: usize, data: bool) -> Option<&[u8]> {
-    let body_len = e.len().checked_sub(CRC_LEN)?;
-    let (body, crc) = e.split_at(body_len);
-    let (header, carried) = body.split_at_checked(header_len)?;
-    let carried_crc = if data {
-        let (rest, own) = carried.split_at(carried.len().checked_sub(CRC_LEN)?);
-        if crc32(rest).to_le_bytes() != own {
-            return None;
-        }
-        own
-    } else if carried.is_empty() {
-        carried
-    } else {
-        return None;
-    };
-    (envelope_crc(header, carried_crc).to_le_bytes() == crc).then_some(carried)
-}
-
 /// The type, sequence number and piggybacked ack of the envelope `bytes[..n]`, or `None` if
 /// it is too short, longer than `bytes`, or fails a CRC: its own, or (data) its frame's.
 fn envelope_header(bytes: &[u8], n: usize) -> Option<(u8, u16, u16)> {
     let e = bytes.get(..n)?;
-    check_envelope(e, HEADER_LEN, *e.first()? == code::DATA)?;
-    Some((
-        e[0],
-        u16::from_le_bytes([e[2], e[3]]),
-        u16::from_le_bytes([e[4], e[5]]),
-    ))
+    let kind = *e.get(field::TYPE)?;
+    check_envelope(e, kind == code::DATA)?;
+    Some((kind, u16_at(e, field::SEQ)?, u16_at(e, field::ACK)?))
 }
 
 /// One read of a link ([`Reliable::read`]).
@@ -222,10 +168,6 @@ enum Read {
     Damaged,
     /// An envelope of this many bytes.
     Envelope(usize),
-}
-
-fn diff(a: u16, b: u16) -> i16 {
-    a.wrapping_sub(b) as i16
 }
 
 /// Links with recovery over `L` (see the module doc). `B` is the caller's storage.
@@ -291,18 +233,18 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
         self.config.frame_len_max + OVERHEAD
     }
 
-    fn slot_range(&self, face: Face, i: usize) -> core::ops::Range<usize> {
+    fn slot_range(&self, face: Face, i: usize) -> Range<usize> {
         let s = self.slot_len();
         let start = (face.index() * 2 * self.config.window + i) * s;
         start..start + s
     }
 
-    fn tx_slot(&self, face: Face, seq: u16) -> core::ops::Range<usize> {
+    fn tx_slot(&self, face: Face, seq: u16) -> Range<usize> {
         self.slot_range(face, seq as usize % self.config.window)
     }
 
     /// The receive slot `k` places after the oldest held.
-    fn rx_slot(&self, face: Face, k: usize) -> core::ops::Range<usize> {
+    fn rx_slot(&self, face: Face, k: usize) -> Range<usize> {
         let w = self.config.window;
         self.slot_range(face, w + (self.rx[face.index()].head + k) % w)
     }
@@ -310,10 +252,9 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Reliable<L, C, B> {
     /// Sends a control envelope; `false` if the link's queue is full (nothing sent).
     fn control(&mut self, face: Face, kind: u8, seq: u16) -> bool {
         let mut e = [0u8; OVERHEAD];
-        e[0] = kind;
-        e[2..4].copy_from_slice(&seq.to_le_bytes());
-        let crc = envelope_crc(&e[..HEADER_LEN], &[]);
-        e[HEADER_LEN..].copy_from_slice(&crc.to_le_bytes());
+        write_header(&mut e, kind, seq, 0);
+        // An envelope of OVERHEAD bytes always seals.
+        let _ = seal(&mut e, false);
         if self.inner.try_send(face, &e).is_err() {
             return false;
         }
@@ -604,14 +545,11 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Links for Reliable<L, C, 
         let len = frame.len() + OVERHEAD;
         let ack = self.rx[f].expected;
         let range = self.tx_slot(face, t.next);
-        let slot = &mut self.buf.as_mut()[range];
-        slot[0] = code::DATA;
-        slot[1] = 0;
-        slot[2..4].copy_from_slice(&t.next.to_le_bytes());
-        slot[4..6].copy_from_slice(&ack.to_le_bytes());
-        slot[HEADER_LEN..HEADER_LEN + frame.len()].copy_from_slice(frame);
-        let crc = envelope_crc(&slot[..HEADER_LEN], &frame[frame.len() - CRC_LEN..]);
-        slot[len - CRC_LEN..len].copy_from_slice(&crc.to_le_bytes());
+        let e = &mut self.buf.as_mut()[range][..len];
+        write_header(e, code::DATA, t.next, ack);
+        e[HEADER_LEN..HEADER_LEN + frame.len()].copy_from_slice(frame);
+        // The frame ends with its CRC (at least CRC_LEN bytes, checked above): it seals.
+        let _ = seal(e, true);
         let range = self.tx_slot(face, t.next);
         self.inner
             .try_send(face, &self.buf.as_ref()[range][..len])?;

@@ -1,13 +1,13 @@
-//! Link recovery ([`link_proto::reliable`]) between two boards over a scripted wire:
+//! Face recovery ([`link_proto::recovery::face`]) between two boards over a scripted wire:
 //! lost data frames, lost nacks, corrupted and duplicated frames, retries exhausted.
 
 use std::cell::{Cell, RefCell};
 use std::collections::VecDeque;
 use std::rc::Rc;
 
-use link_proto::reliable::{code, Clock, Reliable, ReliableConfig};
+use link_proto::recovery::face::{code, Reliable, ReliableConfig};
 use link_proto::{
-    Face, FrameKind, FrameRepr, Links, Payload, Peek, Precision, RecvError, SendError,
+    Clock, Face, FrameKind, FrameRepr, Links, Payload, Peek, Precision, RecvError, SendError,
 };
 
 /// What the wire does to the n-th envelope it carries in one direction.
@@ -194,7 +194,7 @@ fn frame(k: u8) -> Vec<u8> {
 /// Receive buffers: one too short for an envelope (frames go through the receive slots)
 /// and one that holds any (the next frame in order goes straight into it).
 const SLOTTED: usize = 64;
-const DIRECT: usize = 64 + link_proto::reliable::OVERHEAD;
+const DIRECT: usize = 64 + link_proto::recovery::OVERHEAD;
 
 /// Receives on B into a buffer of `len` bytes until a frame arrives, moving the clock
 /// 500 ns per try and letting A answer (as its own loop would); at most `tries`.
@@ -427,7 +427,7 @@ fn a_buffer_that_holds_an_envelope_takes_frames_straight_from_the_link() {
 /// CRC covers ten bytes, the frame's own CRC the rest.
 #[test]
 fn every_bit_of_a_data_envelope_is_checked() {
-    let bits = (frame(7).len() + link_proto::reliable::OVERHEAD) * 8;
+    let bits = (frame(7).len() + link_proto::recovery::OVERHEAD) * 8;
     assert_eq!(bits, 46 * 8);
     assert!(
         frame(7).iter().filter(|&&b| b != 0).count() > 20,

@@ -1,7 +1,7 @@
-//! Recovery on the global network: a [`Links`] wrapper that numbers the packets of every
-//! (source, destination) flow, acknowledges them, and retransmits a packet lost or damaged,
-//! within bounded retries. The faces pass through untouched (stack it on
-//! [`crate::reliable::Reliable`] for the point-to-point links).
+//! Global recovery, on the global network: a [`Links`] wrapper that numbers the packets of
+//! every (source, destination) flow, acknowledges them, and retransmits a packet lost or
+//! damaged, within bounded retries. The faces pass through untouched (stack it on
+//! [`crate::recovery::face::Reliable`] for the point-to-point links).
 //!
 //! Every global packet goes out in an envelope (little-endian):
 //!
@@ -16,7 +16,8 @@
 //! | 6 + `n` | 4    | CRC-32 of bytes `0 .. 6` followed by (data) the packet's last four  |
 //!
 //! [`OVERHEAD`] = 10 bytes per packet; an ack or nack is [`OVERHEAD`] bytes. As on the
-//! links ([`crate::reliable`]), the packet's own CRC protects the packet and the envelope's
+//! links ([`crate::recovery::face`]; the length and the CRC rule are
+//! [`crate::recovery::envelope`]'s), the packet's own CRC protects the packet and the envelope's
 //! its header and the packet's CRC; a receiver (a board or a sink) checks both.
 //!
 //! The protocol, per flow (go-back-N with a window of `window` packets):
@@ -46,7 +47,7 @@
 //!   with [`SendError::NoLink`] rather than sent unprotected.
 //!
 //! The receiving half alone (for a sink such as a graphics engine that only receives) is
-//! [`FlowRx`] with [`parse`] and [`control`].
+//! [`FlowRx`] with [`parse`] and [`control`] ([`flow`]: the envelope on the wire).
 //!
 //! Cost: [`OVERHEAD`] bytes per packet plus one ack ([`OVERHEAD`] bytes) per service of the
 //! receiving port that took packets, about one per packet when packets come one at a time;
@@ -56,185 +57,24 @@
 //! Time comes in through [`Clock`] (never read globally). Storage is the caller's: one
 //! buffer of [`GlobalReliable::buffer_len`] bytes. No allocation, no panics.
 
-use crate::error::Error;
-use crate::limits::CRC_LEN;
-use crate::link::{Face, Links, RecvError, SendError};
-use crate::packet::ADDR_BROADCAST;
-use crate::reliable::Clock;
-use crate::reliable::{check_envelope, envelope_crc};
+pub mod flow;
 
-/// Envelope header length.
-pub const HEADER_LEN: usize = 6;
-/// Bytes an envelope adds to a packet (and the length of an ack or nack).
-pub const OVERHEAD: usize = HEADER_LEN + CRC_LEN;
-/// Largest window (packets kept per destination for retransmission).
-pub const WINDOW_MAX: usize = 16;
+use core::ops::Range;
+
+use super::envelope::{diff, HEADER_LEN, OVERHEAD, WINDOW_MAX};
+use super::stats::GlobalRecovery;
+use crate::error::Error;
+use crate::link::{Clock, Face, Links, RecvError, SendError};
+use crate::packet::{self, ADDR_BROADCAST};
+
+pub use flow::{code, control, data_packet, emit_data, parse, Envelope, FlowRx, Verdict};
+
 /// Most peers (addresses with a flow) a board can keep.
 pub const PEERS_MAX: usize = crate::limits::BOARD_COUNT + 2;
 /// Most send slots (shared by the peers).
 pub const TX_SLOTS_MAX: usize = 128;
 /// Most packets received and not yet taken by the caller.
 pub const RX_SLOTS_MAX: usize = 128;
-
-mod field {
-    pub const DST: usize = 0;
-    pub const SRC: usize = 1;
-    pub const TYPE: usize = 2;
-    pub const SEQ: core::ops::Range<usize> = 4..6;
-}
-
-/// Envelope type codes.
-pub mod code {
-    /// A data packet.
-    pub const DATA: u8 = 0xB1;
-    /// Acknowledgement: every packet before `seq` arrived.
-    pub const ACK: u8 = 0xB2;
-    /// Negative acknowledgement: send `seq` (and later ones) again.
-    pub const NACK: u8 = 0xB3;
-}
-
-/// The packet inside a data envelope (unchecked: for observers such as fault injectors),
-/// or `None` for anything else.
-pub fn data_packet(envelope: &[u8]) -> Option<&[u8]> {
-    if envelope.get(field::TYPE) != Some(&code::DATA) {
-        return None;
-    }
-    envelope.get(HEADER_LEN..envelope.len().checked_sub(CRC_LEN)?)
-}
-
-/// What an envelope carries, once its CRC and length are checked.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Envelope<'a> {
-    /// A data packet number `seq` of the flow from `src`.
-    Data {
-        /// Source address.
-        src: u8,
-        /// Number in the flow.
-        seq: u16,
-        /// The packet.
-        packet: &'a [u8],
-    },
-    /// `src` received every packet before `seq`.
-    Ack {
-        /// Source address (the receiver of the acknowledged flow).
-        src: u8,
-        /// Next expected.
-        seq: u16,
-    },
-    /// `src` asks for `seq` and later ones again.
-    Nack {
-        /// Source address.
-        src: u8,
-        /// The number wanted.
-        seq: u16,
-    },
-    /// Failed its CRC or length, or an unknown type: dropped.
-    Damaged,
-}
-
-/// Checks and reads an envelope: its CRC and (data) its packet's.
-pub fn parse(envelope: &[u8]) -> Envelope<'_> {
-    let data = envelope.get(field::TYPE) == Some(&code::DATA);
-    let Some(carried) = check_envelope(envelope, HEADER_LEN, data) else {
-        return Envelope::Damaged;
-    };
-    let src = envelope[field::SRC];
-    let seq = u16::from_le_bytes([envelope[field::SEQ.start], envelope[field::SEQ.start + 1]]);
-    match envelope[field::TYPE] {
-        code::DATA => Envelope::Data {
-            src,
-            seq,
-            packet: carried,
-        },
-        // An envelope without a packet is exactly OVERHEAD bytes (checked above).
-        code::ACK => Envelope::Ack { src, seq },
-        code::NACK => Envelope::Nack { src, seq },
-        _ => Envelope::Damaged,
-    }
-}
-
-/// An ack or nack envelope (`kind` [`code::ACK`] or [`code::NACK`]) from `src` to `dst`.
-pub fn control(dst: u8, src: u8, kind: u8, seq: u16) -> [u8; OVERHEAD] {
-    let mut e = [0u8; OVERHEAD];
-    e[field::DST] = dst;
-    e[field::SRC] = src;
-    e[field::TYPE] = kind;
-    e[field::SEQ].copy_from_slice(&seq.to_le_bytes());
-    let crc = envelope_crc(&e[..HEADER_LEN], &[]);
-    e[HEADER_LEN..].copy_from_slice(&crc.to_le_bytes());
-    e
-}
-
-/// Wraps `packet` (its byte 0 the destination, byte 1 the source, its last four bytes the
-/// CRC-32 of the rest) as data number `seq` into `out`; returns the envelope's length, or
-/// `None` if `out` is too short or the packet is shorter than its addresses and CRC. The
-/// envelope's CRC binds the packet's own (ten bytes, not the packet again).
-pub fn emit_data(packet: &[u8], seq: u16, out: &mut [u8]) -> Option<usize> {
-    let len = packet.len() + OVERHEAD;
-    let (dst, src) = (*packet.first()?, *packet.get(1)?);
-    let own_crc = packet.get(packet.len().checked_sub(CRC_LEN)?..)?;
-    let e = out.get_mut(..len)?;
-    e[field::DST] = dst;
-    e[field::SRC] = src;
-    e[field::TYPE] = code::DATA;
-    e[3] = 0;
-    e[field::SEQ].copy_from_slice(&seq.to_le_bytes());
-    e[HEADER_LEN..HEADER_LEN + packet.len()].copy_from_slice(packet);
-    let crc = envelope_crc(&e[..HEADER_LEN], own_crc);
-    e[len - CRC_LEN..].copy_from_slice(&crc.to_le_bytes());
-    Some(len)
-}
-
-fn diff(a: u16, b: u16) -> i16 {
-    a.wrapping_sub(b) as i16
-}
-
-/// The receiving end of one flow: in order only.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct FlowRx {
-    expected: u16,
-    /// The number last nacked (one nack per gap: a lost nack is recovered by the sender's
-    /// timer).
-    nacked: Option<u16>,
-}
-
-/// What to do with a data packet of a flow.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Verdict {
-    /// The next expected: deliver it, then acknowledge [`FlowRx::expected`].
-    Deliver,
-    /// Already delivered: drop it, acknowledge again.
-    Duplicate,
-    /// Beyond the next expected (one was lost): drop it, and nack [`FlowRx::expected`] if
-    /// `nack` (the first packet beyond this gap).
-    Gap {
-        /// Whether to nack.
-        nack: bool,
-    },
-}
-
-impl FlowRx {
-    /// The verdict on data number `seq`; a delivered one moves the flow on.
-    pub fn take(&mut self, seq: u16) -> Verdict {
-        match diff(seq, self.expected) {
-            0 => {
-                self.expected = self.expected.wrapping_add(1);
-                Verdict::Deliver
-            }
-            d if d < 0 => Verdict::Duplicate,
-            _ => {
-                let nack = self.nacked != Some(self.expected);
-                self.nacked = Some(self.expected);
-                Verdict::Gap { nack }
-            }
-        }
-    }
-
-    /// The next number expected (every one before it was delivered).
-    pub fn expected(&self) -> u16 {
-        self.expected
-    }
-}
 
 /// Settings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -271,51 +111,6 @@ impl Default for GlobalConfig {
             retransmit_after_ns: 10_000_000,
             retransmit_backoff_max_ns: 160_000_000,
         }
-    }
-}
-
-/// What recovery cost on the global port (this board's side). With the `serde` feature it
-/// serialises as is (the host's reports).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
-pub struct GlobalRecovery {
-    /// Data envelopes sent the first time.
-    pub data_packets: u64,
-    /// Their bytes (envelope included).
-    pub data_bytes: u64,
-    /// Data envelopes sent again.
-    pub retransmitted_packets: u64,
-    /// Their bytes.
-    pub retransmitted_bytes: u64,
-    /// Retransmissions started by a timeout (not a nack).
-    pub timeouts: u64,
-    /// Acks sent.
-    pub acks_sent: u64,
-    /// Nacks sent.
-    pub nacks_sent: u64,
-    /// Bytes of the acks and nacks.
-    pub control_bytes: u64,
-    /// Nacks received.
-    pub nacks_received: u64,
-    /// Envelopes received that failed their CRC, length or type.
-    pub damaged: u64,
-    /// Data envelopes received beyond the next expected.
-    pub gaps: u64,
-    /// Data envelopes received twice.
-    pub duplicates: u64,
-    /// Packets from a new address dropped because every peer slot was taken, or in-order
-    /// packets dropped because the receive slots were full (the sender's timer recovers
-    /// the latter).
-    pub refused: u64,
-    /// Peer slots taken.
-    pub peers: u32,
-}
-
-impl GlobalRecovery {
-    /// Bytes recovery added: an [`OVERHEAD`]-byte envelope per data packet, the
-    /// retransmissions, the acks and nacks.
-    pub fn overhead_bytes(&self) -> u64 {
-        self.data_packets * OVERHEAD as u64 + self.retransmitted_bytes + self.control_bytes
     }
 }
 
@@ -449,12 +244,12 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
         self.config.packet_len_max + OVERHEAD
     }
 
-    fn slot(&self, i: usize) -> core::ops::Range<usize> {
+    fn slot(&self, i: usize) -> Range<usize> {
         let s = self.slot_len();
         i * s..(i + 1) * s
     }
 
-    fn tx_slot(&self, peer: usize, seq: u16) -> core::ops::Range<usize> {
+    fn tx_slot(&self, peer: usize, seq: u16) -> Range<usize> {
         self.slot(usize::from(
             self.peers[peer].slots[seq as usize % self.config.window],
         ))
@@ -476,12 +271,12 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> GlobalReliable<L, C, B> {
         None
     }
 
-    fn rx_slot(&self, k: usize) -> core::ops::Range<usize> {
+    fn rx_slot(&self, k: usize) -> Range<usize> {
         let base = self.config.tx_slots;
         self.slot(base + (self.head + k) % self.config.rx_slots)
     }
 
-    fn scratch(&self) -> core::ops::Range<usize> {
+    fn scratch(&self) -> Range<usize> {
         self.slot(self.config.tx_slots + self.config.rx_slots)
     }
 
@@ -705,10 +500,16 @@ impl<L: Links, C: Clock, B: AsRef<[u8]> + AsMut<[u8]>> Links for GlobalReliable<
     }
 
     fn try_send_global(&mut self, packet: &[u8]) -> Result<(), SendError> {
-        if packet.len() > self.config.packet_len_max || packet.len() < 2 {
+        if packet.len() > self.config.packet_len_max {
             return Err(SendError::TooLong);
         }
-        let dst = packet[0];
+        // Shorter than its addresses: not a packet.
+        let (Some(&dst), Some(_)) = (
+            packet.get(packet::field::DST),
+            packet.get(packet::field::SRC),
+        ) else {
+            return Err(SendError::TooLong);
+        };
         if dst == ADDR_BROADCAST || self.failure.is_some() {
             return Err(SendError::NoLink);
         }
