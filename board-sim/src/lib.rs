@@ -995,7 +995,7 @@ fn run_worker<T: WireReal + 'static, E: ElementRecord<T> + 'static>(
         if stop.load(Ordering::Relaxed) {
             // Where every board still running stood: the consequences of the fault, and
             // evidence of where it came from.
-            let now = pe_firmware::runtime::Environment::now_ns(env);
+            let now = link_proto::Clock::now_ns(env);
             for (i, rt) in rts.iter().enumerate() {
                 if state[i] != State::Running {
                     continue;

@@ -474,10 +474,13 @@ impl ThreadEnv {
     }
 }
 
-impl Environment for ThreadEnv {
+impl link_proto::Clock for ThreadEnv {
     fn now_ns(&mut self) -> u64 {
         self.clock.now_ns()
     }
+}
+
+impl Environment for ThreadEnv {
     fn idle(&mut self) {
         // Spin briefly (a frame is often about to arrive), then park on the doorbell.
         self.spins += 1;
@@ -955,7 +958,7 @@ impl Links for Lower {
 /// A board's clock for link recovery: its worker's [`SweepClock`], passed in.
 pub struct SimClock(Arc<SweepClock>);
 
-impl link_proto::reliable::Clock for SimClock {
+impl link_proto::Clock for SimClock {
     fn now_ns(&mut self) -> u64 {
         self.0.now_ns()
     }

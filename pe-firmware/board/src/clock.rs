@@ -7,6 +7,7 @@ use core::sync::atomic::{AtomicU32, Ordering};
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
 use cortex_m_rt::exception;
+use link_proto::Clock;
 use pe_firmware::runtime::Environment;
 
 static MILLIS: AtomicU32 = AtomicU32::new(0);
@@ -36,7 +37,7 @@ impl BoardClock {
     }
 }
 
-impl Environment for BoardClock {
+impl Clock for BoardClock {
     fn now_ns(&mut self) -> u64 {
         let ms = MILLIS.load(Ordering::Relaxed);
         if ms < self.last {
@@ -45,7 +46,9 @@ impl Environment for BoardClock {
         self.last = ms;
         (self.high + ms as u64) * 1_000_000
     }
+}
 
+impl Environment for BoardClock {
     /// QEMU: sleeps until a link moves ([`crate::links::wait_for_link_event`]); the board
     /// (no link drivers yet): spins.
     fn idle(&mut self) {

@@ -57,10 +57,9 @@ impl WireReal for f64 {
     }
 }
 
-/// Time and waiting, passed in (never read globally).
-pub trait Environment {
-    /// Monotonic time in ns.
-    fn now_ns(&mut self) -> u64;
+/// Time and waiting, passed in (never read globally): the links' clock
+/// ([`link_proto::Clock`], the one link recovery times its requests by) and a way to wait.
+pub trait Environment: link_proto::Clock {
     /// Called while waiting for a link (spin, yield, sleep until an interrupt...).
     fn idle(&mut self);
 }

@@ -51,11 +51,14 @@ pub extern "C" fn bench_mark(id: u32) {
 /// never waits for a link).
 struct CallClock(u64);
 
-impl Environment for CallClock {
+impl link_proto::Clock for CallClock {
     fn now_ns(&mut self) -> u64 {
         self.0 += 1;
         self.0
     }
+}
+
+impl Environment for CallClock {
     fn idle(&mut self) {}
 }
 

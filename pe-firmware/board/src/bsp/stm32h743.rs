@@ -465,7 +465,7 @@ impl CycleClock {
     }
 }
 
-impl pe_firmware::runtime::Environment for CycleClock {
+impl link_proto::Clock for CycleClock {
     fn now_ns(&mut self) -> u64 {
         let c = cortex_m::peripheral::DWT::cycle_count();
         if c < self.last {
@@ -476,7 +476,9 @@ impl pe_firmware::runtime::Environment for CycleClock {
         // cycles * 1e9 / hz without overflow for any run shorter than centuries.
         (cycles / self.hz) * 1_000_000_000 + (cycles % self.hz) * 1_000_000_000 / self.hz
     }
+}
 
+impl pe_firmware::runtime::Environment for CycleClock {
     /// The ports move by DMA: nothing to wait for but the next poll.
     fn idle(&mut self) {
         core::hint::spin_loop();
