@@ -20,7 +20,9 @@
 //! after [`Frame::new_checked`] (or [`Frame::check_len`]) succeeded.
 
 use crate::error::{Error, Result};
-use crate::limits::{CRC_LEN, FRAME_HEADER_LEN, FRAME_LEN_MAX, VALUES_PER_FRAME_MAX};
+use crate::limits::{
+    enveloped_len, CRC_LEN, FRAME_HEADER_LEN, FRAME_LEN_MAX, FRAME_LEN_MIN, VALUES_PER_FRAME_MAX,
+};
 
 mod field {
     use core::ops::Range;
@@ -32,6 +34,15 @@ mod field {
 }
 
 const _: () = assert!(field::PAYLOAD == FRAME_HEADER_LEN);
+const _: () = assert!(frame_len(0, Precision::F32) == FRAME_LEN_MIN);
+const _: () = assert!(frame_len(VALUES_PER_FRAME_MAX, Precision::F64) == FRAME_LEN_MAX);
+
+/// Length of a link frame of `values` values of `precision`: header, values and CRC (without
+/// recovery's envelope: [`crate::limits::enveloped_len`] of this; on a byte stream at most
+/// [`crate::limits::wire_len_max`] of either).
+pub const fn frame_len(values: usize, precision: Precision) -> usize {
+    FRAME_HEADER_LEN + values * precision.width() + CRC_LEN
+}
 
 /// What a link frame carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -163,7 +174,7 @@ impl<T: AsRef<[u8]>> Frame<T> {
         ) else {
             return Err(Error::Truncated);
         };
-        if data.len() < FRAME_HEADER_LEN + CRC_LEN {
+        if data.len() < FRAME_LEN_MIN {
             return Err(Error::Truncated);
         }
         let precision = Precision::from_code(precision)?;
@@ -171,7 +182,7 @@ impl<T: AsRef<[u8]>> Frame<T> {
         if count > VALUES_PER_FRAME_MAX {
             return Err(Error::Oversized);
         }
-        let total = FRAME_HEADER_LEN + count * precision.width() + CRC_LEN;
+        let total = frame_len(count, precision);
         match data.len() {
             n if n < total => Err(Error::Truncated),
             n if n > total => Err(Error::BadLength),
@@ -442,9 +453,14 @@ impl<'a> FrameRepr<'a> {
         })
     }
 
-    /// Length of the emitted frame.
+    /// Length of the emitted frame ([`frame_len`]).
     pub fn buffer_len(&self) -> usize {
-        FRAME_HEADER_LEN + self.payload.bytes.len() + CRC_LEN
+        frame_len(self.payload.len(), self.payload.precision)
+    }
+
+    /// Length of the emitted frame inside recovery's envelope ([`enveloped_len`]).
+    pub fn enveloped_len(&self) -> usize {
+        enveloped_len(self.buffer_len())
     }
 
     /// Emits the frame at the start of `buf`; returns its length.
@@ -459,7 +475,7 @@ impl<'a> FrameRepr<'a> {
             self.payload.precision,
             self.payload.len(),
         )?;
-        out.get_mut(FRAME_HEADER_LEN..len - CRC_LEN)
+        out.get_mut(field::PAYLOAD..len - CRC_LEN)
             .ok_or(Error::BufferTooSmall)?
             .copy_from_slice(self.payload.bytes);
         Frame::new_unchecked(out).fill_crc();
@@ -469,7 +485,7 @@ impl<'a> FrameRepr<'a> {
 
 fn payload_of(bytes: &[u8], len: usize) -> &[u8] {
     bytes
-        .get(FRAME_HEADER_LEN..FRAME_HEADER_LEN + len)
+        .get(field::PAYLOAD..field::PAYLOAD + len)
         .unwrap_or(&[])
 }
 
@@ -484,7 +500,7 @@ fn write_header(
         .ok()
         .filter(|&c| usize::from(c) <= VALUES_PER_FRAME_MAX)
         .ok_or(Error::Oversized)?;
-    if out.len() < FRAME_HEADER_LEN + usize::from(count) * precision.width() + CRC_LEN {
+    if out.len() < frame_len(usize::from(count), precision) {
         return Err(Error::BufferTooSmall);
     }
     let mut f = Frame::new_unchecked(out);
@@ -505,14 +521,14 @@ pub fn emit_values(
     buf: &mut [u8],
 ) -> Result<usize> {
     let precision = values.precision();
-    let len = FRAME_HEADER_LEN + values.len() * precision.width() + CRC_LEN;
+    let len = frame_len(values.len(), precision);
     if values.len() > VALUES_PER_FRAME_MAX {
         return Err(Error::Oversized);
     }
     let out = buf.get_mut(..len).ok_or(Error::BufferTooSmall)?;
     write_header(out, kind, step, precision, values.len())?;
     let payload = out
-        .get_mut(FRAME_HEADER_LEN..len - CRC_LEN)
+        .get_mut(field::PAYLOAD..len - CRC_LEN)
         .ok_or(Error::BufferTooSmall)?;
     match values {
         Values::F32(v) => {

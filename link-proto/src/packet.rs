@@ -30,7 +30,8 @@
 use crate::error::{Error, Result};
 use crate::frame::crc32;
 use crate::limits::{
-    BOARD_COUNT, CRC_LEN, PACKET_HEADER_LEN, PACKET_LEN_MAX, PACKET_PAYLOAD_LEN_MAX,
+    enveloped_len, BOARD_COUNT, CRC_LEN, PACKET_HEADER_LEN, PACKET_LEN_MAX, PACKET_LEN_MIN,
+    PACKET_PAYLOAD_LEN_MAX,
 };
 
 pub(crate) mod field {
@@ -45,6 +46,16 @@ pub(crate) mod field {
 }
 
 const _: () = assert!(field::PAYLOAD == PACKET_HEADER_LEN);
+const _: () = assert!(packet_len(0) == PACKET_LEN_MIN);
+const _: () = assert!(packet_len(PACKET_PAYLOAD_LEN_MAX) == PACKET_LEN_MAX);
+
+/// Length of a global packet whose payload is `payload_len` bytes: header, payload and CRC
+/// (without recovery's envelope: [`crate::limits::enveloped_len`] of this; on a byte stream
+/// at most [`crate::limits::wire_len_max`] of either). The payloads' lengths are in
+/// [`crate::payload`].
+pub const fn packet_len(payload_len: usize) -> usize {
+    PACKET_HEADER_LEN + payload_len + CRC_LEN
+}
 
 /// Version byte of the packet format described here.
 pub const PACKET_VERSION: u8 = 1;
@@ -154,7 +165,7 @@ impl<T: AsRef<[u8]>> Packet<T> {
         if data.len() > PACKET_LEN_MAX {
             return Err(Error::Oversized);
         }
-        if data.len() < PACKET_HEADER_LEN + CRC_LEN {
+        if data.len() < PACKET_LEN_MIN {
             return Err(Error::Truncated);
         }
         let len = match data.get(field::LEN) {
@@ -164,7 +175,7 @@ impl<T: AsRef<[u8]>> Packet<T> {
         if len > PACKET_PAYLOAD_LEN_MAX {
             return Err(Error::Oversized);
         }
-        let total = PACKET_HEADER_LEN + len + CRC_LEN;
+        let total = packet_len(len);
         match data.len() {
             n if n < total => Err(Error::Truncated),
             n if n > total => Err(Error::BadLength),
@@ -311,14 +322,19 @@ impl<'a> PacketRepr<'a> {
             msg_id: p.msg_id(),
             kind: p.kind(),
             payload: bytes
-                .get(PACKET_HEADER_LEN..PACKET_HEADER_LEN + len)
+                .get(field::PAYLOAD..field::PAYLOAD + len)
                 .unwrap_or(&[]),
         })
     }
 
-    /// Length of the emitted packet.
+    /// Length of the emitted packet ([`packet_len`]).
     pub fn buffer_len(&self) -> usize {
-        PACKET_HEADER_LEN + self.payload.len() + CRC_LEN
+        packet_len(self.payload.len())
+    }
+
+    /// Length of the emitted packet inside recovery's envelope ([`enveloped_len`]).
+    pub fn enveloped_len(&self) -> usize {
+        enveloped_len(self.buffer_len())
     }
 
     /// Emits the packet at the start of `buf`; returns its length. Fails with

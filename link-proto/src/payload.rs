@@ -12,6 +12,15 @@
 //! | [`HelloPayload`] ([`PacketKind::Hello`](crate::PacketKind)) | compilation id, 8 bytes as in the image header |
 //! | surface ([`PacketKind::GraphicsSurface`](crate::PacketKind)) | frame u32, step u32, chunk u8, chunks u8, count u16, then count × (mesh node u32, displacement 3×f32) |
 //!
+//! # Lengths
+//!
+//! Each payload says its length, for given counts, without being built:
+//! [`SurfaceHeader::payload_len`]`(count)`, [`NodesHeader::payload_len`]`(count, precision)`,
+//! [`BoxPayload::LEN`], [`ToolForcePayload::LEN`], [`HelloPayload::LEN`]; and, built, each
+//! one's `encoded_len()` (what `emit` returns). The packet around a payload of `n` bytes is
+//! [`crate::packet::packet_len`]`(n)` bytes (see [`crate::limits`] for the envelope and the
+//! byte stream).
+//!
 //! # Panics
 //!
 //! Never: parsing checks every length first, emitting checks the buffer.
@@ -23,6 +32,71 @@ use crate::error::{Error, Result};
 use crate::frame::Precision;
 use crate::limits::PACKET_PAYLOAD_LEN_MAX;
 
+/// Field offsets of the payloads (the layouts above); an entry's fields are counted from
+/// the entry's start.
+mod field {
+    /// A u32.
+    pub const U32: usize = 4;
+    /// An f64.
+    pub const F64: usize = 8;
+    /// An f32.
+    pub const F32: usize = 4;
+
+    /// [`super::BoxPayload`].
+    pub mod bbox {
+        pub const STEP: usize = 0;
+        pub const MIN: usize = 4;
+        pub const MAX: usize = MIN + 3 * super::F64;
+        pub const END: usize = MAX + 3 * super::F64;
+    }
+
+    /// [`super::NodesHeader`] and its entries.
+    pub mod nodes {
+        pub const STEP: usize = 0;
+        pub const LAST: usize = 4;
+        pub const PRECISION: usize = 5;
+        pub const COUNT: core::ops::Range<usize> = 6..8;
+        pub const END: usize = COUNT.end;
+        /// Within an entry: the contact-node index, then three values.
+        pub const INDEX: usize = 0;
+        pub const VALUES: usize = INDEX + super::U32;
+    }
+
+    /// [`super::ToolForcePayload`].
+    pub mod tool {
+        pub const STEP: usize = 0;
+        pub const TOOL: usize = 4;
+        pub const FORCE: usize = 5;
+        pub const END: usize = FORCE + 3 * super::F64;
+    }
+
+    /// [`super::HelloPayload`].
+    pub mod hello {
+        pub const ID: usize = 0;
+        pub const END: usize = ID + 8;
+    }
+
+    /// [`super::SurfaceHeader`] and its entries.
+    pub mod surface {
+        pub const FRAME: usize = 0;
+        pub const STEP: usize = 4;
+        pub const CHUNK: usize = 8;
+        pub const CHUNKS: usize = 9;
+        pub const COUNT: core::ops::Range<usize> = 10..12;
+        pub const END: usize = COUNT.end;
+        /// Within an entry: the mesh node, then three f32 values.
+        pub const NODE: usize = 0;
+        pub const VALUES: usize = NODE + super::U32;
+        pub const ENTRY_END: usize = VALUES + 3 * super::F32;
+    }
+}
+
+const _: () = assert!(field::bbox::STEP + field::U32 == field::bbox::MIN);
+const _: () = assert!(field::nodes::STEP + field::U32 == field::nodes::LAST);
+const _: () = assert!(field::tool::STEP + field::U32 == field::tool::TOOL);
+const _: () = assert!(field::surface::FRAME + field::U32 == field::surface::STEP);
+const _: () = assert!(field::surface::STEP + field::U32 == field::surface::CHUNK);
+
 /// Offset of entry `k`, `None` if the entry would end past `usize::MAX` (found by
 /// fuzzing: `k * len` overflowed for a huge `k`).
 fn entry_offset(header: usize, k: usize, len: usize) -> Option<usize> {
@@ -30,14 +104,20 @@ fn entry_offset(header: usize, k: usize, len: usize) -> Option<usize> {
     at.checked_add(len).map(|_| at)
 }
 
+fn u16_at(b: &[u8], range: core::ops::Range<usize>) -> Result<u16> {
+    match b.get(range) {
+        Some(&[x, y]) => Ok(u16::from_le_bytes([x, y])),
+        _ => Err(Error::Truncated),
+    }
+}
 fn u32_at(b: &[u8], at: usize) -> Result<u32> {
-    match b.get(at..at + 4) {
+    match b.get(at..at + field::U32) {
         Some(&[a, c, d, e]) => Ok(u32::from_le_bytes([a, c, d, e])),
         _ => Err(Error::Truncated),
     }
 }
 fn f64_at(b: &[u8], at: usize) -> Result<f64> {
-    let s = b.get(at..at + 8).ok_or(Error::Truncated)?;
+    let s = b.get(at..at + field::F64).ok_or(Error::Truncated)?;
     let mut a = [0u8; 8];
     a.copy_from_slice(s);
     Ok(f64::from_le_bytes(a))
@@ -50,6 +130,15 @@ fn put(buf: &mut [u8], at: usize, bytes: &[u8]) -> Result<()> {
         .ok_or(Error::BufferTooSmall)?
         .copy_from_slice(bytes);
     Ok(())
+}
+
+/// [`Error::Truncated`] or [`Error::BadLength`] unless `b` is exactly `len` bytes.
+fn exact(b: &[u8], len: usize) -> Result<()> {
+    match b.len() {
+        n if n < len => Err(Error::Truncated),
+        n if n > len => Err(Error::BadLength),
+        _ => Ok(()),
+    }
 }
 
 /// A board's bounding box of its contact nodes at a check step.
@@ -65,35 +154,36 @@ pub struct BoxPayload {
 
 impl BoxPayload {
     /// Payload length.
-    pub const LEN: usize = 52;
+    pub const LEN: usize = field::bbox::END;
+
+    /// The payload's length: [`BoxPayload::LEN`].
+    pub const fn encoded_len(&self) -> usize {
+        Self::LEN
+    }
 
     /// Writes the payload; returns its length.
     pub fn emit(&self, buf: &mut [u8]) -> Result<usize> {
-        put(buf, 0, &self.step.to_le_bytes())?;
+        use field::bbox;
+        put(buf, bbox::STEP, &self.step.to_le_bytes())?;
         for i in 0..3 {
-            put(buf, 4 + 8 * i, &self.min[i].to_le_bytes())?;
-            put(buf, 28 + 8 * i, &self.max[i].to_le_bytes())?;
+            put(buf, bbox::MIN + field::F64 * i, &self.min[i].to_le_bytes())?;
+            put(buf, bbox::MAX + field::F64 * i, &self.max[i].to_le_bytes())?;
         }
-        Ok(Self::LEN)
+        Ok(self.encoded_len())
     }
 
     /// Reads a payload of exactly [`BoxPayload::LEN`] bytes.
     pub fn parse(b: &[u8]) -> Result<Self> {
-        if b.len() != Self::LEN {
-            return Err(if b.len() < Self::LEN {
-                Error::Truncated
-            } else {
-                Error::BadLength
-            });
-        }
+        use field::bbox;
+        exact(b, Self::LEN)?;
         let mut p = BoxPayload {
-            step: u32_at(b, 0)?,
+            step: u32_at(b, bbox::STEP)?,
             min: [0.0; 3],
             max: [0.0; 3],
         };
         for i in 0..3 {
-            p.min[i] = f64_at(b, 4 + 8 * i)?;
-            p.max[i] = f64_at(b, 28 + 8 * i)?;
+            p.min[i] = f64_at(b, bbox::MIN + field::F64 * i)?;
+            p.max[i] = f64_at(b, bbox::MAX + field::F64 * i)?;
         }
         Ok(p)
     }
@@ -114,11 +204,11 @@ pub struct NodesHeader {
 }
 
 /// Header length of a node payload.
-pub const NODES_HEADER_LEN: usize = 8;
+pub const NODES_HEADER_LEN: usize = field::nodes::END;
 
 /// Length of one node entry whose displacement has `precision`: index u32, 3 values.
 pub const fn node_entry_len(precision: Precision) -> usize {
-    4 + 3 * precision.width()
+    field::nodes::VALUES + 3 * precision.width()
 }
 
 /// Most node entries of `precision` in one packet.
@@ -127,39 +217,47 @@ pub const fn nodes_per_packet_max(precision: Precision) -> usize {
 }
 
 impl NodesHeader {
-    /// Writes the header; the entries go after it with [`emit_node_entry`].
+    /// Length of a node payload of `count` entries of `precision`: the header and the
+    /// entries.
+    pub const fn payload_len(count: usize, precision: Precision) -> usize {
+        NODES_HEADER_LEN + count * node_entry_len(precision)
+    }
+
+    /// Length of the payload this header heads ([`NodesHeader::payload_len`]).
+    pub const fn encoded_len(&self) -> usize {
+        Self::payload_len(self.count as usize, self.precision)
+    }
+
+    /// Writes the header; the entries go after it with [`emit_node_entry`]. Returns the
+    /// payload's length.
     pub fn emit(&self, buf: &mut [u8]) -> Result<usize> {
-        put(buf, 0, &self.step.to_le_bytes())?;
-        put(buf, 4, &[self.last as u8, self.precision.code()])?;
-        put(buf, 6, &self.count.to_le_bytes())?;
-        Ok(NODES_HEADER_LEN + usize::from(self.count) * node_entry_len(self.precision))
+        use field::nodes;
+        put(buf, nodes::STEP, &self.step.to_le_bytes())?;
+        put(buf, nodes::LAST, &[self.last as u8])?;
+        put(buf, nodes::PRECISION, &[self.precision.code()])?;
+        put(buf, nodes::COUNT.start, &self.count.to_le_bytes())?;
+        Ok(self.encoded_len())
     }
 
     /// Reads the header and checks that exactly `count` entries follow.
     pub fn parse(b: &[u8]) -> Result<Self> {
-        let step = u32_at(b, 0)?;
-        let last = match b.get(4) {
+        use field::nodes;
+        let step = u32_at(b, nodes::STEP)?;
+        let last = match b.get(nodes::LAST) {
             Some(0) => false,
             Some(1) => true,
             Some(_) => return Err(Error::BadLength),
             None => return Err(Error::Truncated),
         };
-        let precision = Precision::from_code(*b.get(5).ok_or(Error::Truncated)?)?;
-        let count = match b.get(6..8) {
-            Some(&[x, y]) => u16::from_le_bytes([x, y]),
-            _ => return Err(Error::Truncated),
-        };
-        let need = NODES_HEADER_LEN + usize::from(count) * node_entry_len(precision);
-        match b.len() {
-            n if n < need => Err(Error::Truncated),
-            n if n > need => Err(Error::BadLength),
-            _ => Ok(NodesHeader {
-                step,
-                last,
-                precision,
-                count,
-            }),
-        }
+        let precision = Precision::from_code(*b.get(nodes::PRECISION).ok_or(Error::Truncated)?)?;
+        let count = u16_at(b, nodes::COUNT)?;
+        exact(b, Self::payload_len(usize::from(count), precision))?;
+        Ok(NodesHeader {
+            step,
+            last,
+            precision,
+            count,
+        })
     }
 }
 
@@ -174,12 +272,12 @@ pub fn emit_node_entry(
 ) -> Result<()> {
     let len = node_entry_len(precision);
     let at = entry_offset(NODES_HEADER_LEN, k, len).ok_or(Error::BufferTooSmall)?;
-    put(buf, at, &index.to_le_bytes())?;
-    let w = precision.width();
+    put(buf, at + field::nodes::INDEX, &index.to_le_bytes())?;
+    let (w, values) = (precision.width(), at + field::nodes::VALUES);
     for i in 0..3 {
         match precision {
-            Precision::F32 => put(buf, at + 4 + w * i, &(u[i] as f32).to_le_bytes())?,
-            Precision::F64 => put(buf, at + 4 + w * i, &u[i].to_le_bytes())?,
+            Precision::F32 => put(buf, values + w * i, &(u[i] as f32).to_le_bytes())?,
+            Precision::F64 => put(buf, values + w * i, &u[i].to_le_bytes())?,
         }
     }
     Ok(())
@@ -189,12 +287,15 @@ pub fn emit_node_entry(
 pub fn node_entry(b: &[u8], precision: Precision, k: usize) -> Result<(u32, [f64; 3])> {
     let len = node_entry_len(precision);
     let at = entry_offset(NODES_HEADER_LEN, k, len).ok_or(Error::Truncated)?;
-    let w = precision.width();
+    let (w, values) = (precision.width(), at + field::nodes::VALUES);
     let value = |i: usize| match precision {
-        Precision::F32 => f32_at(b, at + 4 + w * i).map(f64::from),
-        Precision::F64 => f64_at(b, at + 4 + w * i),
+        Precision::F32 => f32_at(b, values + w * i).map(f64::from),
+        Precision::F64 => f64_at(b, values + w * i),
     };
-    Ok((u32_at(b, at)?, [value(0)?, value(1)?, value(2)?]))
+    Ok((
+        u32_at(b, at + field::nodes::INDEX)?,
+        [value(0)?, value(1)?, value(2)?],
+    ))
 }
 
 /// The compilation id of the image a board runs (to the host, before step 0).
@@ -206,20 +307,26 @@ pub struct HelloPayload {
 
 impl HelloPayload {
     /// Payload length.
-    pub const LEN: usize = 8;
+    pub const LEN: usize = field::hello::END;
+
+    /// The payload's length: [`HelloPayload::LEN`].
+    pub const fn encoded_len(&self) -> usize {
+        Self::LEN
+    }
 
     /// Writes the payload; returns its length.
     pub fn emit(&self, buf: &mut [u8]) -> Result<usize> {
-        put(buf, 0, &self.compilation)?;
-        Ok(Self::LEN)
+        put(buf, field::hello::ID, &self.compilation)?;
+        Ok(self.encoded_len())
     }
 
     /// Reads a payload of exactly [`HelloPayload::LEN`] bytes.
     pub fn parse(b: &[u8]) -> Result<Self> {
-        match <[u8; 8]>::try_from(b) {
-            Ok(compilation) => Ok(HelloPayload { compilation }),
-            Err(_) if b.len() < Self::LEN => Err(Error::Truncated),
-            Err(_) => Err(Error::BadLength),
+        exact(b, Self::LEN)?;
+        let id = b.get(field::hello::ID..field::hello::END);
+        match id.and_then(|id| <[u8; 8]>::try_from(id).ok()) {
+            Some(compilation) => Ok(HelloPayload { compilation }),
+            None => Err(Error::Truncated),
         }
     }
 }
@@ -237,31 +344,37 @@ pub struct ToolForcePayload {
 
 impl ToolForcePayload {
     /// Payload length.
-    pub const LEN: usize = 29;
+    pub const LEN: usize = field::tool::END;
+
+    /// The payload's length: [`ToolForcePayload::LEN`].
+    pub const fn encoded_len(&self) -> usize {
+        Self::LEN
+    }
 
     /// Writes the payload; returns its length.
     pub fn emit(&self, buf: &mut [u8]) -> Result<usize> {
-        put(buf, 0, &self.step.to_le_bytes())?;
-        put(buf, 4, &[self.tool])?;
+        use field::tool;
+        put(buf, tool::STEP, &self.step.to_le_bytes())?;
+        put(buf, tool::TOOL, &[self.tool])?;
         for i in 0..3 {
-            put(buf, 5 + 8 * i, &self.force[i].to_le_bytes())?;
+            put(
+                buf,
+                tool::FORCE + field::F64 * i,
+                &self.force[i].to_le_bytes(),
+            )?;
         }
-        Ok(Self::LEN)
+        Ok(self.encoded_len())
     }
 
     /// Reads a payload of exactly [`ToolForcePayload::LEN`] bytes.
     pub fn parse(b: &[u8]) -> Result<Self> {
-        if b.len() != Self::LEN {
-            return Err(if b.len() < Self::LEN {
-                Error::Truncated
-            } else {
-                Error::BadLength
-            });
-        }
+        use field::tool;
+        exact(b, Self::LEN)?;
+        let force = |i: usize| f64_at(b, tool::FORCE + field::F64 * i);
         Ok(ToolForcePayload {
-            step: u32_at(b, 0)?,
-            tool: b[4],
-            force: [f64_at(b, 5)?, f64_at(b, 13)?, f64_at(b, 21)?],
+            step: u32_at(b, tool::STEP)?,
+            tool: *b.get(tool::TOOL).ok_or(Error::Truncated)?,
+            force: [force(0)?, force(1)?, force(2)?],
         })
     }
 }
@@ -282,60 +395,76 @@ pub struct SurfaceHeader {
 }
 
 /// Header length of a surface payload.
-pub const SURFACE_HEADER_LEN: usize = 12;
+pub const SURFACE_HEADER_LEN: usize = field::surface::END;
 /// Length of one surface entry.
-pub const SURFACE_ENTRY_LEN: usize = 16;
+pub const SURFACE_ENTRY_LEN: usize = field::surface::ENTRY_END;
 /// Most surface entries in one packet.
 pub const SURFACE_NODES_PER_PACKET_MAX: usize =
     (PACKET_PAYLOAD_LEN_MAX - SURFACE_HEADER_LEN) / SURFACE_ENTRY_LEN;
 
 impl SurfaceHeader {
+    /// Length of a surface payload of `count` entries: the header and the entries.
+    pub const fn payload_len(count: usize) -> usize {
+        SURFACE_HEADER_LEN + count * SURFACE_ENTRY_LEN
+    }
+
+    /// Length of the payload this header heads ([`SurfaceHeader::payload_len`]).
+    pub const fn encoded_len(&self) -> usize {
+        Self::payload_len(self.count as usize)
+    }
+
     /// Writes the header; entries follow with [`emit_surface_entry`]. Returns the payload length.
     pub fn emit(&self, buf: &mut [u8]) -> Result<usize> {
-        put(buf, 0, &self.frame.to_le_bytes())?;
-        put(buf, 4, &self.step.to_le_bytes())?;
-        put(buf, 8, &[self.chunk, self.chunks])?;
-        put(buf, 10, &self.count.to_le_bytes())?;
-        Ok(SURFACE_HEADER_LEN + usize::from(self.count) * SURFACE_ENTRY_LEN)
+        use field::surface;
+        put(buf, surface::FRAME, &self.frame.to_le_bytes())?;
+        put(buf, surface::STEP, &self.step.to_le_bytes())?;
+        put(buf, surface::CHUNK, &[self.chunk])?;
+        put(buf, surface::CHUNKS, &[self.chunks])?;
+        put(buf, surface::COUNT.start, &self.count.to_le_bytes())?;
+        Ok(self.encoded_len())
     }
 
     /// Reads the header and checks that exactly `count` entries follow.
     pub fn parse(b: &[u8]) -> Result<Self> {
-        let (chunk, chunks, count) = match b.get(8..12) {
-            Some(&[c, n, x, y]) => (c, n, u16::from_le_bytes([x, y])),
-            _ => return Err(Error::Truncated),
+        use field::surface;
+        let (Some(&chunk), Some(&chunks), Ok(count)) = (
+            b.get(surface::CHUNK),
+            b.get(surface::CHUNKS),
+            u16_at(b, surface::COUNT),
+        ) else {
+            return Err(Error::Truncated);
         };
-        let need = SURFACE_HEADER_LEN + usize::from(count) * SURFACE_ENTRY_LEN;
-        match b.len() {
-            n if n < need => Err(Error::Truncated),
-            n if n > need => Err(Error::BadLength),
-            _ => Ok(SurfaceHeader {
-                frame: u32_at(b, 0)?,
-                step: u32_at(b, 4)?,
-                chunk,
-                chunks,
-                count,
-            }),
-        }
+        exact(b, Self::payload_len(usize::from(count)))?;
+        Ok(SurfaceHeader {
+            frame: u32_at(b, surface::FRAME)?,
+            step: u32_at(b, surface::STEP)?,
+            chunk,
+            chunks,
+            count,
+        })
     }
 }
 
 /// Writes surface entry `k` (mesh node, displacement as f32).
 pub fn emit_surface_entry(buf: &mut [u8], k: usize, node: u32, u: [f32; 3]) -> Result<()> {
+    use field::surface;
     let at = entry_offset(SURFACE_HEADER_LEN, k, SURFACE_ENTRY_LEN).ok_or(Error::BufferTooSmall)?;
-    put(buf, at, &node.to_le_bytes())?;
+    put(buf, at + surface::NODE, &node.to_le_bytes())?;
     for i in 0..3 {
-        put(buf, at + 4 + 4 * i, &u[i].to_bits().to_le_bytes())?;
+        let v = at + surface::VALUES + field::F32 * i;
+        put(buf, v, &u[i].to_bits().to_le_bytes())?;
     }
     Ok(())
 }
 
 /// Reads surface entry `k` of a payload whose header parsed.
 pub fn surface_entry(b: &[u8], k: usize) -> Result<(u32, [f32; 3])> {
+    use field::surface;
     let at = entry_offset(SURFACE_HEADER_LEN, k, SURFACE_ENTRY_LEN).ok_or(Error::Truncated)?;
+    let value = |i: usize| f32_at(b, at + surface::VALUES + field::F32 * i);
     Ok((
-        u32_at(b, at)?,
-        [f32_at(b, at + 4)?, f32_at(b, at + 8)?, f32_at(b, at + 12)?],
+        u32_at(b, at + surface::NODE)?,
+        [value(0)?, value(1)?, value(2)?],
     ))
 }
 

@@ -246,6 +246,36 @@ fn a_lost_data_frame_is_retransmitted() {
     assert_eq!(fates(&ab, code::DATA), 5);
 }
 
+/// What face recovery says it added (`FaceRecovery::overhead_bytes`) is every byte the
+/// sender put on the wire beyond its frames: envelopes, retransmissions, its acks.
+#[test]
+fn the_overhead_is_what_was_sent_beyond_the_frames() {
+    let on_wire = Rc::new(Cell::new(0usize));
+    let counted = on_wire.clone();
+    let (mut a, mut b, _ab, _ba, t) = pair(
+        Box::new(move |n, e| {
+            counted.set(counted.get() + e.len());
+            if n == 1 {
+                Fate::Drop
+            } else {
+                Fate::Deliver
+            }
+        }),
+        Box::new(|_, _| Fate::Deliver),
+    );
+    let frames: usize = (0..3).map(|k| frame(k).len()).sum();
+    for k in 0..3 {
+        a.try_send(Face::PosX, &frame(k)).unwrap();
+    }
+    for k in 0..3 {
+        assert_eq!(recv(&mut a, &mut b, &t, 20).unwrap(), frame(k), "frame {k}");
+    }
+    let s = a.stats()[Face::PosX.index()];
+    assert_eq!(s.retransmitted_frames, 2, "frames 1 and 2 sent again");
+    assert!(s.overhead_bytes() >= 3 * 10 + 2 * 46, "{s:?}");
+    assert_eq!(s.overhead_bytes(), (on_wire.get() - frames) as u64);
+}
+
 /// The last frame of a burst lost: nothing follows to reveal it, so the receiver's wait
 /// asks for it.
 #[test]

@@ -4,7 +4,7 @@
 //! Every envelope is a six-byte header ([`HEADER_LEN`]; its fields differ: see
 //! [`super::face`] and [`super::global`]), then (data) the frame or packet carried, which
 //! ends with the CRC-32 of its other bytes, then the envelope's CRC-32 over the header
-//! followed by the carried CRC ([`envelope_crc`]). [`OVERHEAD`] = 10 bytes per frame or
+//! followed by the carried CRC (`envelope_crc`). [`OVERHEAD`] = 10 bytes per frame or
 //! packet, and the whole length of an envelope that carries none (ack, nack, status).
 
 use crate::frame::{crc32, CRC32};

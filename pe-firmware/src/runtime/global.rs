@@ -1,7 +1,8 @@
 //! The board's port on the global network: packets to other boards, the host and the
 //! graphics engine, with their statistics.
 
-use link_proto::{Links, Packet, PacketKind, PACKET_HEADER_LEN};
+use link_proto::packet::packet_len;
+use link_proto::{Links, Packet, PacketKind};
 
 use super::{Fault, FaultKind, Runtime, WireReal};
 use crate::image::ElementRecord;
@@ -33,8 +34,8 @@ pub(super) struct GlobalPort {
 }
 
 impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
-    /// Sends the packet whose payload (`len` bytes) is already in `tx[8..]`; `Ok(false)` if
-    /// the port's queue is full.
+    /// Sends the packet whose payload (`len` bytes) is already in `tx[PACKET_HEADER_LEN..]`
+    /// (the packet is [`packet_len`]`(len)` bytes); `Ok(false)` if the port's queue is full.
     pub(super) fn send_global(
         &mut self,
         links: &mut impl Links,
@@ -42,7 +43,7 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
         kind: PacketKind,
         len: usize,
     ) -> Result<bool, Fault> {
-        let total = PACKET_HEADER_LEN + len + link_proto::CRC_LEN;
+        let total = packet_len(len);
         let Some(buf) = self.st.tx.get_mut(..total) else {
             return Err(self.fault(FaultKind::GlobalSendFailed {
                 dst,

@@ -1,6 +1,7 @@
 //! The graphics stream: on the first `spread` steps of every graphics interval, one slice
 //! of the board's owned surface nodes (displacements as f32) to the graphics engine.
 
+use link_proto::packet::packet_len;
 use link_proto::payload::{emit_surface_entry, SurfaceHeader, SURFACE_NODES_PER_PACKET_MAX};
 use link_proto::{Links, PacketKind, PACKET_HEADER_LEN};
 
@@ -53,8 +54,7 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                 return Ok(false);
             }
             self.port.stats.graphics_packets += 1;
-            self.port.stats.graphics_bytes +=
-                (PACKET_HEADER_LEN + plen + link_proto::CRC_LEN) as u64;
+            self.port.stats.graphics_bytes += packet_len(plen) as u64;
             self.graphics_cursor += count.max(1);
             if start == end {
                 break;
