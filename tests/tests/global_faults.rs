@@ -1,5 +1,5 @@
 //! Faults on the global network (contact exchange, graphics, tool forces): injected on the
-//! packets the boards send, recovered by global recovery (`link_proto::reliable_global`)
+//! packets the boards send, recovered by global recovery (`link_proto::recovery::global`)
 //! with the clean run's bits and outputs, and without recovery detected and attributed.
 
 use std::time::Duration;
@@ -267,7 +267,7 @@ fn global_retries_exhausted_stop_the_run() {
         };
         assert_eq!(
             requests,
-            link_proto::reliable_global::GlobalConfig::default().retries
+            link_proto::recovery::global::GlobalConfig::default().retries
         );
         assert_eq!(
             d.fault.board.map(|v| v as usize),
