@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
-use board_sim::links::{FaultSpec, Rng};
+use board_sim::faults::{FaultSpec, Rng};
 use board_sim::{run, SimFault, SimOptions};
 use host_tools::compile::image_file_name;
 use link_proto::machine::across;

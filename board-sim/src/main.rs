@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use board_sim::links::FaultSpec;
+use board_sim::faults::FaultSpec;
 use board_sim::timing::{model, SimTiming};
 use board_sim::{run, SimOptions};
 use clap::{Parser, Subcommand};

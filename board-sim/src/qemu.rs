@@ -37,7 +37,7 @@ use pe_firmware::image::ImageReader;
 use pe_firmware::profile::mps2_uarts;
 use pe_firmware::runtime::RuntimeConfig;
 
-use crate::links::GlobalNet;
+use crate::fabric::GlobalNet;
 
 /// One end of a cable: a board's face connector.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -815,7 +815,7 @@ pub fn run_array(dir: &Path, opts: &ArrayOptions) -> Result<ArrayOutput> {
         lines.extend(damaged.iter().map(|(src, e)| {
             format!(
                 "global network: a damaged packet from {}: {e}",
-                crate::links::address_name(*src)
+                crate::fabric::address_name(*src)
             )
         }));
         return Err(ArrayFault {
@@ -856,9 +856,10 @@ pub fn run_array(dir: &Path, opts: &ArrayOptions) -> Result<ArrayOutput> {
         );
     }
     let displacements: Vec<[f64; 3]> = merged.into_iter().flatten().collect();
-    let mut check = crate::HostCheck::new(&m.compilation, m.machine);
+    let mut check =
+        crate::check::HostCheck::new(&m.compilation, crate::runner::manifest_machine(dir, &m)?);
     check.finish(&switch.sinks)?;
-    let (frames, tool_force) = crate::collect_sinks(&switch.sinks, m.steps, tools)?;
+    let (frames, tool_force) = crate::check::collect_sinks(&switch.sinks, m.steps, tools)?;
     Ok(ArrayOutput {
         machine: m.machine,
         steps: m.steps,
