@@ -12,15 +12,21 @@
 //!   attribution.
 //! - [`runner`]: the boards on worker threads (each board's link stack, the collector).
 //! - [`qemu`]: the firmware itself on an emulated array of QEMUs.
+//! - [`report`], [`outputs`]: the run report and the output files.
+//! - [`campaign`], [`commands`]: the subcommands' bodies (`main.rs` is the command line).
 //!
 //! The precision x integration dispatch: [`storage::load_check`] and the runner's worker
 //! (`runner/worker.rs`, `dispatch`).
 
+pub mod campaign;
 pub mod check;
 pub mod clock;
+pub mod commands;
 pub mod fabric;
 pub mod faults;
+pub mod outputs;
 pub mod qemu;
+pub mod report;
 pub mod results;
 pub mod runner;
 pub mod storage;
