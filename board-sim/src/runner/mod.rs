@@ -17,6 +17,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Result};
 use host_tools::compile::read_manifest;
+use link_proto::Machine;
 use pe_firmware::runtime::RuntimeConfig;
 
 pub use images::manifest_machine;
@@ -60,37 +61,7 @@ pub fn run(
     let (tx, rx) = mpsc::channel::<Report>();
     let shared = Shared::default();
     let start = Instant::now();
-    let mut per_worker: Vec<(Vec<BoardCtx>, Vec<BoxedLinks>)> = (0..workers.count)
-        .map(|_| (Vec::new(), Vec::new()))
-        .collect();
-    for (b, (image, link)) in images.into_iter().zip(links).enumerate() {
-        let coords = machine.coords(b);
-        let ctx = BoardCtx {
-            index: b,
-            coords,
-            image,
-            steps,
-            frame_every: opts.frame_every,
-            config: RuntimeConfig {
-                link_timeout_ns: opts.link_timeout.as_nanos() as u64,
-            },
-            progress: shared.progress.clone(),
-            stop: shared.stop.clone(),
-            finished: shared.finished.clone(),
-            total: machine.count(),
-            batched: opts.batched,
-        };
-        let l = board_links(
-            link,
-            coords,
-            b,
-            opts,
-            &workers.clocks[workers.of(b)],
-            &shared,
-        )?;
-        per_worker[workers.of(b)].0.push(ctx);
-        per_worker[workers.of(b)].1.push(l);
-    }
+    let per_worker = workers.place(machine, images, links, steps, opts, &shared)?;
     let handles = spawn_workers(
         per_worker,
         &workers.bells,
@@ -210,6 +181,43 @@ impl Workers {
     /// The worker of board `b`.
     fn of(&self, b: usize) -> usize {
         b * self.count / self.boards
+    }
+
+    /// Each worker's boards, in board order: what a worker needs to run each, and its
+    /// links as its runtime sees them.
+    fn place(
+        &self,
+        machine: Machine,
+        images: Vec<Vec<u8>>,
+        links: Vec<EmuLinks>,
+        steps: u64,
+        opts: &SimOptions,
+        shared: &Shared,
+    ) -> Result<Vec<(Vec<BoardCtx>, Vec<BoxedLinks>)>> {
+        let mut per_worker: Vec<(Vec<BoardCtx>, Vec<BoxedLinks>)> =
+            (0..self.count).map(|_| (Vec::new(), Vec::new())).collect();
+        for (b, (image, link)) in images.into_iter().zip(links).enumerate() {
+            let coords = machine.coords(b);
+            let ctx = BoardCtx {
+                index: b,
+                coords,
+                image,
+                steps,
+                frame_every: opts.frame_every,
+                config: RuntimeConfig {
+                    link_timeout_ns: opts.link_timeout.as_nanos() as u64,
+                },
+                progress: shared.progress.clone(),
+                stop: shared.stop.clone(),
+                finished: shared.finished.clone(),
+                total: machine.count(),
+                batched: opts.batched,
+            };
+            let l = board_links(link, coords, b, opts, &self.clocks[self.of(b)], shared)?;
+            per_worker[self.of(b)].0.push(ctx);
+            per_worker[self.of(b)].1.push(l);
+        }
+        Ok(per_worker)
     }
 }
 
