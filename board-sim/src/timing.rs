@@ -1,9 +1,9 @@
 //! The link timing model of a compiled directory: `host_tools::compile::timing` (the
 //! compile report's step model) on the images read from it.
 
-use host_tools::compile::partition::Machine;
 pub use host_tools::compile::timing::{SimTiming, StepTiming};
 use host_tools::compile::{decode_image, image_file_name, DecodedImage};
+use link_proto::Machine;
 
 /// Models one step of the machine of `dims` whose images are in `dir`.
 pub fn model(dir: &std::path::Path, dims: [usize; 3], t: SimTiming) -> anyhow::Result<StepTiming> {

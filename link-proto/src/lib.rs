@@ -92,20 +92,3 @@ pub use link::{Axis, Clock, Face, Links, Peek, RecvError, SendError};
 pub use machine::Machine;
 pub use packet::{Control, Packet, PacketKind, PacketRepr};
 pub use stream::{FacePort, GlobalPort, StreamLinks, StreamPort};
-
-/// Former path of [`recovery::face`] (with the envelope's constants and [`Clock`]), kept
-/// while board-sim still names it; new code uses [`recovery`].
-#[doc(hidden)]
-pub mod reliable {
-    pub use crate::link::Clock;
-    pub use crate::recovery::face::*;
-    pub use crate::recovery::{FaceRecovery, HEADER_LEN, OVERHEAD, WINDOW_MAX};
-}
-
-/// Former path of [`recovery::global`] (with the envelope's constants), kept while
-/// board-sim still names it; new code uses [`recovery`].
-#[doc(hidden)]
-pub mod reliable_global {
-    pub use crate::recovery::global::*;
-    pub use crate::recovery::{GlobalRecovery, HEADER_LEN, OVERHEAD, WINDOW_MAX};
-}

@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use board_sim::links::FaultSpec;
+use board_sim::faults::FaultSpec;
 use board_sim::{run, SimFault, SimOptions};
 use host_tools::solver;
 use system_tests::*;

@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use board_sim::links::FaultSpec;
+use board_sim::faults::FaultSpec;
 use board_sim::{run, SimFault, SimOptions, SimOutput};
 use system_tests::*;
 
@@ -38,7 +38,7 @@ fn stopped(dir: &std::path::Path, o: &SimOptions) -> SimFault {
     }
 }
 
-fn global_injected(o: &[board_sim::links::Injected]) -> usize {
+fn global_injected(o: &[board_sim::faults::Injected]) -> usize {
     o.iter()
         .filter(|i| i.face.starts_with("global to "))
         .count()
@@ -184,7 +184,7 @@ fn a_dropped_global_packet_stops_the_run_naming_it() {
                 (Some(sink), _) => {
                     assert_eq!(
                         face,
-                        format!("global to {}", board_sim::links::address_name(sink)),
+                        format!("global to {}", board_sim::fabric::address_name(sink)),
                         "{f}"
                     );
                     assert_eq!(d.fault.board.map(|v| v as usize), f.cause.board, "{f}");
@@ -276,7 +276,7 @@ fn global_retries_exhausted_stop_the_run() {
         );
         assert_eq!(
             f.cause.face.as_deref(),
-            Some(format!("global to {}", board_sim::links::address_name(peer)).as_str()),
+            Some(format!("global to {}", board_sim::fabric::address_name(peer)).as_str()),
             "{f}"
         );
     }
@@ -305,7 +305,7 @@ fn a_lost_graphics_or_tool_force_packet_is_not_a_silent_wrong_answer() {
         let sink = d.sink.expect("detected by a sink");
         assert_eq!(
             f.cause.face.as_deref(),
-            Some(format!("global to {}", board_sim::links::address_name(sink)).as_str()),
+            Some(format!("global to {}", board_sim::fabric::address_name(sink)).as_str()),
             "{f}"
         );
         assert_eq!(f.cause.board, [0, 0, 0]);

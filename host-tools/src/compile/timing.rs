@@ -35,7 +35,7 @@ pub struct SimTiming {
     pub cycles_per_search_test: f64,
     pub link_bytes_per_s: f64,
     pub link_latency_s: f64,
-    /// Bytes link recovery adds to every frame (its envelope, `link_proto::reliable::OVERHEAD`;
+    /// Bytes link recovery adds to every frame (its envelope, `link_proto::recovery::face::OVERHEAD`;
     /// 0 without recovery). Retransmissions are not modelled: at the loss rates recovery is
     /// for (1e-3 per frame) they add that fraction of a frame per frame.
     pub frame_overhead_bytes: usize,

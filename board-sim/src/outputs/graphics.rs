@@ -15,7 +15,7 @@ pub struct SurfaceFrame {
 }
 
 /// The frames of a run the graphics engine could assemble (every surface node present).
-pub fn surface_frames(pr: &Problem, out: &board_sim::SimOutput) -> Vec<SurfaceFrame> {
+pub fn surface_frames(pr: &Problem, out: &crate::results::SimOutput) -> Vec<SurfaceFrame> {
     let surface = pr.surface_node_mask();
     let needed = surface.iter().filter(|s| **s).count();
     out.graphics
@@ -93,7 +93,7 @@ pub fn render_frame(
     p: &Path,
     pr: &Problem,
     f: &SurfaceFrame,
-    out: &board_sim::SimOutput,
+    out: &crate::results::SimOutput,
 ) -> Result<()> {
     use host_tools::output::render::{render_surface_png, CapsuleOverlay, SurfaceImage, View};
     let positions: Vec<[f64; 3]> = pr
@@ -155,7 +155,7 @@ pub fn render_frame(
 pub fn write_volume_series(
     d: &Path,
     pr: &Problem,
-    out: &board_sim::SimOutput,
+    out: &crate::results::SimOutput,
     dt_s: f64,
 ) -> Result<usize> {
     std::fs::create_dir_all(d)?;
