@@ -27,3 +27,13 @@ bash scripts/qemu-array.sh
 # The firmware's measured cost (QEMU, exact instruction counts) against the table the
 # compiler and board-sim use: fails when pe_firmware::profile::MEASURED_COST is stale.
 bash scripts/board-cost.sh
+
+# The trainer page in a real browser (Debian's chromium, headless, driven by Playwright):
+# the probe dragged onto the right tube moves it and raises the force bar; surface frames
+# >= 25 Hz; screenshots in target/live/. Installs chromium and playwright-core if missing.
+bash scripts/live-check.sh
+
+# OpenIGTLink with an independent client (pyigtl from PyPI, pinned, in a venv under the
+# target dir): TRANSFORMs move the probe; forces (POINT) and the surface (POLYDATA) come back;
+# an unknown device is answered with an error while the connection goes on.
+bash scripts/igtl-check.sh

@@ -11,6 +11,7 @@
 //! - [`check`]: the host's checks (compilation ids, the sinks' packets) and fault
 //!   attribution.
 //! - [`runner`]: the boards on worker threads (each board's link stack, the collector).
+//! - [`live`]: the running array as a live session's engine (`board-sim live`).
 //! - [`qemu`]: the firmware itself on an emulated array of QEMUs.
 //! - [`report`], [`outputs`]: the run report and the output files.
 //! - [`campaign`], [`commands`]: the subcommands' bodies (`main.rs` is the command line).
@@ -24,6 +25,7 @@ pub mod clock;
 pub mod commands;
 pub mod fabric;
 pub mod faults;
+pub mod live;
 pub mod outputs;
 pub mod qemu;
 pub mod report;

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use board_sim::commands::{bench, builtin, execute, qemu_array, QemuArgs, RunArgs};
+use board_sim::commands::{bench, builtin, execute, live, qemu_array, LiveArgs, QemuArgs, RunArgs};
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
@@ -29,6 +29,17 @@ enum Command {
         dir: PathBuf,
         #[command(flatten)]
         args: RunArgs,
+    },
+    /// Serve the images of DIR as a live session (the trainer page, the WebSocket session,
+    /// OpenIGTLink), as `pe live` serves the host solver: the host steps the boards, sends
+    /// them the tools' poses and sums their tool forces (docs/live.md).
+    #[command(
+        after_help = "Example:\n  pe compile --builtin --level coarse --boards 2x2x2 -o out/compiled\n  board-sim live out/compiled --listen 127.0.0.1:8080 --record out/session.jsonl\n  board-sim run out/compiled --replay out/session.jsonl --tool-force out/tool_force.csv"
+    )]
+    Live {
+        dir: PathBuf,
+        #[command(flatten)]
+        args: LiveArgs,
     },
     /// Benchmark: steps per second of the serial solver and of board-sim on the same scene,
     /// in one run, as a ratio.
@@ -103,9 +114,12 @@ enum Command {
 
 fn main() -> Result<()> {
     host_tools::output::exit_quietly_when_stdout_closes();
+    // A bad PE_ISA is refused before any work.
+    host_tools::problem::batched::Isa::cap_from_env().map_err(anyhow::Error::msg)?;
     let Cli { command } = Cli::parse();
     match command {
         Command::Run { dir, args } => execute(&dir, args).map(|_| ()),
+        Command::Live { dir, args } => live(&dir, &args),
         Command::Builtin {
             level,
             boards,

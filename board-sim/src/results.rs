@@ -22,57 +22,25 @@ pub struct BoardResult {
     pub recovery: Option<LinkRecovery>,
 }
 
-/// What link recovery cost on one board, per face (`Face::index` order: +x, −x, +y, −y,
-/// +z, −z).
+/// What link recovery cost on one board: link-proto's statistics as they are, per face
+/// (`Face::index` order: +x, −x, +y, −y, +z, −z) and on the global port.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct LinkRecovery {
-    /// Bytes of the envelopes of first transmissions (frames included).
-    pub data_bytes: [u64; 6],
-    pub retransmitted_frames: [u64; 6],
-    pub retransmitted_bytes: [u64; 6],
-    pub nacks_sent: [u64; 6],
-    pub nacks_received: [u64; 6],
-    pub acks_sent: [u64; 6],
-    pub statuses_sent: [u64; 6],
-    /// Bytes of acks, nacks and statuses.
-    pub control_bytes: [u64; 6],
-    /// Envelopes received damaged, beyond a gap, or twice.
-    pub damaged: [u64; 6],
-    pub gaps: [u64; 6],
-    pub duplicates: [u64; 6],
-    /// Data envelopes sent the first time (each adds `recovery::OVERHEAD` bytes).
-    pub data_frames: [u64; 6],
+    pub faces: [FaceRecovery; 6],
     /// What global recovery cost on the board's global port (with it on).
     pub global: Option<GlobalRecovery>,
 }
 
 impl LinkRecovery {
-    pub(crate) fn from_faces(f: &[FaceRecovery; 6], global: Option<&GlobalRecovery>) -> Self {
-        let a = |g: fn(&FaceRecovery) -> u64| std::array::from_fn(|i| g(&f[i]));
-        LinkRecovery {
-            data_bytes: a(|x| x.data_bytes),
-            retransmitted_frames: a(|x| x.retransmitted_frames),
-            retransmitted_bytes: a(|x| x.retransmitted_bytes),
-            nacks_sent: a(|x| x.nacks_sent),
-            nacks_received: a(|x| x.nacks_received),
-            acks_sent: a(|x| x.acks_sent),
-            statuses_sent: a(|x| x.statuses_sent),
-            control_bytes: a(|x| x.control_bytes),
-            damaged: a(|x| x.damaged),
-            gaps: a(|x| x.gaps),
-            duplicates: a(|x| x.duplicates),
-            data_frames: a(|x| x.data_frames),
-            global: global.copied(),
-        }
+    /// The sum of `stat` over the six faces.
+    pub fn faces_sum(&self, stat: fn(&FaceRecovery) -> u64) -> u64 {
+        self.faces.iter().map(stat).sum()
     }
 
     /// Bytes recovery added on this board's links: envelopes, retransmissions, control,
     /// on the faces and on the global port.
     pub fn overhead_bytes(&self) -> u64 {
-        let s = |v: &[u64; 6]| v.iter().sum::<u64>();
-        s(&self.data_frames) * link_proto::recovery::OVERHEAD as u64
-            + s(&self.retransmitted_bytes)
-            + s(&self.control_bytes)
+        self.faces_sum(FaceRecovery::overhead_bytes)
             + self
                 .global
                 .as_ref()
@@ -99,7 +67,6 @@ pub struct SimOutput {
     /// Per step, the force on each tool as the host summed it from the boards' shares (N).
     pub tool_force: Vec<[f64; 3]>,
     pub tools: usize,
-    pub dt_s: f64,
     /// What the receiving end of global recovery cost in the graphics and host sinks (acks
     /// and nacks they sent), with global recovery on.
     pub sink_recovery: Option<GlobalRecovery>,

@@ -2,8 +2,7 @@
 //! ([`pe_firmware::runtime::StorageBuf`]) over growable vectors, sized exactly for an image
 //! or as the firmware of a board profile sizes it.
 
-use pe_firmware::image::{ElementRecord, ImageError, ImageReader, Integration, Precision};
-use pe_firmware::physics::{HexFull, HexReduced};
+use pe_firmware::image::{ElementRecord, ImageError, ImageReader};
 use pe_firmware::runtime::{Capacities, Runtime, RuntimeConfig, Shelf, StorageBuf, WireReal};
 
 /// Growable vectors: board-sim's storage, sized when a board is loaded.
@@ -68,14 +67,7 @@ pub fn load_check(image: &[u8], board: [u8; 3], sizing: StorageSizing) -> Result
         Runtime::load(image, board, st, RuntimeConfig::default()).map(|_| ())
     }
     let h = ImageReader::new(image, Some(board))?.header;
-    match (h.precision, h.integration) {
-        (Precision::F64, Integration::Reduced) => {
-            typed::<f64, HexReduced<f64>>(image, board, sizing)
-        }
-        (Precision::F64, Integration::Full) => typed::<f64, HexFull<f64>>(image, board, sizing),
-        (Precision::F32, Integration::Reduced) => {
-            typed::<f32, HexReduced<f32>>(image, board, sizing)
-        }
-        (Precision::F32, Integration::Full) => typed::<f32, HexFull<f32>>(image, board, sizing),
-    }
+    pe_firmware::with_element_types!(h.precision, h.integration, |T, E| {
+        typed::<T, E>(image, board, sizing)
+    })
 }

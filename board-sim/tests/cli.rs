@@ -41,8 +41,11 @@ fn every_help_has_an_example() {
         .filter(|c| *c != "help")
         .map(str::to_string)
         .collect();
-    // run, bench, campaign, qemu, builtin (an empty list would prove nothing).
-    assert_eq!(subs, ["run", "bench", "campaign", "qemu", "builtin"]);
+    // run, live, bench, campaign, qemu, builtin (an empty list would prove nothing).
+    assert_eq!(
+        subs,
+        ["run", "live", "bench", "campaign", "qemu", "builtin"]
+    );
     for sub in &subs {
         let help = sim(&[sub, "--help"]);
         assert!(help.contains("Example"), "board-sim {sub} --help:\n{help}");

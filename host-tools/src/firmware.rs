@@ -13,9 +13,14 @@ use std::process::Command;
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
-use pe_firmware::image::{blob, Feature, ImageHeader};
+use pe_firmware::image::{blob, Integration, Precision};
+use pe_firmware::profile::BoardProfile;
 
-use crate::compile::{image_file_name, read_manifest};
+use crate::compile::{image_file_name, Manifest};
+use crate::scene::settings::{integration_text, precision_text};
+
+/// The firmware's parts some image of a set needs (its home: [`crate::compile::parts_of`]).
+pub use crate::compile::parts_needed;
 
 /// The schedule region's content for an image ([`blob::write_blob`]).
 pub fn schedule_blob(image: &[u8]) -> Vec<u8> {
@@ -103,40 +108,22 @@ pub fn repo_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// Cargo features of the firmware for a manifest's precision, integration and profile.
-pub fn firmware_features(precision: &str, integration: &str, profile: &str) -> Vec<&'static str> {
-    use pe_firmware::profile::{PE_BOARD, STM32H743_UART};
-    let mut f = Vec::new();
-    if profile == STM32H743_UART.name {
-        // The prototype's board support (USART faces and global port by DMA, clocks).
-        f.push("stm32h743");
-        f.push("defmt");
-    } else if profile == PE_BOARD.name {
-        f.push("defmt"); // logs and fault messages over RTT (probe-rs attach)
-    } else {
-        f.push("qemu");
-    }
-    if precision == "f32" {
+/// Cargo features of the firmware for a set's precision, integration and board profile:
+/// the board's support ([`BoardProfile::board_features`]), then `f32` and `full` when the
+/// set needs them.
+pub fn firmware_features(
+    precision: Precision,
+    integration: Integration,
+    profile: &BoardProfile,
+) -> Vec<&'static str> {
+    let mut f = profile.board_features.to_vec();
+    if precision == Precision::F32 {
         f.push("f32");
     }
-    if integration == "full" {
+    if integration == Integration::Full {
         f.push("full");
     }
     f
-}
-
-/// The firmware's parts ([`Feature`]: contact, graphics, loads; cargo features of the
-/// board crate) that some image of `headers` needs, in [`Feature::ALL`] order: the build
-/// `pe image` makes carries no other (a scene without contact gets a firmware without its
-/// code and tables; a board's image without contact tables runs none of it either way).
-pub fn parts_needed<'h>(
-    headers: impl Iterator<Item = &'h ImageHeader> + Clone,
-) -> Vec<&'static str> {
-    Feature::ALL
-        .into_iter()
-        .filter(|&f| headers.clone().any(|h| h.uses(f).is_some()))
-        .map(Feature::name)
-        .collect()
 }
 
 /// Builds the firmware with cargo (release, thumbv7em-none-eabihf, -C target-cpu=cortex-m7
@@ -187,9 +174,12 @@ pub struct ImageManifest {
     #[serde(default)]
     pub compilation: String,
     pub machine: [usize; 3],
-    pub profile: String,
-    pub precision: String,
-    pub integration: String,
+    #[serde(with = "pe_firmware::profile::by_name")]
+    pub profile: &'static BoardProfile,
+    #[serde(with = "precision_text")]
+    pub precision: Precision,
+    #[serde(with = "integration_text")]
+    pub integration: Integration,
     pub steps: u64,
     /// The firmware ELF the per-board copies were made from, and its cargo features.
     pub firmware: String,
@@ -199,9 +189,8 @@ pub struct ImageManifest {
 
 /// `pe image DIR -o OUT [--firmware ELF]`.
 pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<ImageManifest> {
-    let m = read_manifest(dir)?;
-    let profile = pe_firmware::profile::profile(&m.profile)
-        .with_context(|| format!("{}: unknown profile {:?}", dir.display(), m.profile))?;
+    let m = Manifest::read(dir)?;
+    let profile = m.profile;
     // Every image decoded and the set checked against the manifest (one compilation, the
     // CRCs it recorded) before anything is built or written.
     let mut files = Vec::new();
@@ -223,7 +212,7 @@ pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<Imag
     }
     crate::compile::check_image_set(&m, &files)?;
     // The firmware carries the parts some board's image needs, and no other.
-    let mut features = firmware_features(&m.precision, &m.integration, &m.profile);
+    let mut features = firmware_features(m.precision, m.integration, profile);
     features.extend(parts_needed(files.iter().map(|f| &f.header)));
     let elf_path = match firmware {
         Some(p) => p.to_path_buf(),

@@ -1,37 +1,14 @@
-//! Small 3-vector arithmetic and the hexahedron's scaled Jacobian: the one copy every
-//! mesh generator, analysis and renderer on the host uses.
+//! Small 3-vector arithmetic (the firmware's `physics::vec3`, re-exported, and what the host
+//! adds to it) and the hexahedron's scaled Jacobian: what every mesh generator, analysis and
+//! renderer on the host uses.
 
 /// A point or vector in 3D.
 pub type V3 = [f64; 3];
 
-pub fn add(a: V3, b: V3) -> V3 {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-pub fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-pub fn scale(a: V3, s: f64) -> V3 {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-
-pub fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-pub fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-/// Euclidean length `√(a·a)`.
-pub fn norm(a: V3) -> f64 {
-    dot(a, a).sqrt()
-}
+/// `a + b`, `a − b`, `s a`, `a · b`, `a × b` and `√(a · a)`: the firmware's
+/// ([`pe_firmware::physics::vec3`], the one home of the small vector helpers), so a value
+/// is the same bits on the host and on the boards.
+pub use pe_firmware::physics::vec3::{add, cross, dot, norm, scale, sub};
 
 /// `a / |a|` (as `a · (1/|a|)`).
 pub fn unit(a: V3) -> V3 {

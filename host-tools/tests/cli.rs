@@ -50,8 +50,8 @@ fn every_help_has_an_example() {
     let top = pe(&["--help"]);
     assert!(top.contains("Example"), "{top}");
     let subs = subcommands(&top);
-    // The twelve subcommands of pe (a list that came back empty would prove nothing).
-    assert_eq!(subs.len(), 12, "{subs:?}");
+    // The thirteen subcommands of pe (a list that came back empty would prove nothing).
+    assert_eq!(subs.len(), 13, "{subs:?}");
     for sub in &subs {
         let help = pe(&[sub, "--help"]);
         assert!(
@@ -273,4 +273,51 @@ fn a_closed_stdout_ends_pe_quietly() {
         out.status
     );
     let _ = std::fs::remove_dir_all(&d);
+}
+
+/// `PE_ISA` caps the element loop's registers (how an AVX-512 machine measures what an AVX2
+/// laptop runs): with `PE_ISA=avx` the report's kernel is never an AVX-512 one, and with
+/// `portable` it is the portable lanes; a value naming no instruction set is refused before
+/// work, naming the variable and the known values.
+#[test]
+fn pe_isa_caps_the_lanes() {
+    let dir = temp_dir("isa");
+    let kernel = |isa: &str| {
+        let report = dir.join(format!("{isa}.json"));
+        let out = Command::new(PE)
+            .env("PE_ISA", isa)
+            .args([
+                "solve",
+                "--builtin",
+                "--level",
+                "coarse",
+                "--steps",
+                "20",
+                "--quiet",
+            ])
+            .arg("--report")
+            .arg(&report)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        r["kernel"].as_str().unwrap().to_string()
+    };
+    let avx = kernel("avx");
+    assert!(!avx.is_empty() && !avx.contains("avx512"), "{avx}");
+    let portable = kernel("portable");
+    assert!(portable.ends_with("portable"), "{portable}");
+    let out = Command::new(PE)
+        .env("PE_ISA", "sse9")
+        .args(["solve", "--builtin", "--level", "coarse", "--steps", "20"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("PE_ISA") && err.contains("avx512"), "{err}");
 }

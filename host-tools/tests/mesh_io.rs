@@ -9,7 +9,8 @@ use std::path::{Path, PathBuf};
 mod common;
 
 use common::TempDir;
-use host_tools::mesh::io::{generate_box, load_mesh};
+use host_tools::mesh::grid::generate_box;
+use host_tools::mesh::io::load_mesh;
 use host_tools::mesh::{Mesh, MeshError};
 use host_tools::output::vtk::{self, PointField, VtkSeriesWriter};
 

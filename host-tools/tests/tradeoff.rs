@@ -83,6 +83,7 @@ fn tradeoff_grid_on_a_box_scene() {
     let opts = Options {
         fine: false,
         level: None,
+        profile: &pe_firmware::profile::PE_BOARD,
     };
     tradeoff::run_cli(&beam(), std::path::Path::new("."), "beam", &opts, &dir).unwrap();
     let csv = std::fs::read_to_string(dir.join("tradeoff.csv")).unwrap();

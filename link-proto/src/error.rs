@@ -22,6 +22,11 @@ pub enum Error {
     BadEncoding,
     /// The caller's output buffer is too small for what is to be emitted or received.
     BufferTooSmall,
+    /// A payload ends inside this field (a payload whose fields are named:
+    /// [`crate::tool_pose`]).
+    TruncatedField(&'static str),
+    /// This field of a payload holds a value it cannot (non-finite, out of range).
+    BadField(&'static str),
 }
 
 impl fmt::Display for Error {
@@ -35,6 +40,10 @@ impl fmt::Display for Error {
             Error::UnsupportedVersion(v) => write!(f, "unsupported packet version {v}"),
             Error::BadEncoding => f.write_str("invalid COBS encoding"),
             Error::BufferTooSmall => f.write_str("output buffer too small"),
+            Error::TruncatedField(name) => {
+                write!(f, "truncated: the payload ends inside field `{name}`")
+            }
+            Error::BadField(name) => write!(f, "bad value in field `{name}`"),
         }
     }
 }

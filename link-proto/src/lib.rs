@@ -32,7 +32,7 @@
 //! | 0       | 1    | destination (board `0..64`, graphics 64, host 65, broadcast 255) |
 //! | 1       | 1    | source                                                       |
 //! | 2       | 2    | message id (u16)                                             |
-//! | 4       | 1    | kind: 0x01 collision, 0x02 graphics surface, 0x03 bounding box, 0x04 tool force, 0x10/0x11/0x12 control start/stop/step-done, 0x20 fault report, else unknown |
+//! | 4       | 1    | kind: 0x01 collision, 0x02 graphics surface, 0x03 bounding box, 0x04 tool force, 0x06 tool pose, 0x10/0x11/0x12 control start/stop/step-done, 0x20 fault report, else unknown |
 //! | 5       | 1    | version (1)                                                  |
 //! | 6       | 2    | payload length `n` (u16, ≤ [`PACKET_PAYLOAD_LEN_MAX`])       |
 //! | 8       | `n`  | payload                                                      |
@@ -83,6 +83,7 @@ pub mod packet;
 pub mod payload;
 pub mod recovery;
 pub mod stream;
+pub mod tool_pose;
 
 pub use error::{Error, Result};
 pub use frame::{emit_values, Frame, FrameKind, FrameRepr, Payload, Precision, Values};

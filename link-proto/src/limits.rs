@@ -12,7 +12,7 @@
 //! |---|---|
 //! | a link frame of `n` values of a precision | [`crate::frame::frame_len`] (and [`crate::frame::FrameRepr::buffer_len`]) |
 //! | a global packet of `n` payload bytes | [`crate::packet::packet_len`] (and [`crate::packet::PacketRepr::buffer_len`]) |
-//! | a payload: surface chunk, contact nodes, bounding box, tool force, hello | [`crate::payload`]: `SurfaceHeader::payload_len`, `NodesHeader::payload_len`, `BoxPayload::LEN`, `ToolForcePayload::LEN`, `HelloPayload::LEN` |
+//! | a payload: surface chunk, contact nodes, bounding box, tool force, hello, tool pose | [`crate::payload`]: `SurfaceHeader::payload_len`, `NodesHeader::payload_len`, `BoxPayload::LEN`, `ToolForcePayload::LEN`, `HelloPayload::LEN`; [`crate::tool_pose::ToolPoseRepr::LEN`] |
 //! | a frame or packet inside its recovery envelope | [`enveloped_len`] (also `crate::recovery::enveloped_len`; `FrameRepr::enveloped_len`, `PacketRepr::enveloped_len`) |
 //! | any of these on a byte stream (COBS and delimiters), at most | [`wire_len_max`] |
 //!

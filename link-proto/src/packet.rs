@@ -15,7 +15,8 @@
 //! | 8 + `n` | 4    | CRC-32/ISO-HDLC over bytes `0 .. 8 + n`                |
 //!
 //! Kind codes: 0x01 collision exchange, 0x02 graphics surface, 0x03 bounding box,
-//! 0x04 tool force, 0x05 hello (a board's compilation id, to the host), 0x10 control
+//! 0x04 tool force, 0x05 hello (a board's compilation id, to the host), 0x06 tool pose
+//! (the host to the boards holding a tool: [`crate::tool_pose`]), 0x10 control
 //! start, 0x11 control stop, 0x12 control step-done, 0x20 fault report; any
 //! other code parses as [`PacketKind::Unknown`].
 //!
@@ -95,6 +96,9 @@ pub enum PacketKind {
     /// A board's compilation id, to the host before step 0 (the host checks the board
     /// runs the set it loaded).
     Hello,
+    /// A tool's pose from a step on, from the host to each board whose contact tables
+    /// hold the tool ([`crate::tool_pose`]).
+    ToolPose,
     /// Control: start, stop, step done.
     Control(Control),
     /// A board reports a fault.
@@ -112,6 +116,7 @@ impl PacketKind {
             PacketKind::BoundingBox => 0x03,
             PacketKind::ToolForce => 0x04,
             PacketKind::Hello => 0x05,
+            PacketKind::ToolPose => 0x06,
             PacketKind::Control(Control::Start) => 0x10,
             PacketKind::Control(Control::Stop) => 0x11,
             PacketKind::Control(Control::StepDone) => 0x12,
@@ -128,6 +133,7 @@ impl PacketKind {
             0x03 => PacketKind::BoundingBox,
             0x04 => PacketKind::ToolForce,
             0x05 => PacketKind::Hello,
+            0x06 => PacketKind::ToolPose,
             0x10 => PacketKind::Control(Control::Start),
             0x11 => PacketKind::Control(Control::Stop),
             0x12 => PacketKind::Control(Control::StepDone),
@@ -224,6 +230,13 @@ impl<T: AsRef<[u8]>> Packet<T> {
     pub fn payload(&self) -> &[u8] {
         let end = field::PAYLOAD + usize::from(self.payload_len());
         &self.buffer.as_ref()[field::PAYLOAD..end]
+    }
+
+    /// What follows the header, whatever the length field says (payload, CRC and any bytes
+    /// after; empty if the buffer is no longer than a header). Never panics: for observers
+    /// of a packet that may be damaged, its length field included.
+    pub fn after_header(&self) -> &[u8] {
+        self.buffer.as_ref().get(field::PAYLOAD..).unwrap_or(&[])
     }
 
     /// The CRC stored in the trailer.

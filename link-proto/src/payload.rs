@@ -10,6 +10,7 @@
 //! | nodes ([`PacketKind::CollisionExchange`](crate::PacketKind)) | step u32, last u8 (1: the sender's last packet of the step), precision u8 (the value width, 4 or 8), count u16, then count × (contact-node index u32, displacement 3×f32 or 3×f64) |
 //! | [`ToolForcePayload`] ([`PacketKind::ToolForce`](crate::PacketKind)) | step u32, tool u8, force 3×f64 (29 bytes) |
 //! | [`HelloPayload`] ([`PacketKind::Hello`](crate::PacketKind)) | compilation id, 8 bytes as in the image header |
+//! | [`ToolPoseRepr`](crate::tool_pose::ToolPoseRepr) ([`PacketKind::ToolPose`](crate::PacketKind), host to boards) | tool u8, step u32, q 4×f64, p_m 3×f64 (61 bytes; [`crate::tool_pose`]) |
 //! | surface ([`PacketKind::GraphicsSurface`](crate::PacketKind)) | frame u32, step u32, chunk u8, chunks u8, count u16, then count × (mesh node u32, displacement 3×f32) |
 //!
 //! # Lengths
@@ -31,6 +32,7 @@
 use crate::error::{Error, Result};
 use crate::frame::Precision;
 use crate::limits::PACKET_PAYLOAD_LEN_MAX;
+use crate::packet::PacketKind;
 
 /// Field offsets of the payloads (the layouts above); an entry's fields are counted from
 /// the entry's start.
@@ -96,6 +98,21 @@ const _: () = assert!(field::nodes::STEP + field::U32 == field::nodes::LAST);
 const _: () = assert!(field::tool::STEP + field::U32 == field::tool::TOOL);
 const _: () = assert!(field::surface::FRAME + field::U32 == field::surface::STEP);
 const _: () = assert!(field::surface::STEP + field::U32 == field::surface::CHUNK);
+
+/// The step a payload of `kind` belongs to, read from its step field alone (boxes, contact
+/// nodes and tool forces carry it first, surface chunks after their frame number); `None`
+/// for other kinds or too short a payload. No other check: for observers of a packet that
+/// may be damaged.
+pub fn step_of(kind: PacketKind, payload: &[u8]) -> Option<u32> {
+    let at = match kind {
+        PacketKind::BoundingBox => field::bbox::STEP,
+        PacketKind::CollisionExchange => field::nodes::STEP,
+        PacketKind::ToolForce => field::tool::STEP,
+        PacketKind::GraphicsSurface => field::surface::STEP,
+        _ => return None,
+    };
+    u32_at(payload, at).ok()
+}
 
 /// Offset of entry `k`, `None` if the entry would end past `usize::MAX` (found by
 /// fuzzing: `k * len` overflowed for a huge `k`).

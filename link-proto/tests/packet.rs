@@ -72,6 +72,7 @@ fn kind_codes() {
         (PacketKind::BoundingBox, 0x03),
         (PacketKind::ToolForce, 0x04),
         (PacketKind::Hello, 0x05),
+        (PacketKind::ToolPose, 0x06),
         (PacketKind::Control(Control::Start), 0x10),
         (PacketKind::Control(Control::Stop), 0x11),
         (PacketKind::Control(Control::StepDone), 0x12),

@@ -446,3 +446,33 @@ fn every_bit_of_a_global_data_envelope_is_checked() {
         "shorter than its CRC"
     );
 }
+
+/// What an observer reads of a global envelope without checking it: the destination of a
+/// packet and of the data envelope carrying it is the packet's, a control envelope names
+/// its own destination and type, the carried packet comes back whole, and bytes too short
+/// for a field give none.
+#[test]
+fn an_observer_reads_destination_and_type_of_an_envelope() {
+    use link_proto::recovery::global::{
+        code, control, data_packet, destination, emit_data, envelope_type,
+    };
+    let p = packet(3, 9, 7);
+    assert!(
+        p.len() > link_proto::PACKET_HEADER_LEN,
+        "a packet with a payload"
+    );
+    assert_eq!(destination(&p), Some(9));
+    let mut e = vec![0u8; link_proto::enveloped_len(p.len())];
+    let n = emit_data(&p, 41, &mut e).expect("an envelope");
+    assert_eq!(n, e.len());
+    assert_eq!(destination(&e), Some(9));
+    assert_eq!(envelope_type(&e), Some(code::DATA));
+    assert_eq!(data_packet(&e), Some(&p[..]));
+    let ack = control(5, 9, code::ACK, 42);
+    assert_eq!(
+        (destination(&ack), envelope_type(&ack)),
+        (Some(5), Some(code::ACK))
+    );
+    assert_eq!(data_packet(&ack), None);
+    assert_eq!((destination(&[]), envelope_type(&[9, 3])), (None, None));
+}

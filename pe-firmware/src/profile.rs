@@ -36,6 +36,10 @@ pub struct BoardProfile {
     pub image_origin: u64,
     /// probe-rs `--chip` of the board's MCU (empty for an emulation profile).
     pub probe_chip: &'static str,
+    /// The board crate's cargo features of this board's support (`pe image` builds the
+    /// firmware with them, beside the precision's, the element's and the parts'): its
+    /// drivers, clocks and log transport.
+    pub board_features: &'static [&'static str],
     /// Contact tables the firmware holds (the same on every board that owns a contact node;
     /// a board that owns none gets none): surface nodes and faces of all declared contact
     /// surfaces.
@@ -99,6 +103,8 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
     face_ports: 6,
     image_origin: 0x0810_0000,
     probe_chip: "STM32H743ZITx",
+    // Logs and fault messages over RTT (probe-rs attach).
+    board_features: &["defmt"],
     // Contact tables (the whole scene's, on every board): some 190 bytes per contact node
     // and 76 per face (with the face's bounds for a step). 384 each, twice the built-in
     // medium scene's 178 nodes and 160 faces, leave the elements more of the RAM than 512
@@ -126,6 +132,9 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
 /// design for real time.
 pub const STM32H743_UART: BoardProfile = BoardProfile {
     name: "stm32h743-uart",
+    // The prototype's board support (USART faces and global port by DMA, clocks), and RTT
+    // logs.
+    board_features: &["stm32h743", "defmt"],
     link_bytes_per_s: 750_000,
     link_latency_ns: 5_000,
     ..PE_BOARD
@@ -149,6 +158,7 @@ pub const QEMU_MPS2_AN500: BoardProfile = BoardProfile {
     face_ports: mps2_uarts::FACE_UARTS.len() as u8,
     image_origin: 0x0020_0000,
     probe_chip: "",
+    board_features: &["qemu"],
     // The frames' node limit, and otherwise the PE board's tables (the RAM decides the
     // elements).
     nodes_max: link_proto::NODES_PER_BOARD_MAX as u32,
@@ -202,14 +212,146 @@ pub mod mps2_uarts {
     }
 }
 
-pub const PROFILES: [BoardProfile; 3] = [PE_BOARD, STM32H743_UART, QEMU_MPS2_AN500];
+/// The board profiles, the one registry every name is looked up in
+/// ([`BoardProfile::by_name`]): a new board is a `BoardProfile` constant above and its entry
+/// here.
+pub const PROFILES: [&BoardProfile; 3] = [&PE_BOARD, &STM32H743_UART, &QEMU_MPS2_AN500];
 
-/// Looks a profile up by name.
-pub fn profile(name: &str) -> Option<BoardProfile> {
-    PROFILES.iter().copied().find(|p| p.name == name)
+impl BoardProfile {
+    /// The registered profile called `name` ([`PROFILES`]); an unknown name is an error
+    /// that names it and lists the known ones.
+    pub fn by_name(name: &str) -> Result<&'static BoardProfile, UnknownProfile> {
+        PROFILES
+            .into_iter()
+            .find(|p| p.name == name)
+            .ok_or_else(|| UnknownProfile::new(name))
+    }
+
+    /// The fixed cost of one link frame (s): [`Self::link_latency_ns`] in seconds.
+    pub fn link_latency_s(&self) -> f64 {
+        self.link_latency_ns as f64 * 1e-9
+    }
+
+    /// The time one link direction of this profile needs for `frames` frames of
+    /// `bytes_on_wire` bytes in all ([`link_time_s`] at its rate and fixed cost).
+    pub fn link_time_s(&self, bytes_on_wire: usize, frames: usize) -> f64 {
+        link_time_s(
+            bytes_on_wire,
+            frames,
+            self.link_bytes_per_s as f64,
+            self.link_latency_s(),
+        )
+    }
+
+    /// The time of one frame of `len_on_wire` bytes on this profile's links
+    /// ([`link_time_s`] of one frame).
+    pub fn frame_time_s(&self, len_on_wire: usize) -> f64 {
+        self.link_time_s(len_on_wire, 1)
+    }
 }
 
-use crate::physics::Kernel;
+/// The link time of `frames` frames of `bytes_on_wire` bytes in all, on a link of
+/// `bytes_per_s` each way whose every frame costs `frame_latency_s` beyond its bytes:
+///
+/// `t = bytes_on_wire / bytes_per_s + frames · frame_latency_s`
+///
+/// The one formula of a frame's time on a face link (the compile report's links, the step
+/// model's frames, board-sim's link model). A frame's bytes on the wire are its length
+/// ([`link_proto::frame::frame_len`]), inside link recovery's envelope when the links run
+/// it ([`link_proto::limits::enveloped_len`]): the caller says which by the length it
+/// passes.
+pub fn link_time_s(
+    bytes_on_wire: usize,
+    frames: usize,
+    bytes_per_s: f64,
+    frame_latency_s: f64,
+) -> f64 {
+    bytes_on_wire as f64 / bytes_per_s + frames as f64 * frame_latency_s
+}
+
+/// A profile shows as its name.
+impl core::fmt::Display for BoardProfile {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name)
+    }
+}
+
+/// A board profile name not in the registry ([`PROFILES`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct UnknownProfile {
+    /// The name asked for (its first [`UNKNOWN_NAME_MAX`] bytes).
+    name: heapless::String<UNKNOWN_NAME_MAX>,
+    truncated: bool,
+}
+
+/// Bytes of an unknown profile name its error keeps.
+pub const UNKNOWN_NAME_MAX: usize = 48;
+
+impl UnknownProfile {
+    fn new(name: &str) -> UnknownProfile {
+        let mut kept = heapless::String::new();
+        let mut truncated = false;
+        for c in name.chars() {
+            if kept.push(c).is_err() {
+                truncated = true;
+                break;
+            }
+        }
+        UnknownProfile {
+            name: kept,
+            truncated,
+        }
+    }
+}
+
+impl core::fmt::Display for UnknownProfile {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "unknown board profile {:?}{} (known:",
+            self.name.as_str(),
+            if self.truncated { "..." } else { "" }
+        )?;
+        for (k, p) in PROFILES.iter().enumerate() {
+            write!(f, "{}{}", if k == 0 { " " } else { ", " }, p.name)?;
+        }
+        f.write_str(")")
+    }
+}
+
+impl core::error::Error for UnknownProfile {}
+
+/// `#[serde(with = "pe_firmware::profile::by_name")]`: a registered profile
+/// (`&'static BoardProfile`) as its name; reading an unknown name is an error listing the
+/// known ones ([`BoardProfile::by_name`]).
+pub mod by_name {
+    use super::BoardProfile;
+
+    pub fn serialize<S: serde::Serializer>(
+        p: &&'static BoardProfile,
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        s.serialize_str(p.name)
+    }
+
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(
+        d: D,
+    ) -> Result<&'static BoardProfile, D::Error> {
+        struct Name;
+        impl serde::de::Visitor<'_> for Name {
+            type Value = &'static BoardProfile;
+            fn expecting(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+                f.write_str("a board profile's name")
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Self::Value, E> {
+                BoardProfile::by_name(v).map_err(E::custom)
+            }
+        }
+        d.deserialize_str(Name)
+    }
+}
+
+use crate::physics::ElementKind;
 
 /// Executed instructions of the board firmware per element and per node in one step,
 /// measured under QEMU (mps2-an500, Cortex-M7 with FPU, `-C target-cpu=cortex-m7`) with an
@@ -258,30 +400,48 @@ pub struct FirmwareCost {
 }
 
 impl FirmwareCost {
-    /// Instructions per element-step (kernel, gather, scatter) of kernel `k`.
-    pub fn element_step(&self, k: Kernel) -> u32 {
+    /// Instructions per element-step (kernel, gather, scatter) of kind `k`: the measured
+    /// figure of this row's precision; 0 for a kind of the other integration (this row
+    /// measured none).
+    pub fn element_step(&self, k: ElementKind) -> u32 {
         match k {
-            Kernel::General => self.per_element_step,
-            Kernel::Parallelepiped => self.box_per_element_step,
-            Kernel::Cuboid => self.cuboid_per_element_step,
+            _ if k.integration() != self.integration => 0,
+            ElementKind::HexReduced | ElementKind::HexFull => self.per_element_step,
+            ElementKind::HexBox => self.box_per_element_step,
+            ElementKind::HexCuboid => self.cuboid_per_element_step,
         }
     }
 
-    /// Instructions of one step of a board holding `per_kernel[k]` elements of each kernel
-    /// ([`Kernel`] order) and `nodes` nodes, charged for `contact_nodes` contact nodes
-    /// ([`Self::charged_contact_nodes`]; no exchange).
+    /// Its figures as a [`StepCost`] (the one formula of a step's instructions), per
+    /// element table ([`ElementKind::table`] order).
+    pub fn step_cost(&self) -> StepCost {
+        StepCost {
+            per_element: core::array::from_fn(|t| self.table_step(t) as f64),
+            per_node_update: self.per_node_update as f64,
+            per_contact_node: self.per_contact_node as f64,
+        }
+    }
+
+    /// [`Self::element_step`] of the kind element table `t` holds in this row's
+    /// integration (0 where the table stays empty).
+    fn table_step(&self, t: usize) -> u32 {
+        ElementKind::in_table(self.integration, t).map_or(0, |k| self.element_step(k))
+    }
+
+    /// Instructions of one step of a board holding `per_table[t]` elements in each element
+    /// table ([`ElementKind::table`] order) and `nodes` nodes, charged for `contact_nodes`
+    /// contact nodes ([`Self::charged_contact_nodes`]; no exchange): [`StepCost::step`].
     pub fn step_instructions(
         &self,
-        per_kernel: [usize; 3],
+        per_table: [usize; ElementKind::TABLES],
         nodes: usize,
         contact_nodes: usize,
     ) -> f64 {
-        Kernel::ALL
-            .iter()
-            .map(|&k| per_kernel[k as usize] as f64 * self.element_step(k) as f64)
-            .sum::<f64>()
-            + nodes as f64 * self.per_node_update as f64
-            + contact_nodes as f64 * self.per_contact_node as f64
+        self.step_cost().step(
+            per_table.map(|n| n as f64),
+            nodes as f64,
+            contact_nodes as f64,
+        )
     }
 
     /// The contact-surface nodes a board's step is charged [`Self::per_contact_node`] for
@@ -302,30 +462,71 @@ impl FirmwareCost {
         }
     }
 
-    /// Per element of a mix with fractions `mix[k]` of each kernel ([`Kernel`] order).
-    pub fn per_element_of_mix(&self, mix: [f64; 3]) -> f64 {
-        Kernel::ALL
-            .iter()
-            .map(|&k| mix[k as usize] * self.element_step(k) as f64)
-            .sum()
+    /// Per element of a mix with fractions `mix[t]` in each element table
+    /// ([`ElementKind::table`] order): [`StepCost::elements`] of the mix.
+    pub fn per_element_of_mix(&self, mix: [f64; ElementKind::TABLES]) -> f64 {
+        self.step_cost().elements(mix)
     }
 
     /// Elements one board of `profile` computes at `rate_hz` steps per second, with
     /// `nodes_per_element` nodes (`contact_per_element` contact nodes) per element and
-    /// fractions `mix` of each kernel, taking one instruction per cycle.
+    /// fractions `mix` in each element table, taking one instruction per cycle.
     pub fn elements_per_board(
         &self,
         profile: &BoardProfile,
         rate_hz: f64,
         nodes_per_element: f64,
         contact_per_element: f64,
-        mix: [f64; 3],
+        mix: [f64; ElementKind::TABLES],
     ) -> f64 {
         profile.clock_hz as f64
             / rate_hz
-            / (self.per_element_of_mix(mix)
-                + nodes_per_element * self.per_node_update as f64
-                + contact_per_element * self.per_contact_node as f64)
+            / self
+                .step_cost()
+                .step(mix, nodes_per_element, contact_per_element)
+    }
+}
+
+/// What a board's step costs in instructions: per element of each kernel ([`Kernel`]
+/// order), per node update and per contact node charged
+/// ([`FirmwareCost::charged_contact_nodes`]). From the measured table
+/// ([`FirmwareCost::step_cost`]) or a timing model's figures; the one formula of a step's
+/// instructions (the compile report's capacity, the step model's batches and node update,
+/// the trade-off study's board real-time factor):
+///
+/// `I = Σ_k n_k · e_k + nodes · u + contact_nodes · c`
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepCost {
+    pub per_element: [f64; ElementKind::TABLES],
+    pub per_node_update: f64,
+    pub per_contact_node: f64,
+}
+
+impl StepCost {
+    /// The element loop's instructions for `elements[k]` elements of each kernel:
+    /// `Σ_k n_k · e_k`.
+    pub fn elements(&self, elements: [f64; ElementKind::TABLES]) -> f64 {
+        (0..ElementKind::TABLES)
+            .map(|t| elements[t] * self.per_element[t])
+            .sum()
+    }
+
+    /// The node update's instructions: `nodes · u + contact_nodes · c`.
+    pub fn update(&self, nodes: f64, contact_nodes: f64) -> f64 {
+        nodes * self.per_node_update + contact_nodes * self.per_contact_node
+    }
+
+    /// A whole step's (no exchange): [`Self::elements`] and then the terms of
+    /// [`Self::update`], added in this order.
+    pub fn step(
+        &self,
+        elements: [f64; ElementKind::TABLES],
+        nodes: f64,
+        contact_nodes: f64,
+    ) -> f64 {
+        self.elements(elements)
+            + nodes * self.per_node_update
+            + contact_nodes * self.per_contact_node
     }
 }
 
@@ -345,7 +546,7 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_per_element_step: 539,
             per_node_update: 79,
             per_contact_node: 275,
-            per_search_test: 30,
+            per_search_test: 29,
             step_per_element: 1176,
         },
         FirmwareCost {
@@ -359,7 +560,7 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_per_element_step: 0,
             per_node_update: 79,
             per_contact_node: 274,
-            per_search_test: 30,
+            per_search_test: 29,
             step_per_element: 4328,
         },
         FirmwareCost {
@@ -373,7 +574,7 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_per_element_step: 493,
             per_node_update: 88,
             per_contact_node: 268,
-            per_search_test: 30,
+            per_search_test: 29,
             step_per_element: 1050,
         },
         FirmwareCost {
@@ -387,7 +588,7 @@ pub const MEASURED_COST: [FirmwareCost; 4] = {
             cuboid_per_element_step: 0,
             per_node_update: 88,
             per_contact_node: 268,
-            per_search_test: 30,
+            per_search_test: 29,
             step_per_element: 3585,
         },
     ]
@@ -405,4 +606,76 @@ pub fn measured_cost(
         }
     }
     c
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use std::string::ToString;
+
+    /// Every registered profile is found by its name (the registry's own entry); a name
+    /// off by a letter is refused, and its error names it and every known profile; a long
+    /// unknown name is kept cut, marked as cut.
+    #[test]
+    fn profiles_are_found_by_their_names_only() {
+        assert_eq!(PROFILES.len(), 3);
+        for p in PROFILES {
+            let found = BoardProfile::by_name(p.name).expect("registered");
+            assert!(core::ptr::eq(found, p), "{}", p.name);
+        }
+        assert_eq!(
+            BoardProfile::by_name("pe-board").unwrap().clock_hz,
+            480_000_000
+        );
+        let e = BoardProfile::by_name("pe-bord").unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "unknown board profile \"pe-bord\" (known: pe-board, stm32h743-uart, qemu-mps2-an500)"
+        );
+        let long = "x".repeat(100);
+        let e = BoardProfile::by_name(&long).unwrap_err().to_string();
+        assert!(
+            e.contains(&std::format!("\"{}\"...", "x".repeat(UNKNOWN_NAME_MAX))),
+            "{e}"
+        );
+    }
+
+    /// A frame's time is its bytes at the link rate plus the frame's fixed cost: on the PE
+    /// board (3 125 000 bytes/s, 2 us a frame) 100 bytes take 32 + 2 us, and 1000 bytes in
+    /// four frames 320 + 8 us (to 1e-18 s: the sums of two rounded terms).
+    #[test]
+    fn a_frame_takes_its_bytes_at_the_rate_and_its_fixed_cost() {
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-18;
+        assert!(
+            close(PE_BOARD.frame_time_s(100), 34e-6),
+            "{}",
+            PE_BOARD.frame_time_s(100)
+        );
+        assert!(close(PE_BOARD.link_time_s(1000, 4), 328e-6));
+        assert_eq!(PE_BOARD.frame_time_s(100), PE_BOARD.link_time_s(100, 1));
+        // The UART profile: 750 000 bytes/s, 5 us a frame.
+        assert!(close(STM32H743_UART.frame_time_s(750), 1e-3 + 5e-6));
+    }
+
+    /// A step's instructions by hand (957, 668 and 539 per general, parallelepiped and
+    /// cuboid element, 79 per node, 275 per contact node): 10 + 2 + 1 elements, 20 nodes
+    /// and 5 contact nodes are 9570 + 1336 + 539 + 1580 + 1375 = 14 400; the step is its
+    /// element loop and its update.
+    #[test]
+    fn a_steps_instructions_are_its_elements_and_its_update() {
+        let c = FirmwareCost {
+            per_element_step: 957,
+            box_per_element_step: 668,
+            cuboid_per_element_step: 539,
+            per_node_update: 79,
+            per_contact_node: 275,
+            ..MEASURED_COST[0]
+        };
+        assert_eq!(c.step_instructions([10, 2, 1], 20, 5), 14_400.0);
+        let s = c.step_cost();
+        assert_eq!(s.elements([10.0, 2.0, 1.0]), 11_445.0);
+        assert_eq!(s.update(20.0, 5.0), 2_955.0);
+        assert_eq!(s.step([10.0, 2.0, 1.0], 20.0, 5.0), 14_400.0);
+    }
 }

@@ -6,9 +6,10 @@
 
 #![allow(clippy::needless_range_loop)] // index loops follow the formulas
 
-use pe_firmware::physics::hex::{KernelFault, NODE_XI};
+use pe_firmware::physics::element::hex::NODE_XI;
+use pe_firmware::physics::element::KernelFault;
 use pe_firmware::physics::{
-    tensor, HexElement, LameParameters, MaterialLaw, ReferenceHex, Volumetric,
+    tensor, vec3, HexElement, LameParameters, MaterialLaw, ReferenceHex, Volumetric,
 };
 
 /// Deterministic pseudo-random numbers in [-1, 1) (a 64-bit LCG; the seed is in each test).
@@ -55,7 +56,7 @@ fn parallelepiped(rng: &mut Lcg, h: f64) -> [[f64; 3]; 8] {
 /// Displacements: a homogeneous part (strain up to `strain`) plus a random part.
 fn displacements(rng: &mut Lcg, x: &[[f64; 3]; 8], strain: f64) -> [[f64; 3]; 8] {
     let g: [[f64; 3]; 3] = core::array::from_fn(|_| core::array::from_fn(|_| strain * rng.next()));
-    let h = tensor::norm(&tensor::sub(&x[6], &x[0]));
+    let h = vec3::norm(vec3::sub(x[6], x[0]));
     core::array::from_fn(|n| {
         core::array::from_fn(|i| {
             (0..3).map(|j| g[i][j] * x[n][j]).sum::<f64>() + 0.3 * strain * h * rng.next()

@@ -7,8 +7,8 @@
 //! every element's stress equals S(F) and the hourglass forces vanish.
 #![allow(clippy::needless_range_loop)]
 
+use pe_firmware::physics::element::hex::{natural_gradients, FACES, NODE_XI};
 use pe_firmware::physics::explicit::accumulate_internal_forces;
-use pe_firmware::physics::hex::{natural_gradients, FACES, NODE_XI};
 use pe_firmware::physics::tensor;
 use pe_firmware::physics::{
     CentralDifference, HexElement, HexReduced, LameParameters, MaterialLaw, ReferenceHex,
@@ -183,7 +183,7 @@ fn centroid_gradients_fail_the_distorted_patch() {
             // Γ = h − γ·B with the same γ (the record keeps γ; the kernel builds Γ from
             // the gradients it is given).
             let mut e = r.reduced::<f64>(*c, 0, 1.5e6, 0.1);
-            e.gradient_moments = pe_firmware::physics::hex::corner_moments(&g);
+            e.gradient_moments = pe_firmware::physics::element::hex::corner_moments(&g);
             e.volume = 8.0 * d;
             e
         })
@@ -207,7 +207,7 @@ fn every_patch_cell_sees_the_homogeneous_deformation_gradient() {
         let r = ReferenceHex::new(&c.map(|n| p.x[n as usize])).unwrap();
         let e = r.reduced::<f64>(*c, 0, 1.0, 0.1);
         let u = c.map(|n| linear_field(a, &p.x[n as usize]));
-        let f = pe_firmware::physics::hex::deformation_gradient(&u, &r.mean_gradients);
+        let f = pe_firmware::physics::element::hex::deformation_gradient(&u, &r.mean_gradients);
         for i in 0..3 {
             for j in 0..3 {
                 assert!((f[i][j] - fexact[i][j]).abs() < 1e-13);

@@ -1,7 +1,7 @@
 //! Physics tests against closed forms, independent computations and exact solutions.
 #![allow(clippy::needless_range_loop)]
 
-use pe_firmware::physics::hex::{natural_gradients, NODE_XI};
+use pe_firmware::physics::element::hex::{natural_gradients, NODE_XI};
 use pe_firmware::physics::material::cauchy_stress;
 use pe_firmware::physics::tensor::{self, Mat3};
 use pe_firmware::physics::{HexElement, LameParameters, MaterialLaw, ReferenceHex, Volumetric};

@@ -498,7 +498,7 @@ fn recovery_gives_the_clean_bits_under_loss_and_corruption() {
         o.boards
             .iter()
             .filter_map(|b| b.recovery.as_ref())
-            .map(|r| r.retransmitted_frames.iter().sum::<u64>())
+            .map(|r| r.faces_sum(|f| f.retransmitted_frames))
             .sum()
     };
     // (The clean run may send a frame again too: a request for a frame that crossed it on

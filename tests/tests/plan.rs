@@ -159,8 +159,9 @@ fn norm(v: [f64; 3]) -> f64 {
 
 /// Checks a plan independently of the planner: the full scene and the written one run
 /// here, the final displacements of the touched nodes (contact surfaces, loads) compared
-/// node by node, and, with a tool, the tool force's window means (its magnitude: a
-/// weaker check than the planner's vector difference, done from the raw per-step series).
+/// node by node, and, with a tool, the tool force's 1 ms and 40 ms window means (its
+/// magnitude: a weaker check than the planner's vector difference, done from the raw
+/// per-step series).
 /// Returns (planned problem, displacement error, force error).
 fn check_plan(
     full_scene: &Scene,
@@ -195,39 +196,48 @@ fn check_plan(
         let d: [f64; 3] = core::array::from_fn(|i| a.displacements[n][i] - b.displacements[k][i]);
         e = e.max(norm(d));
     }
+    // At the rates the force's consumers sample it: 1 ms means (a haptic loop) and 40 ms
+    // means (a graphics frame); the worse of the two.
     let force = full.contact.as_ref().map(|c| {
         let tools = c.tool_names.len();
         assert!(tools > 0);
         let duration = full_scene.solver.duration.expect("duration");
-        let fa = window_means(
-            &a.tool_force,
-            tools,
-            full.time_step.dt_s,
-            duration,
-            plan::trace::SAMPLES,
-        );
-        let fb = window_means(
-            &b.tool_force,
-            tools,
-            planned.time_step.dt_s,
-            duration,
-            plan::trace::SAMPLES,
-        );
-        assert_eq!(fa.len(), fb.len());
-        fa.iter()
-            .zip(&fb)
-            .map(|(x, y)| {
-                assert_eq!(x.len(), y.len());
-                let peak = x.iter().copied().fold(0.0, f64::max);
+        [1e-3, 0.04]
+            .into_iter()
+            .map(|window_s| {
+                let windows = (duration / window_s).round() as usize;
                 assert!(
-                    peak > 1e-4,
-                    "the tool pressed: peak window force {peak:e} N"
+                    windows > 10 && (windows as f64 * window_s - duration).abs() < 1e-9,
+                    "{duration} s is a whole number of {window_s} s windows"
                 );
-                x.iter()
-                    .zip(y)
-                    .map(|(p, q)| (p - q).abs())
+                let fa = window_means(&a.tool_force, tools, full.time_step.dt_s, duration, windows);
+                let fb = window_means(
+                    &b.tool_force,
+                    tools,
+                    planned.time_step.dt_s,
+                    duration,
+                    windows,
+                );
+                assert_eq!(fa.len(), fb.len());
+                fa.iter()
+                    .zip(&fb)
+                    .map(|(x, y)| {
+                        assert_eq!(x.len(), y.len());
+                        assert_eq!(x.len(), windows);
+                        // (f64::max below would drop a NaN.)
+                        assert!(x.iter().chain(y).all(|v| v.is_finite()), "finite means");
+                        let peak = x.iter().copied().fold(0.0, f64::max);
+                        assert!(
+                            peak > 1e-4,
+                            "the tool pressed: peak window force {peak:e} N"
+                        );
+                        x.iter()
+                            .zip(y)
+                            .map(|(p, q)| (p - q).abs())
+                            .fold(0.0, f64::max)
+                            / peak
+                    })
                     .fold(0.0, f64::max)
-                    / peak
             })
             .fold(0.0, f64::max)
     });

@@ -5,6 +5,7 @@
 use host_tools::compile::partition::Machine;
 use host_tools::compile::{compile_images, plan, report, summary, CompileReport};
 use host_tools::problem::Problem;
+use link_proto::frame::frame_len;
 use pe_firmware::image::Precision;
 use pe_firmware::physics::contact::{ContactFace, ContactPair};
 use pe_firmware::profile::{measured_cost, BoardProfile, PE_BOARD};
@@ -249,12 +250,7 @@ fn verdict_matches_an_independent_computation() {
         let images = compile_images(&p, &plan).expect("images");
         let r = report(name, &p, &plan, &images, &profile).expect("report");
         let dt = p.time_step.dt_s;
-        let w = if p.solver.precision == Precision::F32 {
-            4
-        } else {
-            8
-        };
-        let overhead = link_proto::FRAME_HEADER_LEN + link_proto::CRC_LEN;
+        let wire = p.solver.precision.wire();
         let mut times = Vec::new();
         for b in &plan.boards {
             for f in 0..6 {
@@ -266,7 +262,7 @@ fn verdict_matches_an_independent_computation() {
                 if sent.is_empty() {
                     continue;
                 }
-                let bytes: usize = sent.iter().map(|n| 3 * w * n + overhead).sum();
+                let bytes: usize = sent.iter().map(|n| frame_len(3 * n, wire)).sum();
                 times.push(
                     bytes as f64 / profile.link_bytes_per_s as f64
                         + sent.len() as f64 * profile.link_latency_ns as f64 * 1e-9,
@@ -355,7 +351,9 @@ fn verdict_matches_an_independent_computation() {
 /// global network is 1000x faster too.
 #[test]
 fn contact_traffic_on_the_global_ports_is_in_the_verdict() {
-    use link_proto::payload::NODES_HEADER_LEN;
+    use link_proto::packet::packet_len;
+    use link_proto::payload::{node_entry_len, nodes_per_packet_max, NodesHeader};
+    use link_proto::Precision as Wire;
     let p = system_tests::builtin_problem("coarse", 10);
     assert_eq!(p.solver.precision.name(), "f64");
     let fast = BoardProfile {
@@ -387,17 +385,16 @@ fn contact_traffic_on_the_global_ports_is_in_the_verdict() {
     };
     let inside =
         |q: &[f64; 3], b: &([f64; 3], [f64; 3])| (0..3).all(|k| b.0[k] <= q[k] && q[k] <= b.1[k]);
-    // Bytes of the packets carrying `n` entries of `width`-byte values.
-    let packet = |n: usize, width: usize| {
-        let entry_len = 4 + 3 * width;
-        let per_packet = (link_proto::PACKET_PAYLOAD_LEN_MAX - NODES_HEADER_LEN) / entry_len;
-        n.div_ceil(per_packet).max(1)
-            * (link_proto::PACKET_HEADER_LEN + NODES_HEADER_LEN + link_proto::CRC_LEN)
-            + n * entry_len
+    // Bytes of the packets carrying `n` entries of `precision` values: as many packets as
+    // the entries need (one at least), each its header and CRC around the payload's header.
+    let packet = |n: usize, precision: Wire| {
+        n.div_ceil(nodes_per_packet_max(precision)).max(1)
+            * packet_len(NodesHeader::payload_len(0, precision))
+            + n * node_entry_len(precision)
     };
     let contact_boards: Vec<usize> = (0..boards).filter(|&b| !owned[b].is_empty()).collect();
     assert!(contact_boards.len() >= 2, "a global exchange to check");
-    let busiest_port = |width: usize| {
+    let busiest_port = |precision: Wire| {
         let (mut bytes_in, mut bytes_out) = (vec![0usize; boards], vec![0usize; boards]);
         for &a in &contact_boards {
             for &b in &contact_boards {
@@ -410,8 +407,8 @@ fn contact_traffic_on_the_global_ports_is_in_the_verdict() {
                     continue;
                 }
                 let sent = owned[a].iter().filter(|q| inside(q, &gb)).count();
-                bytes_out[a] += packet(sent, width);
-                bytes_in[b] += packet(sent, width);
+                bytes_out[a] += packet(sent, precision);
+                bytes_in[b] += packet(sent, precision);
             }
         }
         (0..boards)
@@ -419,7 +416,7 @@ fn contact_traffic_on_the_global_ports_is_in_the_verdict() {
             .max()
             .expect("boards")
     };
-    let busiest = busiest_port(8);
+    let busiest = busiest_port(Wire::F64);
     assert!(busiest > 0);
     // In f32 the same partition and the same nodes: the port carries 16-byte entries.
     let mut p32 = p.clone();
@@ -433,7 +430,7 @@ fn contact_traffic_on_the_global_ports_is_in_the_verdict() {
         .global_busiest
         .as_ref()
         .expect("a global port load");
-    let busiest32 = busiest_port(4);
+    let busiest32 = busiest_port(Wire::F32);
     assert_eq!(g32.bytes_in_per_step.max(g32.bytes_out_per_step), busiest32);
     assert!(
         busiest32 < busiest,

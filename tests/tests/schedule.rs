@@ -414,7 +414,7 @@ density = 1000.0
 /// one kernel table of one board.
 #[test]
 fn each_cell_gets_the_kernel_its_shape_allows() {
-    let xi = pe_firmware::physics::hex::NODE_XI;
+    let xi = pe_firmware::physics::element::hex::NODE_XI;
     // (affine, axis-aligned) of cell e.
     let shape = |p: &Problem, e: usize| {
         let x = p.mesh.cells[e].map(|n| p.mesh.nodes[n as usize]);

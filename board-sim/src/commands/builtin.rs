@@ -5,11 +5,14 @@
 use std::path::Path;
 
 use anyhow::Result;
+use host_tools::output::OutputArgs as RunOutputs;
 use host_tools::problem::Problem;
 use host_tools::scene::builtin::builtin_scene;
 use link_proto::Machine;
+use pe_firmware::physics::vec3::norm;
 
 use super::run::{execute, RunArgs};
+
 use crate::outputs::{OutputArgs, ResultArgs};
 
 /// The main job (see the module doc).
@@ -37,23 +40,25 @@ pub fn builtin(
     print!("{}", host_tools::compile::summary(&rep));
     let args = RunArgs {
         outputs: OutputArgs {
-            result: ResultArgs {
-                output_nodes: Some(out.join("nodes.csv")),
-                report: Some(out.join("report.json")),
+            run: RunOutputs {
+                result: ResultArgs {
+                    output_nodes: Some(out.join("nodes.csv")),
+                    report: Some(out.join("report.json")),
+                },
+                vtk: Some(out.join("frames")),
+                tool_force: Some(out.join("tool_force.csv")),
             },
-            vtk: Some(out.join("frames")),
             png: Some(out.join("final.png")),
-            tool_force: Some(out.join("tool_force.csv")),
         },
         steps,
         link_timeout_s: 10.0,
         quiet,
         ..Default::default()
     };
-    let (sim, pr) = execute(&images, args)?;
+    let sim = execute(&images, args)?;
     // What a user of the trainer wants to know: what the probe did to the tube (and, through
     // their contact pair, the tube to the ovary).
-    let moved = host_tools::scene::builtin::builtin_summary(&pr.mesh, &sim.displacements);
+    let moved = host_tools::scene::builtin::builtin_summary(&problem.mesh, &sim.displacements);
     let tube_max = moved.right_tube_max_displacement_m;
     let ovary_max = moved.right_ovary_max_displacement_m;
     let sim_s = sim.steps as f64 * sim.manifest.dt_s;
@@ -64,7 +69,7 @@ pub fn builtin(
         f[0],
         f[1],
         f[2],
-        (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt()
+        norm(f)
     );
     println!(
         "  right tube: largest displacement {:.3} mm; right ovary (pressed by the tube through their contact pair): {:.3} mm",

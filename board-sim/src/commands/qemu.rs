@@ -5,10 +5,10 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::{anyhow, bail, Result};
-use host_tools::compile::read_manifest;
+use host_tools::compile::{read_manifest, OutputMesh};
 use host_tools::output::write_nodes_csv;
 
-use crate::outputs::{manifest_problem, ResultArgs};
+use crate::outputs::{ResultArgs, OUTPUT_MESH_SOURCE};
 use crate::qemu::{parse_board, run_array, ArrayFault, ArrayOptions, Connector};
 use crate::report::array::{write_array_fault_report, write_array_report};
 
@@ -117,8 +117,8 @@ pub fn qemu_array(dir: &Path, args: QemuArgs) -> Result<()> {
         out.graphics_frames
     );
     if let Some(p) = &result.output_nodes {
-        let problem = manifest_problem(&manifest)?;
-        write_nodes_csv(p, &problem.mesh, &out.displacements)?;
+        let mesh = OutputMesh::read(dir)?.mesh(OUTPUT_MESH_SOURCE);
+        write_nodes_csv(p, &mesh, &out.displacements)?;
     }
     if let Some(p) = &result.report {
         write_array_report(p, &out, max_u, per_step)?;

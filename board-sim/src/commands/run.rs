@@ -4,13 +4,15 @@
 use std::path::Path;
 use std::time::Duration;
 
-use anyhow::{anyhow, Context, Result};
-use host_tools::compile::{read_manifest, Manifest};
-use host_tools::problem::{NodeKind, Problem};
+use anyhow::Result;
+use host_tools::compile::{read_manifest, Manifest, OutputMesh};
+use host_tools::live::session::record::replay_schedule_for;
+use host_tools::solver::PoseSchedule;
+use pe_firmware::physics::vec3::norm;
 
 use crate::check::SimFault;
 use crate::faults::FaultSpec;
-use crate::outputs::{graphics, manifest_problem, write_outputs, OutputArgs};
+use crate::outputs::{graphics, write_outputs, OutputArgs};
 use crate::report::{global_summary, recovery_summary, write_fault_report, write_report, RunFacts};
 use crate::results::SimOutput;
 use crate::runner::{run, SimOptions};
@@ -61,6 +63,11 @@ pub struct RunArgs {
     /// the manifest's profile holds: an image the board would refuse is refused here).
     #[arg(long, value_enum, default_value_t = Storage::Exact)]
     pub storage: Storage,
+    /// Replay a recorded live session (`pe live --record FILE`): the host sends each pose
+    /// to the boards holding its tool, to take effect at its recorded step, as
+    /// `pe solve --replay FILE` applies it.
+    #[arg(long, value_name = "FILE")]
+    pub replay: Option<std::path::PathBuf>,
     #[arg(long)]
     pub quiet: bool,
 }
@@ -73,15 +80,19 @@ pub enum Storage {
     Board,
 }
 
-/// Runs a compiled machine and writes the requested outputs; returns the run and the scene.
-pub fn execute(dir: &Path, a: RunArgs) -> Result<(SimOutput, Problem)> {
+/// Runs a compiled machine and writes the requested outputs; returns the run. Reads the
+/// compiled directory only: its manifest, images, report and mesh (`DIR/mesh.json`).
+pub fn execute(dir: &Path, a: RunArgs) -> Result<SimOutput> {
     let manifest = read_manifest(dir)?;
-    let mut opts = sim_options(&a, &manifest, dir)?;
+    let mut opts = sim_options(&a, &manifest)?;
     let total = opts.steps.unwrap_or(manifest.steps).min(manifest.steps);
-    // The mesh, for outputs: from the scene the manifest names.
-    let problem = manifest_problem(&manifest)?;
+    // The mesh the outputs write and draw.
+    let mesh = OutputMesh::read(dir)?;
+    if let Some(r) = &a.replay {
+        opts.poses = replay_poses(r, &manifest, &mesh)?;
+    }
     let (elements, graphics_stream) = compile_report_facts(dir)?;
-    if a.outputs.vtk.is_some() && !graphics_stream {
+    if a.outputs.run.vtk.is_some() && !graphics_stream {
         opts.frame_every = ((0.04 / manifest.dt_s).round() as u64).max(1);
     }
     eprintln!(
@@ -97,32 +108,26 @@ pub fn execute(dir: &Path, a: RunArgs) -> Result<(SimOutput, Problem)> {
     let out = match run_with_progress(dir, &opts, total, a.quiet) {
         Ok(o) => o,
         Err(e) => {
-            if let (Some(p), Some(f)) = (&a.outputs.result.report, e.downcast_ref::<SimFault>()) {
+            if let (Some(p), Some(f)) = (&a.outputs.run.result.report, e.downcast_ref::<SimFault>())
+            {
                 write_fault_report(p, &manifest, f)?;
             }
             return Err(e);
         }
     };
     let sim_s = out.steps as f64 * manifest.dt_s;
-    let max_displacement = print_run(&out, &problem, sim_s);
+    let max_displacement = print_run(&out, &mesh, sim_s);
     let modelled = link_model(dir, &manifest, &a)?;
     // The frames the graphics engine could assemble (every surface node received): the
     // ones written to the ParaView series and counted in the summary and the report.
-    let frames = graphics::surface_frames(&problem, &out);
-    let paraview_frames = write_outputs(
-        &a.outputs,
-        &problem,
-        &out,
-        &frames,
-        &manifest,
-        graphics_stream,
-    )?;
-    let entry_bytes = link_proto::payload::node_entry_len(problem.solver.precision.wire());
+    let frames = graphics::surface_frames(&mesh, &out);
+    let paraview_frames = write_outputs(&a.outputs, &mesh, &out, &frames, graphics_stream)?;
+    let entry_bytes = link_proto::payload::node_entry_len(manifest.precision.wire());
     let global = global_summary(&out, sim_s, frames.len(), entry_bytes as f64);
     if let Some(g) = &global {
         println!("{}", g.text);
     }
-    if let Some(p) = &a.outputs.result.report {
+    if let Some(p) = &a.outputs.run.result.report {
         let facts = RunFacts {
             elements,
             sim_s,
@@ -131,7 +136,7 @@ pub fn execute(dir: &Path, a: RunArgs) -> Result<(SimOutput, Problem)> {
         };
         write_report(p, &manifest, &out, &facts, &modelled, global.as_ref())?;
     }
-    Ok((out, problem))
+    Ok(out)
 }
 
 /// Runs with a progress bar of `total` steps (none when `quiet`).
@@ -150,22 +155,18 @@ fn run_with_progress(dir: &Path, opts: &SimOptions, total: u64, quiet: bool) -> 
 
 /// Prints what the run did: its speed and largest displacement, the prescribed reaction,
 /// what link recovery cost; returns the largest displacement (m).
-fn print_run(out: &SimOutput, problem: &Problem, sim_s: f64) -> f64 {
+fn print_run(out: &SimOutput, mesh: &OutputMesh, sim_s: f64) -> f64 {
     let max = out
         .displacements
         .iter()
         .enumerate()
-        .map(|(k, u)| (k, (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()))
+        .map(|(k, u)| (k, norm(*u)))
         .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
     println!(
         "{} steps on {} boards in {:.2} s: {:.1} steps/s, real-time factor {:.3}; max |u| = {:.4e} m",
         out.steps, out.boards.len(), out.wall_s, out.steps as f64 / out.wall_s, sim_s / out.wall_s, max.1,
     );
-    let prescribed = problem
-        .node_kind
-        .iter()
-        .filter(|k| matches!(k, NodeKind::Prescribed(_)))
-        .count();
+    let prescribed = mesh.prescribed_nodes;
     if prescribed > 0 {
         let f = out.reaction_prescribed;
         println!(
@@ -204,18 +205,11 @@ fn print_recovery(r: &serde_json::Value) {
 }
 
 /// The simulation options from the command line (steps from `--steps` or `--duration`).
-fn sim_options(a: &RunArgs, manifest: &Manifest, dir: &Path) -> Result<SimOptions> {
+fn sim_options(a: &RunArgs, manifest: &Manifest) -> Result<SimOptions> {
     let storage = match a.storage {
         Storage::Exact => StorageSizing::Exact,
-        Storage::Board => StorageSizing::Board(
-            pe_firmware::profile::profile(&manifest.profile).with_context(|| {
-                format!(
-                    "{}: unknown board profile {:?} in manifest.json",
-                    dir.display(),
-                    manifest.profile
-                )
-            })?,
-        ),
+        // The manifest's profile is a registered one (an unknown name fails to read).
+        Storage::Board => StorageSizing::Board(*manifest.profile),
     };
     let mut opts = SimOptions {
         link_timeout: Duration::from_secs_f64(a.link_timeout_s),
@@ -244,13 +238,24 @@ fn sim_options(a: &RunArgs, manifest: &Manifest, dir: &Path) -> Result<SimOption
     Ok(opts)
 }
 
+/// The poses of the record `path` (host-tools' reader: the scene, time step and tools
+/// checked against the compiled scene's).
+fn replay_poses(path: &Path, manifest: &Manifest, mesh: &OutputMesh) -> Result<PoseSchedule> {
+    // The images step at the manifest's dt and hold the tools `mesh.json` names.
+    let tools: Vec<&str> = mesh.tools.iter().map(|t| t.name.as_str()).collect();
+    let poses = replay_schedule_for(path, &manifest.scene, manifest.dt_s, &tools)?;
+    eprintln!(
+        "replaying {} poses of {} (each sent {} steps ahead)",
+        poses.poses.len(),
+        path.display(),
+        link_proto::tool_pose::POSE_DELAY_STEPS
+    );
+    Ok(poses)
+}
+
 /// The link timing model of the run's images (profile links unless overridden), printed.
 fn link_model(dir: &Path, manifest: &Manifest, a: &RunArgs) -> Result<StepTiming> {
-    let profile =
-        pe_firmware::profile::profile(&manifest.profile).unwrap_or(pe_firmware::profile::PE_BOARD);
-    let precision = host_tools::scene::settings::precision_from_name(&manifest.precision)
-        .map_err(|e| anyhow!("{}: {e}", dir.join("manifest.json").display()))?;
-    let mut timing = SimTiming::for_precision(&profile, precision);
+    let mut timing = SimTiming::for_precision(manifest.profile, manifest.precision);
     if let Some(b) = a.link_bandwidth {
         timing.link_bytes_per_s = b;
     }
@@ -291,19 +296,15 @@ fn link_model(dir: &Path, manifest: &Manifest, a: &RunArgs) -> Result<StepTiming
     };
     println!(
         "link model ({}): a step takes {:.1} us on the slowest board ({:.1} us computing){check}, dt = {:.1} us: {}",
-        profile.name, modelled.step_s * 1e6, modelled.compute_s * 1e6, modelled.dt_s * 1e6,
+        manifest.profile.name, modelled.step_s * 1e6, modelled.compute_s * 1e6, modelled.dt_s * 1e6,
         if modelled.real_time { "keeps real time" } else { "does NOT keep real time" }
     );
     Ok(modelled)
 }
 
-/// From the compile report: the scene's elements, and whether the images send surface
-/// frames to the graphics engine.
+/// From the compile report (read as the type that wrote it): the scene's elements, and
+/// whether the images send surface frames to the graphics engine.
 fn compile_report_facts(dir: &Path) -> Result<(usize, bool)> {
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json"))?)?;
-    Ok((
-        r["elements"].as_u64().unwrap_or(0) as usize,
-        r["graphics"]["interval_steps"].as_u64().unwrap_or(0) > 0,
-    ))
+    let r = host_tools::compile::CompileReport::read(dir)?;
+    Ok((r.elements, r.graphics.interval_steps > 0))
 }

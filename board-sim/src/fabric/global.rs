@@ -72,10 +72,10 @@ impl GlobalNet {
     }
 
     /// Routes what board `src` sent, a packet or (with recovery) its envelope, on the
-    /// destination in its byte 0, as a switch would: the envelope
+    /// destination, as a switch would: the envelope
     /// (`link_proto::recovery::global`) keeps the destination where a packet has it.
     pub(crate) fn send(&self, src: u8, bytes: &[u8]) -> Result<(), SendError> {
-        let dst = *bytes.first().ok_or(SendError::TooLong)?;
+        let dst = link_proto::recovery::global::destination(bytes).ok_or(SendError::TooLong)?;
         self.deliver(dst, src, bytes)
     }
 

@@ -2,17 +2,12 @@
 //! or a packet without taking it apart, and how it names a global address.
 
 use link_proto::packet::{ADDR_BROADCAST, ADDR_GRAPHICS, ADDR_HOST};
-use link_proto::{Frame, Machine, Packet, PacketKind, PACKET_HEADER_LEN};
+use link_proto::{Frame, Machine, Packet, PACKET_HEADER_LEN};
 
 /// The step of a frame, or of the frame in a recovery envelope; None for a recovery
 /// control envelope (ack, nack, status) or what is no frame.
 pub fn frame_step(frame: &[u8]) -> Option<u32> {
-    use link_proto::recovery::face::{code, data_frame};
-    let f = match frame.first() {
-        Some(&code::DATA) => data_frame(frame)?,
-        Some(c) if *c >= code::ACK => return None,
-        _ => frame,
-    };
+    let f = link_proto::recovery::face::carried_frame(frame)?;
     Frame::new_checked(f).ok().map(|f| f.step())
 }
 
@@ -28,15 +23,9 @@ pub fn packet_header(packet: &[u8]) -> Option<Packet<&[u8]>> {
 /// `link_proto::payload`); None for other kinds or too short a packet. Unchecked (the
 /// packet may be damaged, its length field included): for observers.
 pub fn packet_step(packet: &[u8]) -> Option<u32> {
-    let at = match packet_header(packet)?.kind() {
-        PacketKind::BoundingBox | PacketKind::CollisionExchange | PacketKind::ToolForce => 0,
-        PacketKind::GraphicsSurface => 4,
-        _ => return None,
-    };
+    let kind = packet_header(packet)?.kind();
     // What follows the header, whatever its (perhaps damaged) length field says.
-    let body = packet.get(PACKET_HEADER_LEN..)?;
-    let b = body.get(at..at + 4)?;
-    Some(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    link_proto::payload::step_of(kind, Packet::new_unchecked(packet).after_header())
 }
 
 /// How a global address is named in reports: `(x,y,z)`, `host`, `graphics`, `broadcast`.
@@ -61,7 +50,7 @@ pub fn global_face(dst: u8) -> String {
 mod tests {
     use super::*;
     use link_proto::payload::ToolForcePayload;
-    use link_proto::{emit_values, FrameKind, PacketRepr, Values};
+    use link_proto::{emit_values, FrameKind, PacketKind, PacketRepr, Values};
 
     /// The step of a frame (bare or in a recovery data envelope) and of a tool-force packet
     /// is the one written into it; a damaged packet length still gives its step; a control

@@ -237,8 +237,8 @@ impl<L: Links> Links for FaultyLinks<L> {
     /// on `global to <destination>` at the packet's step (a recovery control envelope at
     /// the last packet's step).
     fn try_send_global(&mut self, p: &[u8]) -> Result<(), SendError> {
-        // Packets and envelopes alike carry their destination in byte 0.
-        let dst = p.first().copied().unwrap_or(u8::MAX);
+        // Packets and envelopes alike carry their destination first.
+        let dst = link_proto::recovery::global::destination(p).unwrap_or(u8::MAX);
         let (packet, is_control) = self.global_packet(p);
         if !is_control {
             if let Some(s) = packet_step(packet) {
@@ -254,8 +254,7 @@ impl<L: Links> Links for FaultyLinks<L> {
             return Ok(());
         }
         let kind = if is_control {
-            // The envelope's type (`link_proto::recovery::global`'s layout).
-            p.get(2).copied().unwrap_or(0)
+            link_proto::recovery::global::envelope_type(p).unwrap_or(0)
         } else {
             packet_header(packet).map_or(0, |h| h.kind().code())
         };

@@ -4,8 +4,9 @@
 use std::path::Path;
 
 use anyhow::Result;
+use host_tools::compile::OutputMesh;
 use host_tools::output::vtk::{SurfaceSeriesWriter, VtkSeriesWriter};
-use host_tools::problem::Problem;
+use pe_firmware::physics::vec3::norm;
 
 /// A frame the graphics engine assembled: time and displacement of every mesh node it
 /// received (others zero), or None if some surface node is missing.
@@ -15,21 +16,21 @@ pub struct SurfaceFrame {
 }
 
 /// The frames of a run the graphics engine could assemble (every surface node present).
-pub fn surface_frames(pr: &Problem, out: &crate::results::SimOutput) -> Vec<SurfaceFrame> {
+pub fn surface_frames(pr: &OutputMesh, out: &crate::results::SimOutput) -> Vec<SurfaceFrame> {
     let surface = pr.surface_node_mask();
     let needed = surface.iter().filter(|s| **s).count();
     out.graphics
         .iter()
         .filter(|f| f.nodes.len() == needed)
         .map(|f| {
-            let mut u = vec![[0.0; 3]; pr.mesh.nodes.len()];
+            let mut u = vec![[0.0; 3]; pr.nodes.len()];
             for (n, d) in &f.nodes {
                 if let Some(x) = u.get_mut(*n as usize) {
                     *x = d.map(|v| v as f64);
                 }
             }
             SurfaceFrame {
-                time_s: f.steps.0 as f64 * out.dt_s,
+                time_s: f.steps.0 as f64 * out.manifest.dt_s,
                 u,
             }
         })
@@ -37,12 +38,12 @@ pub fn surface_frames(pr: &Problem, out: &crate::results::SimOutput) -> Vec<Surf
 }
 
 /// The assembled surface frames as a ParaView series in `d`; returns the number of frames.
-pub fn write_surface_series(d: &Path, pr: &Problem, frames: &[SurfaceFrame]) -> Result<usize> {
+pub fn write_surface_series(d: &Path, pr: &OutputMesh, frames: &[SurfaceFrame]) -> Result<usize> {
     std::fs::create_dir_all(d)?;
     let (local, quads) = surface_numbering(pr);
-    let reference: Vec<[f64; 3]> = local.iter().map(|&g| pr.mesh.nodes[g as usize]).collect();
+    let reference: Vec<[f64; 3]> = local.iter().map(|&g| pr.nodes[g as usize]).collect();
     let regions = surface_regions(pr);
-    let mut w = SurfaceSeriesWriter::new(d, reference, quads, regions, &pr.mesh.region_names)?;
+    let mut w = SurfaceSeriesWriter::new(d, reference, quads, regions, &pr.region_names)?;
     for f in frames {
         let u: Vec<[f64; 3]> = local.iter().map(|&g| f.u[g as usize]).collect();
         w.write_frame(f.time_s, &u)?;
@@ -53,7 +54,7 @@ pub fn write_surface_series(d: &Path, pr: &Problem, frames: &[SurfaceFrame]) -> 
 }
 
 /// Surface nodes (mesh indices, ascending) and the boundary quads in that numbering.
-fn surface_numbering(pr: &Problem) -> (Vec<u32>, Vec<[u32; 4]>) {
+fn surface_numbering(pr: &OutputMesh) -> (Vec<u32>, Vec<[u32; 4]>) {
     let mask = pr.surface_node_mask();
     let local: Vec<u32> = (0..mask.len() as u32)
         .filter(|&n| mask[n as usize])
@@ -73,15 +74,15 @@ fn surface_numbering(pr: &Problem) -> (Vec<u32>, Vec<[u32; 4]>) {
 
 /// Region of each boundary quad: the region tag of the cell it bounds (named by the mesh's
 /// `region_names`).
-fn surface_regions(pr: &Problem) -> Vec<i32> {
+fn surface_regions(pr: &OutputMesh) -> Vec<i32> {
     pr.surface_face_cells
         .iter()
-        .map(|c| pr.mesh.cell_regions.get(*c as usize).copied().unwrap_or(0))
+        .map(|c| pr.cell_regions.get(*c as usize).copied().unwrap_or(0))
         .collect()
 }
 
 /// Colour group of each boundary quad for the picture: its region, as a small index.
-fn surface_groups(pr: &Problem) -> Vec<u8> {
+fn surface_groups(pr: &OutputMesh) -> Vec<u8> {
     surface_regions(pr)
         .into_iter()
         .map(|r| r.clamp(0, 255) as u8)
@@ -91,39 +92,30 @@ fn surface_groups(pr: &Problem) -> Vec<u8> {
 /// PNG of surface frame `f` with the tools at their positions at its time.
 pub fn render_frame(
     p: &Path,
-    pr: &Problem,
+    pr: &OutputMesh,
     f: &SurfaceFrame,
     out: &crate::results::SimOutput,
 ) -> Result<()> {
     use host_tools::output::render::{render_surface_png, CapsuleOverlay, SurfaceImage, View};
     let positions: Vec<[f64; 3]> = pr
-        .mesh
         .nodes
         .iter()
         .zip(&f.u)
         .map(|(x, u)| core::array::from_fn(|i| x[i] + u[i]))
         .collect();
-    let values: Vec<f64> =
-        f.u.iter()
-            .map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt())
-            .collect();
+    let values: Vec<f64> = f.u.iter().map(|u| norm(*u)).collect();
     let tools: Vec<CapsuleOverlay> = pr
-        .contact
-        .as_ref()
-        .map(|c| {
-            c.tools
-                .iter()
-                .map(|t| {
-                    let cap = t.capsule.translated(pr.paths[t.path as usize].at(f.time_s));
-                    CapsuleOverlay {
-                        a: cap.a,
-                        b: cap.b,
-                        radius_m: cap.radius_m,
-                    }
-                })
-                .collect()
+        .tools
+        .iter()
+        .map(|t| {
+            let cap = t.at(f.time_s);
+            CapsuleOverlay {
+                a: cap.a,
+                b: cap.b,
+                radius_m: cap.radius_m,
+            }
         })
-        .unwrap_or_default();
+        .collect();
     let title = format!(
         "t = {:.3} s: the graphics stream from {} boards",
         f.time_s,
@@ -150,17 +142,17 @@ pub fn render_frame(
 }
 
 /// Without a graphics stream: the whole mesh every `frame_every` steps (the frames board-sim
-/// kept), from rest to the final state, as a ParaView series in `d`; returns the number of
-/// frames.
+/// kept), from rest to the final state, as a ParaView series in `d` (times: steps × the
+/// manifest's dt); returns the number of frames.
 pub fn write_volume_series(
     d: &Path,
-    pr: &Problem,
+    pr: &OutputMesh,
     out: &crate::results::SimOutput,
-    dt_s: f64,
 ) -> Result<usize> {
     std::fs::create_dir_all(d)?;
-    let mut w = VtkSeriesWriter::new(d, &pr.mesh)?;
-    w.write_frame(0.0, &vec![[0.0; 3]; pr.mesh.nodes.len()])?;
+    let dt_s = out.manifest.dt_s;
+    let mut w = VtkSeriesWriter::new(d, &pr.mesh(super::OUTPUT_MESH_SOURCE))?;
+    w.write_frame(0.0, &vec![[0.0; 3]; pr.nodes.len()])?;
     for (s, u) in &out.frames {
         w.write_frame(*s as f64 * dt_s, u)?;
     }

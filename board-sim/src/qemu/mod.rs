@@ -93,11 +93,11 @@ pub fn run_array(dir: &Path, opts: &ArrayOptions) -> Result<ArrayOutput> {
 /// Refuses images of another profile than QEMU's, and a missing emulator.
 fn check_setup(dir: &Path, m: &Manifest, opts: &ArrayOptions) -> Result<()> {
     let qemu_profile = pe_firmware::profile::QEMU_MPS2_AN500;
-    if m.profile != qemu_profile.name {
+    if m.profile.name != qemu_profile.name {
         bail!(
             "{}: compiled for the {} profile; the emulated array runs images of the {} profile (pe compile ... --profile {})",
             dir.display(),
-            m.profile,
+            m.profile.name,
             qemu_profile.name,
             qemu_profile.name
         );

@@ -1,5 +1,6 @@
 //! The global network's figures of a run, beside the seed's.
 
+use pe_firmware::physics::vec3::norm;
 use pe_firmware::runtime::GlobalStats;
 
 use crate::results::SimOutput;
@@ -76,7 +77,7 @@ fn tool_force_figures(out: &SimOutput) -> (Vec<[f64; 3]>, Vec<f64>) {
                 .iter()
                 .skip(t)
                 .step_by(out.tools.max(1))
-                .map(|f| (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt())
+                .map(|f| norm(*f))
                 .fold(0.0, f64::max)
         })
         .collect();

@@ -1,6 +1,6 @@
 //! Link recovery's totals over a run's boards.
 
-use link_proto::recovery::GlobalRecovery;
+use link_proto::recovery::{FaceRecovery, GlobalRecovery};
 
 use crate::results::{LinkRecovery, SimOutput};
 
@@ -15,9 +15,7 @@ pub fn recovery_summary(out: &SimOutput) -> Option<serde_json::Value> {
     if rs.is_empty() {
         return None;
     }
-    let sum = |g: fn(&LinkRecovery) -> &[u64; 6]| {
-        rs.iter().map(|r| g(r).iter().sum::<u64>()).sum::<u64>()
-    };
+    let sum = |g: fn(&FaceRecovery) -> u64| rs.iter().map(|r| r.faces_sum(g)).sum::<u64>();
     let frame_bytes: u64 = out
         .boards
         .iter()
@@ -29,15 +27,15 @@ pub fn recovery_summary(out: &SimOutput) -> Option<serde_json::Value> {
     Some(serde_json::json!({
         "global": global_totals(out, &gs),
         "faces_overhead_bytes": overhead - global_overhead,
-        "retransmitted_frames": sum(|r| &r.retransmitted_frames),
-        "retransmitted_bytes": sum(|r| &r.retransmitted_bytes),
-        "nacks_sent": sum(|r| &r.nacks_sent),
-        "acks_sent": sum(|r| &r.acks_sent),
-        "statuses_sent": sum(|r| &r.statuses_sent),
-        "control_bytes": sum(|r| &r.control_bytes),
-        "damaged_received": sum(|r| &r.damaged),
-        "gaps": sum(|r| &r.gaps),
-        "duplicates": sum(|r| &r.duplicates),
+        "retransmitted_frames": sum(|f| f.retransmitted_frames),
+        "retransmitted_bytes": sum(|f| f.retransmitted_bytes),
+        "nacks_sent": sum(|f| f.nacks_sent),
+        "acks_sent": sum(|f| f.acks_sent),
+        "statuses_sent": sum(|f| f.statuses_sent),
+        "control_bytes": sum(|f| f.control_bytes),
+        "damaged_received": sum(|f| f.damaged),
+        "gaps": sum(|f| f.gaps),
+        "duplicates": sum(|f| f.duplicates),
         "overhead_bytes": overhead + out.sink_recovery.unwrap_or_default().control_bytes,
         "overhead_fraction_of_frame_bytes": (overhead - global_overhead) as f64 / frame_bytes.max(1) as f64,
     }))

@@ -44,8 +44,8 @@ pub fn write_report(
     let rep = serde_json::json!({
         "scene": manifest.scene,
         "machine": manifest.machine,
-        "precision": manifest.precision,
-        "integration": manifest.integration,
+        "precision": manifest.precision.name(),
+        "integration": manifest.integration.name(),
         "steps": out.steps,
         "dt_s": manifest.dt_s,
         "simulated_s": sim_s,

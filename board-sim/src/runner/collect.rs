@@ -4,6 +4,7 @@ use std::collections::BTreeMap;
 
 use link_proto::recovery::FaceRecovery;
 use link_proto::recovery::GlobalRecovery;
+use pe_firmware::physics::vec3::add;
 
 use crate::check::Observed;
 use crate::results::{BoardResult, LinkRecovery};
@@ -83,7 +84,7 @@ impl Collected {
                 global,
             } => {
                 if let Some(r) = self.recovery.get_mut(board) {
-                    *r = Some(LinkRecovery::from_faces(&faces, global.as_ref()));
+                    *r = Some(LinkRecovery { faces, global });
                 }
             }
         }
@@ -116,10 +117,9 @@ impl Collected {
 
     /// The prescribed and fixed reactions (N) and the kinetic energy, summed in board order.
     pub fn energies(&self) -> ([f64; 3], [f64; 3], f64) {
-        let add3 = |a: [f64; 3], b: [f64; 3]| [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
         (
-            self.energies.iter().fold([0.0; 3], |s, e| add3(s, e.0)),
-            self.energies.iter().fold([0.0; 3], |s, e| add3(s, e.1)),
+            self.energies.iter().fold([0.0; 3], |s, e| add(s, e.0)),
+            self.energies.iter().fold([0.0; 3], |s, e| add(s, e.1)),
             self.energies.iter().fold(0.0, |s, e| s + e.2),
         )
     }

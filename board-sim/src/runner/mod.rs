@@ -5,7 +5,9 @@
 
 mod collect;
 mod images;
+mod open;
 mod options;
+mod poses;
 pub mod stack;
 mod worker;
 
@@ -18,9 +20,11 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, Result};
 use host_tools::compile::read_manifest;
 use link_proto::Machine;
+use pe_firmware::image::ImageReader;
 use pe_firmware::runtime::RuntimeConfig;
 
 pub use images::manifest_machine;
+pub use open::{start_open, OpenArray};
 pub use options::SimOptions;
 
 use crate::check::{attribute, collect_sinks, missing_sink_packets, sink_observations, HostCheck};
@@ -29,6 +33,7 @@ use crate::fabric::{build_links, Doorbell, EmuLinks, GlobalNet};
 use crate::faults::{FaultyLinks, Injected};
 use crate::results::SimOutput;
 use collect::{Collected, Report};
+use poses::{one_per_tool_and_step, PoseFeed, PoseSender};
 use stack::{BoardLinks, Lower};
 use worker::{spawn_workers, BoardCtx, BoxedLinks};
 
@@ -42,24 +47,38 @@ pub fn run(
     opts: &SimOptions,
     on_progress: &mut dyn FnMut(u64, u64),
 ) -> Result<SimOutput> {
-    let manifest = read_manifest(dir)?;
-    let machine = manifest_machine(dir, &manifest)?;
-    let (images, header, tools) =
-        images::read_images(dir, &manifest, machine, opts.check_manifest)?;
-    if let Some(spec) = &opts.faults {
-        spec.check(machine)?;
-    }
+    let Prepared {
+        manifest,
+        machine,
+        images,
+        header,
+        tools,
+        holders,
+        workers,
+        links,
+        net,
+        tx,
+        rx,
+    } = prepare(dir, opts)?;
     let steps = opts
         .steps
         .unwrap_or(header.params.steps)
         .min(header.params.steps.max(opts.steps.unwrap_or(0)));
-    let workers = Workers::new(opts.workers, machine.count());
-    let board_bells: Vec<Arc<Doorbell>> = (0..machine.count())
-        .map(|b| workers.bells[workers.of(b)].clone())
-        .collect();
-    let (links, net) = build_links(machine, &board_bells, opts.global_recovery.is_some());
-    let (tx, rx) = mpsc::channel::<Report>();
-    let shared = Shared::default();
+    let shared = Shared {
+        poses: PoseFeed::new(machine.count(), !opts.poses.poses.is_empty()),
+        ..Default::default()
+    };
+    let sender = PoseSender {
+        poses: one_per_tool_and_step(&opts.poses),
+        holders,
+        net: net.clone(),
+        envelopes: opts.global_recovery.is_some(),
+        feed: shared.poses.clone(),
+        bells: workers.bells.clone(),
+        stop: shared.stop.clone(),
+        steps,
+    };
+    sender.check()?;
     let start = Instant::now();
     let per_worker = workers.place(machine, images, links, steps, opts, &shared)?;
     let handles = spawn_workers(
@@ -72,6 +91,7 @@ pub fn run(
         &header,
     )?;
     drop(tx);
+    let sending = (!sender.poses.is_empty()).then(|| std::thread::spawn(move || sender.run()));
     let mut c = Collected::new(steps, header.scene_nodes as usize, machine.count());
     let mut host_check = opts
         .check_manifest
@@ -87,7 +107,12 @@ pub fn run(
     };
     let watched = watch.collect(&rx, &mut c, host_check.as_mut(), on_progress);
     join(handles);
+    shared.stop.store(true, Ordering::Relaxed);
+    let sent = sending.map(|h| h.join().map_err(|_| anyhow!("the pose sender panicked")));
     watched?;
+    if let Some(sent) = sent {
+        sent??;
+    }
     let wall_s = start.elapsed().as_secs_f64();
     let injected = shared
         .injected
@@ -123,7 +148,6 @@ pub fn run(
         graphics,
         tool_force,
         tools,
-        dt_s: header.params.dt_s,
         manifest,
         steps,
         wall_s,
@@ -148,6 +172,79 @@ struct Shared {
     finished: Arc<AtomicUsize>,
     /// What the fault injectors injected.
     injected: Arc<Mutex<Vec<Injected>>>,
+    /// The host's tool poses: the gate and each board's steps ([`poses`]).
+    poses: PoseFeed,
+}
+
+impl Default for PoseFeed {
+    fn default() -> Self {
+        PoseFeed::new(0, false)
+    }
+}
+
+/// The global addresses of the boards whose contact tables hold each of the scene's
+/// `tools` tools (an image that does not read holds none: `read_images` checked them).
+/// What a run to its end ([`run`]) and an open-ended one ([`start_open`]) set up alike
+/// before their boards start: the compiled machine and its images, which boards hold each
+/// tool, the workers and their doorbells, each board's links and the global network, and
+/// the channel the workers report on.
+struct Prepared {
+    manifest: host_tools::compile::Manifest,
+    machine: Machine,
+    images: Vec<Vec<u8>>,
+    header: pe_firmware::image::ImageHeader,
+    tools: usize,
+    holders: Vec<Vec<u8>>,
+    workers: Workers,
+    links: Vec<EmuLinks>,
+    net: Arc<GlobalNet>,
+    tx: mpsc::Sender<Report>,
+    rx: mpsc::Receiver<Report>,
+}
+
+/// Reads the compiled machine in `dir`, checks the fault spec against it, and builds what
+/// its boards run on ([`Prepared`]).
+fn prepare(dir: &Path, opts: &SimOptions) -> Result<Prepared> {
+    let manifest = read_manifest(dir)?;
+    let machine = manifest_machine(dir, &manifest)?;
+    let (images, header, tools) =
+        images::read_images(dir, &manifest, machine, opts.check_manifest)?;
+    if let Some(spec) = &opts.faults {
+        spec.check(machine)?;
+    }
+    let holders = tool_holders(machine, &images, tools);
+    let workers = Workers::new(opts.workers, machine.count());
+    let board_bells: Vec<Arc<Doorbell>> = (0..machine.count())
+        .map(|b| workers.bells[workers.of(b)].clone())
+        .collect();
+    let (links, net) = build_links(machine, &board_bells, opts.global_recovery.is_some());
+    let (tx, rx) = mpsc::channel::<Report>();
+    Ok(Prepared {
+        manifest,
+        machine,
+        images,
+        header,
+        tools,
+        holders,
+        workers,
+        links,
+        net,
+        tx,
+        rx,
+    })
+}
+
+fn tool_holders(machine: Machine, images: &[Vec<u8>], tools: usize) -> Vec<Vec<u8>> {
+    let mut holders = vec![Vec::new(); tools];
+    for (c, image) in machine.boards().zip(images) {
+        let (Ok(r), Some(a)) = (ImageReader::new(image, None), Machine::address(c)) else {
+            continue;
+        };
+        for h in holders.iter_mut().take(r.header.counts.tools as usize) {
+            h.push(a);
+        }
+    }
+    holders
 }
 
 /// The worker threads the boards are multiplexed over: contiguous blocks of boards (by
@@ -212,6 +309,7 @@ impl Workers {
                 finished: shared.finished.clone(),
                 total: machine.count(),
                 batched: opts.batched,
+                poses: shared.poses.clone(),
             };
             let l = board_links(link, coords, b, opts, &self.clocks[self.of(b)], shared)?;
             per_worker[self.of(b)].0.push(ctx);

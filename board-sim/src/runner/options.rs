@@ -38,6 +38,9 @@ pub struct SimOptions {
     /// (`host_tools::solver::batched::board`, the bits of the firmware's scalar loop), or
     /// the firmware's scalar loop itself (false).
     pub batched: bool,
+    /// Tool poses the host sends to the boards holding each tool, each to take effect at
+    /// its step (a recorded live session replayed: `--replay`; see `runner::poses`).
+    pub poses: host_tools::solver::PoseSchedule,
 }
 
 impl Default for SimOptions {
@@ -53,6 +56,7 @@ impl Default for SimOptions {
             recovery: Some(ReliableConfig::default()),
             global_recovery: Some(GlobalConfig::default()),
             batched: true,
+            poses: Default::default(),
         }
     }
 }

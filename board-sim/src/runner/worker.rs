@@ -12,7 +12,6 @@ use host_tools::solver::batched::board::{BoardBatches, BoardElements};
 use host_tools::solver::batched::Isa;
 use link_proto::Links;
 use pe_firmware::image::{ElementRecord, ImageError, ImageHeader, Integration, Precision};
-use pe_firmware::physics::{HexFull, HexReduced};
 use pe_firmware::runtime::{Fault, FaultKind, LinkStats, Runtime, RuntimeConfig, WireReal};
 
 use super::collect::Report;
@@ -41,6 +40,8 @@ pub(crate) struct BoardCtx {
     pub total: usize,
     /// Element batches on the host's lanes ([`super::SimOptions::batched`]).
     pub batched: bool,
+    /// The host's tool poses: the gate a board waits at, its steps reported.
+    pub poses: super::poses::PoseFeed,
 }
 
 /// One thread per worker, each running its boards; a fault stops its board, and the run
@@ -93,20 +94,9 @@ fn dispatch(
     precision: Precision,
     integration: Integration,
 ) -> Result<(), Fault> {
-    match (precision, integration) {
-        (Precision::F64, Integration::Reduced) => {
-            run_worker::<f64, HexReduced<f64>>(ctx, sizing, links, env, out)
-        }
-        (Precision::F64, Integration::Full) => {
-            run_worker::<f64, HexFull<f64>>(ctx, sizing, links, env, out)
-        }
-        (Precision::F32, Integration::Reduced) => {
-            run_worker::<f32, HexReduced<f32>>(ctx, sizing, links, env, out)
-        }
-        (Precision::F32, Integration::Full) => {
-            run_worker::<f32, HexFull<f32>>(ctx, sizing, links, env, out)
-        }
-    }
+    pe_firmware::with_element_types!(precision, integration, |T, E| {
+        run_worker::<T, E>(ctx, sizing, links, env, out)
+    })
 }
 
 /// Runs a worker's boards: each is polled in turn as far as its links allow; when no board
@@ -321,6 +311,11 @@ impl<T: WireReal + 'static, E: ElementRecord<T> + 'static> Worker<'_, '_, T, E> 
                 return true;
             }
             let before = rt.progress();
+            if before.1 == 0 && !ctx.poses.open(before.0) {
+                // The host has not sent this step's poses yet (`super::poses`).
+                self.links[i].poll();
+                return progressed;
+            }
             let mut link: &mut (dyn Links + Send) = &mut *self.links[i];
             let complete = match rt.poll_step_with(&mut link, env, &self.kernels[i]) {
                 Ok(c) => c,
@@ -339,6 +334,7 @@ impl<T: WireReal + 'static, E: ElementRecord<T> + 'static> Worker<'_, '_, T, E> 
                 return progressed;
             }
             let s = rt.step_index();
+            ctx.poses.done(ctx.index, s);
             if ctx.index == 0 {
                 ctx.progress.store(s, Ordering::Relaxed);
             }

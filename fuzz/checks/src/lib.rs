@@ -168,6 +168,11 @@ pub fn payload_parse(data: &[u8]) {
         let n = t.emit(&mut out).expect("a parsed tool force re-emits");
         assert_eq!(&out[..n], data, "a parsed tool force re-emits to its bytes");
     }
+    if let Ok(p) = link_proto::tool_pose::ToolPoseRepr::parse_bytes(data) {
+        let n = p.emit(&mut out).expect("a parsed tool pose re-emits");
+        assert_eq!(&out[..n], data, "a parsed tool pose re-emits to its bytes");
+        assert!(p.q.iter().chain(&p.p_m).all(|v| v.is_finite()));
+    }
     if let Ok(h) = NodesHeader::parse(data) {
         let count = usize::from(h.count);
         for k in 0..count {

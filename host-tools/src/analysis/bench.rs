@@ -302,7 +302,7 @@ pub fn run_cli(elements: usize, seconds: f64, runs: usize, only: Only) -> Result
         None => vec![1],
     };
     let ghz = clock_ghz();
-    let isa = crate::solver::batched::Isa::detect();
+    let isa = crate::problem::batched::Isa::detect();
     println!(
         "host cost of one element-step (whole steps of the seed's box / elements), median of {runs} runs of >= {seconds} s each, {isa:?} lanes:"
     );

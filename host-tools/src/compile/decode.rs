@@ -4,7 +4,6 @@
 
 use super::tables::ImageTables;
 use pe_firmware::image::*;
-use pe_firmware::physics::{HexFull, HexReduced};
 
 /// One decoded exchange round (local node indices).
 #[derive(Clone, Debug, Default)]
@@ -105,18 +104,7 @@ pub fn decode_image(
 ) -> Result<DecodedImage, ImageError> {
     let h = ImageReader::new(bytes, expected_board)?.header;
     let c = &h.counts;
-    match (h.precision, h.integration) {
-        (Precision::F32, Integration::Reduced) => {
-            decode_typed::<f32, HexReduced<f32>>(bytes, expected_board, c)
-        }
-        (Precision::F32, Integration::Full) => {
-            decode_typed::<f32, HexFull<f32>>(bytes, expected_board, c)
-        }
-        (Precision::F64, Integration::Reduced) => {
-            decode_typed::<f64, HexReduced<f64>>(bytes, expected_board, c)
-        }
-        (Precision::F64, Integration::Full) => {
-            decode_typed::<f64, HexFull<f64>>(bytes, expected_board, c)
-        }
-    }
+    pe_firmware::with_element_types!(h.precision, h.integration, |T, E| {
+        decode_typed::<T, E>(bytes, expected_board, c)
+    })
 }

@@ -4,8 +4,7 @@
 //! board, the table and the overflow.
 
 use anyhow::{bail, Result};
-use pe_firmware::image::{ImageHeader, Integration, Precision};
-use pe_firmware::physics::{HexFull, HexReduced};
+use pe_firmware::image::ImageHeader;
 use pe_firmware::profile::BoardProfile;
 use pe_firmware::runtime::{Capacities, ROUNDS_PER_AXIS_MAX};
 
@@ -14,16 +13,9 @@ use super::plan::FACE_NAMES;
 
 /// What the `profile` firmware built for this image's precision and integration holds.
 pub fn board_capacities(profile: &BoardProfile, h: &ImageHeader) -> Capacities {
-    match (h.precision, h.integration) {
-        (Precision::F32, Integration::Reduced) => {
-            Capacities::for_board::<f32, HexReduced<f32>>(profile)
-        }
-        (Precision::F32, Integration::Full) => Capacities::for_board::<f32, HexFull<f32>>(profile),
-        (Precision::F64, Integration::Reduced) => {
-            Capacities::for_board::<f64, HexReduced<f64>>(profile)
-        }
-        (Precision::F64, Integration::Full) => Capacities::for_board::<f64, HexFull<f64>>(profile),
-    }
+    pe_firmware::with_element_types!(h.precision, h.integration, |T, E| {
+        Capacities::for_board::<T, E>(profile)
+    })
 }
 
 /// Why the images do not fit `profile`, one line per board and table (empty: they fit).

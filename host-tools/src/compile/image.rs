@@ -7,13 +7,13 @@ use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
 use pe_firmware::image::*;
-use pe_firmware::physics::{CentralDifference, ReferenceHex};
+use pe_firmware::physics::{CentralDifference, ElementKind, HexBox, HexCuboid};
 use pe_firmware::runtime::Capacities;
 
 use super::plan::{BoardPlan, Plan};
 use super::tables::ImageTables;
 use crate::problem::contact::ContactRun;
-use crate::problem::elements::{kernel_of, Kernel};
+use crate::problem::elements::{kind_of, record_of};
 use crate::problem::{NodeKind, Problem};
 
 /// A compiled image with its figures.
@@ -90,7 +90,6 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
     plan: &Plan,
     shared: &Shared,
     b: usize,
-    element: impl Fn(&ReferenceHex, [u32; 8], u16) -> E,
 ) -> Result<BoardImage> {
     let bp = &plan.boards[b];
     if bp.nodes.len() > u16::MAX as usize {
@@ -119,23 +118,17 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
     let mut start = 0;
     for (k, &end) in bp.batch_ends.iter().enumerate() {
         for &e in &bp.elements[start..end] {
-            let (r, m) = (
-                &problem.reference[e as usize],
-                problem.cell_material[e as usize],
-            );
-            let (modulus, hg) = (
-                problem.laws[m as usize].hourglass_modulus(),
-                problem.solver.hourglass,
-            );
-            match kernel_of(problem, e as usize) {
-                Kernel::Parallelepiped => {
-                    t.boxes
-                        .push(r.parallelepiped::<T>(local_nodes(e), m, modulus, hg))
-                }
-                Kernel::Cuboid => t
+            let (e, nodes) = (e as usize, local_nodes(e));
+            match kind_of(problem, e) {
+                k if k == E::KIND => t.elements.push(record_of(problem, e, nodes)),
+                ElementKind::HexBox => t.boxes.push(record_of::<T, HexBox<T>>(problem, e, nodes)),
+                ElementKind::HexCuboid => t
                     .cuboids
-                    .push(r.cuboid::<T>(local_nodes(e), m, modulus, hg)),
-                Kernel::General => t.elements.push(element(r, local_nodes(e), m)),
+                    .push(record_of::<T, HexCuboid<T>>(problem, e, nodes)),
+                k => bail!(
+                    "internal: cell {e} is a {k}, which an image of {} holds no table for",
+                    E::KIND
+                ),
             }
         }
         batch_ends[k] = t.elements.len() as u32;
@@ -489,20 +482,12 @@ fn compile_unstamped(problem: &Problem, plan: &Plan) -> Result<Vec<BoardImage>> 
         on_surface: problem.surface_node_mask(),
         graphics: graphics_params(problem, dt),
     };
-    let hourglass = problem.solver.hourglass;
-    let modulus = |m: u16| problem.laws[m as usize].hourglass_modulus();
-    let full = problem.solver.integration == Integration::Full;
-    let f32 = problem.solver.precision == Precision::F32;
+    let (precision, integration) = (problem.solver.precision, problem.solver.integration);
     (0..plan.boards.len())
-        .map(|b| match (f32, full) {
-            (true, true) => write_image(problem, plan, &shared, b, |r, n, m| r.full::<f32>(n, m)),
-            (false, true) => write_image(problem, plan, &shared, b, |r, n, m| r.full::<f64>(n, m)),
-            (true, false) => write_image(problem, plan, &shared, b, |r, n, m| {
-                r.reduced::<f32>(n, m, modulus(m), hourglass)
-            }),
-            (false, false) => write_image(problem, plan, &shared, b, |r, n, m| {
-                r.reduced::<f64>(n, m, modulus(m), hourglass)
-            }),
+        .map(|b| {
+            pe_firmware::with_element_types!(precision, integration, |T, E| {
+                write_image::<T, E>(problem, plan, &shared, b)
+            })
         })
         .collect()
 }

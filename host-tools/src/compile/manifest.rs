@@ -4,16 +4,19 @@
 use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
-use pe_firmware::image::{CompilationId, ImageHeader, FORMAT_VERSION};
+use link_proto::Machine;
+use pe_firmware::image::{CompilationId, ImageHeader, Integration, Precision, FORMAT_VERSION};
 use pe_firmware::profile::BoardProfile;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
-use super::partition::Machine;
 use super::{check_fit, image_file_name, plan_for_real_time, report, write_images, CompileReport};
 use crate::problem::Problem;
+use crate::scene::settings::{integration_text, precision_text};
 
-/// `DIR/manifest.json`.
-#[derive(Clone, Debug, Serialize, serde::Deserialize)]
+/// `DIR/manifest.json`: written by [`compile_to_dir`], read back as this type
+/// ([`Manifest::read`]); the profile, precision and integration are their names in the
+/// file, and an unknown name is an error.
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Manifest {
     pub format_version: u16,
     pub scene: String,
@@ -23,15 +26,18 @@ pub struct Manifest {
     /// How to load the scene again (its mesh, for outputs): `builtin:LEVEL` or a file path.
     pub scene_source: String,
     pub machine: [usize; 3],
-    pub profile: String,
-    pub precision: String,
-    pub integration: String,
+    #[serde(with = "pe_firmware::profile::by_name")]
+    pub profile: &'static BoardProfile,
+    #[serde(with = "precision_text")]
+    pub precision: Precision,
+    #[serde(with = "integration_text")]
+    pub integration: Integration,
     pub dt_s: f64,
     pub steps: u64,
     pub boards: Vec<ManifestBoard>,
 }
 
-#[derive(Clone, Debug, Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ManifestBoard {
     pub board: [usize; 3],
     pub file: String,
@@ -41,7 +47,8 @@ pub struct ManifestBoard {
     pub crc32: String,
 }
 
-/// Compiles a problem into `dir`: images, manifest.json, report.json; returns the report.
+/// Compiles a problem into `dir`: images, manifest.json, report.json and mesh.json (what a
+/// run's outputs write and draw, [`super::OutputMesh`]); returns the report.
 pub fn compile_to_dir(
     scene: &str,
     scene_source: &str,
@@ -50,6 +57,8 @@ pub fn compile_to_dir(
     profile: &BoardProfile,
     dir: &Path,
 ) -> Result<CompileReport> {
+    // The manifest names a registered profile (the figures may be a variant of it).
+    let registered = BoardProfile::by_name(profile.name)?;
     let (plan, images, balance_other) = plan_for_real_time(problem, machine, profile)?;
     check_fit(&images, profile)?;
     write_images(dir, &images)?;
@@ -63,9 +72,9 @@ pub fn compile_to_dir(
             .unwrap_or_default(),
         scene_source: scene_source.to_string(),
         machine: machine.dims(),
-        profile: profile.name.to_string(),
-        precision: problem.solver.precision.name().to_string(),
-        integration: problem.solver.integration.name().to_string(),
+        profile: registered,
+        precision: problem.solver.precision,
+        integration: problem.solver.integration,
         dt_s: dt,
         steps: problem.steps(dt),
         boards: images
@@ -89,13 +98,26 @@ pub fn compile_to_dir(
     let p = dir.join("report.json");
     std::fs::write(&p, serde_json::to_string_pretty(&rep)?)
         .with_context(|| format!("writing {}", p.display()))?;
+    super::OutputMesh::of(problem).write(dir)?;
     Ok(rep)
 }
 
-/// Reads `DIR/manifest.json`.
+impl Manifest {
+    /// Reads `DIR/manifest.json`, as the type that wrote it.
+    pub fn read(dir: &Path) -> Result<Manifest> {
+        read_json(&dir.join("manifest.json"))
+    }
+}
+
+/// Reads `DIR/manifest.json` ([`Manifest::read`]).
 pub fn read_manifest(dir: &Path) -> Result<Manifest> {
-    let p = dir.join("manifest.json");
-    let text = std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
+    Manifest::read(dir)
+}
+
+/// A JSON artefact of a compiled directory, read back as the type that wrote it; the
+/// error names the file (and, from serde, the line and column).
+pub(super) fn read_json<T: serde::de::DeserializeOwned>(p: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
     serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))
 }
 
@@ -211,4 +233,62 @@ pub fn check_image_set(manifest: &Manifest, files: &[ImageFile]) -> Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `manifest.json` and `report.json` read back as the types that wrote them: written
+    /// again they are the same bytes, the profile is the registry's entry and the
+    /// precision and integration the problem's (their names in the file); a manifest
+    /// naming an unknown profile is refused, naming the file, the name and the known ones.
+    /// `mesh.json` holds the problem's outputs mesh.
+    #[test]
+    fn the_artefacts_read_back_as_their_types() {
+        let scene = crate::scene::builtin::builtin_scene("coarse").expect("scene");
+        let p = Problem::from_scene(&scene, Path::new(".")).expect("problem");
+        let dir = std::env::temp_dir().join(format!("pe-typed-artefacts-{}", std::process::id()));
+        let machine = Machine::parse("2x2x2").expect("machine");
+        let profile = &pe_firmware::profile::PE_BOARD;
+        compile_to_dir("coarse", "builtin:coarse", &p, machine, profile, &dir).expect("compiles");
+        let text = |f: &str| std::fs::read_to_string(dir.join(f)).expect("written");
+        let m = Manifest::read(&dir).expect("manifest");
+        assert_eq!(m.boards.len(), 8);
+        assert!(core::ptr::eq(
+            m.profile,
+            BoardProfile::by_name("pe-board").unwrap()
+        ));
+        assert_eq!(
+            (m.precision, m.integration),
+            (p.solver.precision, p.solver.integration)
+        );
+        assert_eq!(
+            serde_json::to_string_pretty(&m).unwrap(),
+            text("manifest.json")
+        );
+        assert!(text("manifest.json").contains("\"profile\": \"pe-board\""));
+        assert!(text("manifest.json").contains("\"precision\": \"f64\""));
+        let r = CompileReport::read(&dir).expect("report");
+        assert_eq!(r.elements, p.mesh.cells.len());
+        assert!(r.elements > 100 && r.boards.len() == 8);
+        assert_eq!(
+            serde_json::to_string_pretty(&r).unwrap(),
+            text("report.json")
+        );
+        // Beside them, what a run's outputs need: the problem's mesh and surface.
+        let mesh = super::super::OutputMesh::read(&dir).expect("mesh.json");
+        assert_eq!(mesh.nodes.len(), p.mesh.nodes.len());
+        assert_eq!(mesh, super::super::OutputMesh::of(&p));
+        let bad = text("manifest.json").replace("\"pe-board\"", "\"pe-bord\"");
+        std::fs::write(dir.join("manifest.json"), bad).expect("written");
+        let e = format!("{:#}", Manifest::read(&dir).unwrap_err());
+        assert!(
+            e.contains("manifest.json")
+                && e.contains("\"pe-bord\"")
+                && e.contains("known: pe-board, stm32h743-uart, qemu-mps2-an500"),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

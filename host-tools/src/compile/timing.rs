@@ -11,15 +11,17 @@
 //! replays a check step too: every board that owns a contact node then also searches the
 //! candidates of the whole table (the compile report's charge).
 
-use super::partition::Machine;
-use super::DecodedImage;
+use link_proto::frame::frame_len;
+use link_proto::{Face, Machine};
 use pe_firmware::image::{Integration, Precision};
-use pe_firmware::profile::{measured_cost, BoardProfile, FirmwareCost};
+use pe_firmware::profile::{link_time_s, measured_cost, BoardProfile, FirmwareCost, StepCost};
 use pe_firmware::runtime::{Op, Program, ROUNDS_PER_AXIS_MAX};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+
+use super::DecodedImage;
 
 /// Model inputs.
-#[derive(Clone, Copy, Debug, Serialize)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct SimTiming {
     pub clock_hz: f64,
     pub cycles_per_element_reduced: f64,
@@ -35,8 +37,9 @@ pub struct SimTiming {
     pub cycles_per_search_test: f64,
     pub link_bytes_per_s: f64,
     pub link_latency_s: f64,
-    /// Bytes link recovery adds to every frame (its envelope, `link_proto::recovery::face::OVERHEAD`;
-    /// 0 without recovery). Retransmissions are not modelled: at the loss rates recovery is
+    /// Bytes link recovery adds to every frame (its envelope,
+    /// [`link_proto::recovery::OVERHEAD`]; 0 without recovery, as the board firmware's links
+    /// run). Retransmissions are not modelled: at the loss rates recovery is
     /// for (1e-3 per frame) they add that fraction of a frame per frame.
     pub frame_overhead_bytes: usize,
 }
@@ -63,14 +66,40 @@ impl SimTiming {
             cycles_per_contact_node: reduced.per_contact_node.max(full.per_contact_node) as f64,
             cycles_per_search_test: reduced.per_search_test.max(full.per_search_test) as f64,
             link_bytes_per_s: p.link_bytes_per_s as f64,
-            link_latency_s: p.link_latency_ns as f64 * 1e-9,
+            link_latency_s: p.link_latency_s(),
             frame_overhead_bytes: 0,
         }
+    }
+
+    /// What a step of images of `integration` costs ([`StepCost`]: the general kernel's
+    /// element of that integration, the others' as measured, the node update and the
+    /// contact nodes).
+    pub fn step_cost(&self, integration: Integration) -> StepCost {
+        StepCost {
+            per_element: [
+                match integration {
+                    Integration::Full => self.cycles_per_element_full,
+                    Integration::Reduced => self.cycles_per_element_reduced,
+                },
+                self.cycles_per_box_element,
+                self.cycles_per_cuboid_element,
+            ],
+            per_node_update: self.cycles_per_node_update,
+            per_contact_node: self.cycles_per_contact_node,
+        }
+    }
+
+    /// The time of a force frame of `values` values of `precision` on these links: its
+    /// length ([`frame_len`]) and the recovery envelope's bytes, if any, at the link rate
+    /// plus the frame's fixed cost ([`link_time_s`], the formula of the profile's links).
+    pub fn frame_time_s(&self, values: usize, precision: Precision) -> f64 {
+        let len = frame_len(values, precision.wire()) + self.frame_overhead_bytes;
+        link_time_s(len, 1, self.link_bytes_per_s, self.link_latency_s)
     }
 }
 
 /// Model results.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct StepTiming {
     pub inputs: SimTiming,
     /// Modelled time of one step on the slowest board (s).
@@ -89,17 +118,6 @@ pub struct StepTiming {
     pub check_slowest_board: [usize; 3],
 }
 
-fn frame_s(t: &SimTiming, values: usize, width: usize) -> f64 {
-    if values == 0 {
-        return 0.0;
-    }
-    let bytes = link_proto::FRAME_HEADER_LEN
-        + link_proto::CRC_LEN
-        + values * width
-        + t.frame_overhead_bytes;
-    t.link_latency_s + bytes as f64 / t.link_bytes_per_s
-}
-
 /// The contact nodes a board's step is charged for ([`FirmwareCost::charged_contact_nodes`]).
 fn charged_contact_nodes(im: &DecodedImage) -> usize {
     let owned = im.contact_nodes.iter().filter(|(_, p)| p.owned).count();
@@ -114,7 +132,7 @@ pub fn model(imgs: &[DecodedImage], dims: [usize; 3], t: SimTiming) -> anyhow::R
 
 /// What the step model says the scene needs to keep its step, each figure with the other
 /// inputs of `t` as they are ([`model_and_needs`]).
-#[derive(Clone, Copy, Debug, Serialize)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct Needs {
     /// The least link rate (bytes/s each way, the frames' fixed time as `t` has it) at
     /// which the modelled step, and a check step, fit within the scene's step; `None` when
@@ -270,12 +288,7 @@ impl<'a> Replay<'a> {
     fn walk(&self, t: &SimTiming, extra: &[f64]) -> (f64, usize, f64) {
         let (imgs, program, machine) = (self.imgs, &self.program, self.machine);
         let h = imgs[0].header;
-        let width = if h.precision == Precision::F64 { 8 } else { 4 };
-        let cpe = if h.integration == Integration::Full {
-            t.cycles_per_element_full
-        } else {
-            t.cycles_per_element_reduced
-        };
+        let cost = t.step_cost(h.integration);
         let count = imgs.len();
         let mut now = vec![0.0f64; count];
         let mut compute = vec![0.0f64; count];
@@ -288,18 +301,20 @@ impl<'a> Replay<'a> {
                     Op::Batch(k) => {
                         let k = k as usize;
                         let size = |e: [u32; 4]| if k == 0 { e[0] } else { e[k] - e[k - 1] } as f64;
-                        let c = (size(im.header.counts.batch_ends) * cpe
-                            + size(im.header.counts.box_batch_ends) * t.cycles_per_box_element
-                            + size(im.header.counts.cuboid_batch_ends)
-                                * t.cycles_per_cuboid_element)
-                            / t.clock_hz;
+                        let n = &im.header.counts;
+                        let c = cost.elements([
+                            size(n.batch_ends),
+                            size(n.box_batch_ends),
+                            size(n.cuboid_batch_ends),
+                        ]) / t.clock_hz;
                         now[b] += c;
                         compute[b] += c;
                     }
                     Op::Update => {
-                        let c = (im.header.counts.nodes as f64 * t.cycles_per_node_update
-                            + charged_contact_nodes(im) as f64 * t.cycles_per_contact_node)
-                            / t.clock_hz
+                        let c = cost.update(
+                            im.header.counts.nodes as f64,
+                            charged_contact_nodes(im) as f64,
+                        ) / t.clock_hz
                             + extra[b];
                         now[b] += c;
                         compute[b] += c;
@@ -311,15 +326,14 @@ impl<'a> Replay<'a> {
                         if n_recv == 0 {
                             continue;
                         }
-                        // Face 0 (+axis) receives what the +axis neighbour sent on its −axis face.
-                        let mut d = machine.coords(b);
-                        if f == 0 {
-                            d[a] += 1;
-                        } else {
-                            d[a] -= 1;
-                        }
+                        // Face 0 (+axis) receives what the +axis neighbour sent on its −axis
+                        // face (a face that receives has a neighbour: the image's rounds).
+                        let Some(d) = machine.neighbour(machine.coords(b), Face::ALL[2 * a + f])
+                        else {
+                            continue;
+                        };
                         let from = sent[machine.index(d)][a][r][1 - f];
-                        now[b] = now[b].max(from + frame_s(t, 3 * n_recv, width));
+                        now[b] = now[b].max(from + t.frame_time_s(3 * n_recv, h.precision));
                     }
                     Op::Graphics | Op::Contact | Op::External(_) => {}
                 }

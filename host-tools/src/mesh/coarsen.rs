@@ -137,11 +137,90 @@ impl Coarsened {
 /// Fine cells by the coarse cell (lattice index) that covers them.
 type Blocks = HashMap<[i64; 3], Vec<usize>>;
 
+/// A coarse cell's corners on the fine lattice, as multiples of 2: coarse cell `K` of
+/// phase `p` spans `2K - p` to `2K - p + 2`.
+const CORNERS: [[i64; 3]; 8] = [
+    [0, 0, 0],
+    [1, 0, 0],
+    [1, 1, 0],
+    [0, 1, 0],
+    [0, 0, 1],
+    [1, 0, 1],
+    [1, 1, 1],
+    [0, 1, 1],
+];
+
+/// Corner `c` ([`CORNERS`]) of coarse cell `k` at phase `p`, on the fine lattice.
+fn corner(p: [i64; 3], k: &[i64; 3], c: &[i64; 3]) -> [i64; 3] {
+    core::array::from_fn(|i| 2 * k[i] - p[i] + 2 * c[i])
+}
+
+/// Union-find root.
+fn root(parent: &mut [usize], mut a: usize) -> usize {
+    while parent[a] != a {
+        parent[a] = parent[parent[a]];
+        a = parent[a];
+    }
+    a
+}
+
 /// `mesh` coarsened 2x if it is a voxel mesh ([`lattice`]); `None` otherwise, or when no
 /// coarse cell would be kept.
 pub fn coarsen(mesh: &Mesh) -> Option<Coarsened> {
     let lat = lattice(mesh)?;
-    // The phase that changes the fewest fine cells.
+    let (p, blocks) = best_phase(&lat)?;
+    let mut kept: Vec<([i64; 3], &Vec<usize>)> = blocks
+        .iter()
+        .filter(|(_, v)| v.len() >= KEEP_MIN)
+        .map(|(k, v)| (*k, v))
+        .collect();
+    if kept.is_empty() {
+        return None;
+    }
+    // Lattice order (z slowest), so that the result does not depend on the map's order.
+    kept.sort_by_key(|(k, _)| [k[2], k[1], k[0]]);
+    let fine_cells_added: usize = kept.iter().map(|(_, v)| 8 - v.len()).sum();
+    let covered: usize = kept.iter().map(|(_, v)| v.len()).sum();
+    let fine_cells_left_out = lat.cells.len() - covered;
+    let before = kept.len();
+    let kept = largest_piece(p, kept)?;
+    let loose_cells_left_out = before - kept.len();
+    let mut out = Mesh {
+        source: format!(
+            "{} coarsened 2x (voxels of {:e} m)",
+            mesh.source,
+            2.0 * lat.h_m
+        ),
+        region_names: mesh.region_names.clone(),
+        ..Mesh::default()
+    };
+    let node_at = coarse_cells(mesh, &lat, p, &kept, &mut out);
+    out.node_tags = (1..=out.nodes.len() as u64).collect();
+    let sets_left_out = coarse_sets(mesh, &lat, &node_at, &mut out);
+    out.notes.push(format!(
+        "coarsened 2x: {} voxels of {:.3} mm from {} of {:.3} mm ({} fine cells left out, {} fine-cell volumes added, {} loose cells left out)",
+        out.cells.len(),
+        2e3 * lat.h_m,
+        mesh.cells.len(),
+        1e3 * lat.h_m,
+        fine_cells_left_out,
+        fine_cells_added,
+        loose_cells_left_out
+    ));
+    Some(Coarsened {
+        mesh: out,
+        h_fine_m: lat.h_m,
+        h_coarse_m: 2.0 * lat.h_m,
+        fine_cells_left_out,
+        fine_cells_added,
+        loose_cells_left_out,
+        sets_left_out,
+    })
+}
+
+/// Of the eight phases of the coarse lattice, the one whose kept coarse cells change the
+/// fewest fine cells (the first on a tie), and its fine cells by coarse cell.
+fn best_phase(lat: &Lattice) -> Option<([i64; 3], Blocks)> {
     let mut best: Option<(usize, [i64; 3], Blocks)> = None;
     for phase in 0..8 {
         let p: [i64; 3] = core::array::from_fn(|i| (phase >> i) & 1);
@@ -164,48 +243,20 @@ pub fn coarsen(mesh: &Mesh) -> Option<Coarsened> {
             best = Some((changed, p, blocks));
         }
     }
-    let (_, p, blocks) = best?;
-    let mut kept: Vec<([i64; 3], &Vec<usize>)> = blocks
-        .iter()
-        .filter(|(_, v)| v.len() >= KEEP_MIN)
-        .map(|(k, v)| (*k, v))
-        .collect();
-    if kept.is_empty() {
-        return None;
-    }
-    // Lattice order (z slowest), so that the result does not depend on the map's order.
-    kept.sort_by_key(|(k, _)| [k[2], k[1], k[0]]);
-    let fine_cells_added: usize = kept.iter().map(|(_, v)| 8 - v.len()).sum();
-    let covered: usize = kept.iter().map(|(_, v)| v.len()).sum();
-    let fine_cells_left_out = lat.cells.len() - covered;
+    best.map(|(_, p, blocks)| (p, blocks))
+}
 
-    // Corners on the fine lattice: coarse cell K spans 2K - p to 2K - p + 2.
-    const CORNERS: [[i64; 3]; 8] = [
-        [0, 0, 0],
-        [1, 0, 0],
-        [1, 1, 0],
-        [0, 1, 0],
-        [0, 0, 1],
-        [1, 0, 1],
-        [1, 1, 1],
-        [0, 1, 1],
-    ];
-    let corner = |k: &[i64; 3], c: &[i64; 3]| -> [i64; 3] {
-        core::array::from_fn(|i| 2 * k[i] - p[i] + 2 * c[i])
-    };
-    // The largest piece, through shared corners (union-find over the kept cells).
+/// The kept coarse cells of the largest piece (connected through shared corners; on a tie
+/// the piece of the lowest root), in order.
+fn largest_piece(
+    p: [i64; 3],
+    kept: Vec<([i64; 3], &Vec<usize>)>,
+) -> Option<Vec<([i64; 3], &Vec<usize>)>> {
     let mut parent: Vec<usize> = (0..kept.len()).collect();
-    fn root(parent: &mut [usize], mut a: usize) -> usize {
-        while parent[a] != a {
-            parent[a] = parent[parent[a]];
-            a = parent[a];
-        }
-        a
-    }
     let mut first_at: HashMap<[i64; 3], usize> = HashMap::new();
     for (c, (k, _)) in kept.iter().enumerate() {
         for off in &CORNERS {
-            let at = corner(k, off);
+            let at = corner(p, k, off);
             match first_at.get(&at) {
                 Some(&o) => {
                     let (a, b) = (root(&mut parent, c), root(&mut parent, o));
@@ -227,34 +278,30 @@ pub fn coarsen(mesh: &Mesh) -> Option<Coarsened> {
         .iter()
         .max_by_key(|(r, n)| (**n, std::cmp::Reverse(**r)))
         .map(|(r, _)| *r)?;
-    let before = kept.len();
     let in_largest: Vec<bool> = (0..kept.len())
         .map(|c| root(&mut parent, c) == largest)
         .collect();
-    let kept: Vec<_> = kept
-        .into_iter()
-        .zip(in_largest)
-        .filter_map(|(k, keep)| keep.then_some(k))
-        .collect();
-    let loose_cells_left_out = before - kept.len();
+    Some(
+        kept.into_iter()
+            .zip(in_largest)
+            .filter_map(|(k, keep)| keep.then_some(k))
+            .collect(),
+    )
+}
 
-    // Fine nodes by lattice point, for the node sets.
-    let point_of = |x: [f64; 3]| -> [i64; 3] {
-        core::array::from_fn(|i| ((x[i] - lat.origin[i]) / lat.h_m).round() as i64)
-    };
-    let mut out = Mesh {
-        source: format!(
-            "{} coarsened 2x (voxels of {:e} m)",
-            mesh.source,
-            2.0 * lat.h_m
-        ),
-        region_names: mesh.region_names.clone(),
-        ..Mesh::default()
-    };
+/// The coarse cells (their nodes, created in order, and regions) into `out`; returns the
+/// coarse node at each fine lattice point.
+fn coarse_cells(
+    mesh: &Mesh,
+    lat: &Lattice,
+    p: [i64; 3],
+    kept: &[([i64; 3], &Vec<usize>)],
+    out: &mut Mesh,
+) -> HashMap<[i64; 3], u32> {
     let mut node_at: HashMap<[i64; 3], u32> = HashMap::new();
-    for (k, fine) in &kept {
+    for (k, fine) in kept {
         let cell: [u32; 8] = core::array::from_fn(|c| {
-            let at = corner(k, &CORNERS[c]);
+            let at = corner(p, k, &CORNERS[c]);
             *node_at.entry(at).or_insert_with(|| {
                 out.nodes.push(core::array::from_fn(|i| {
                     lat.origin[i] + lat.h_m * at[i] as f64
@@ -276,7 +323,21 @@ pub fn coarsen(mesh: &Mesh) -> Option<Coarsened> {
             .0;
         out.cell_regions.push(region);
     }
-    out.node_tags = (1..=out.nodes.len() as u64).collect();
+    node_at
+}
+
+/// The fine mesh's named node sets on the coarse nodes (into `out`); returns the names of
+/// those left empty, left out.
+fn coarse_sets(
+    mesh: &Mesh,
+    lat: &Lattice,
+    node_at: &HashMap<[i64; 3], u32>,
+    out: &mut Mesh,
+) -> Vec<String> {
+    // Fine nodes by lattice point.
+    let point_of = |x: [f64; 3]| -> [i64; 3] {
+        core::array::from_fn(|i| ((x[i] - lat.origin[i]) / lat.h_m).round() as i64)
+    };
     let mut sets_left_out = Vec::new();
     for (name, set) in &mesh.node_sets {
         let mut s: Vec<u32> = set
@@ -292,31 +353,13 @@ pub fn coarsen(mesh: &Mesh) -> Option<Coarsened> {
             out.node_sets.insert(name.clone(), s);
         }
     }
-    out.notes.push(format!(
-        "coarsened 2x: {} voxels of {:.3} mm from {} of {:.3} mm ({} fine cells left out, {} fine-cell volumes added, {} loose cells left out)",
-        out.cells.len(),
-        2e3 * lat.h_m,
-        mesh.cells.len(),
-        1e3 * lat.h_m,
-        fine_cells_left_out,
-        fine_cells_added,
-        loose_cells_left_out
-    ));
-    Some(Coarsened {
-        mesh: out,
-        h_fine_m: lat.h_m,
-        h_coarse_m: 2.0 * lat.h_m,
-        fine_cells_left_out,
-        fine_cells_added,
-        loose_cells_left_out,
-        sets_left_out,
-    })
+    sets_left_out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::io::generate_box;
+    use crate::mesh::grid::generate_box;
 
     /// A 4x4x4 box of 1 cm voxels coarsens to 2x2x2 voxels of 2 cm, with the same volume
     /// and bounds, and every coarse node on the fine mesh's nodes.

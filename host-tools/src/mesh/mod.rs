@@ -3,6 +3,7 @@
 
 pub mod builtin;
 pub mod coarsen;
+pub mod grid;
 pub mod io;
 pub mod ovary;
 
@@ -98,7 +99,7 @@ fn line_suffix(line: Option<usize>) -> String {
 /// outside (so the right-hand normal points out of the cell when its Jacobian is positive).
 /// In order: bottom (-zeta), top (+zeta), front (-eta), right (+xi), back (+eta), left (-xi).
 /// (The firmware's table, defined once.)
-pub const HEX_FACES: [[usize; 4]; 6] = pe_firmware::physics::hex::FACES;
+pub const HEX_FACES: [[usize; 4]; 6] = pe_firmware::physics::element::hex::FACES;
 
 /// A linear hexahedral mesh in metres.
 ///

@@ -5,9 +5,13 @@
 //! `ux_m`, `time_s`, `fx_n`, `energy_j`); ids, counts and ratios have none. The ParaView
 //! frames name their arrays the same way (see [`vtk`]).
 
+mod args;
 pub mod font;
 pub mod render;
+pub mod tool_force;
 pub mod vtk;
+
+pub use args::{OutputArgs, ResultArgs};
 
 use std::io::Write;
 use std::path::Path;

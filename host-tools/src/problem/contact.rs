@@ -56,6 +56,8 @@ pub struct ContactSetup {
     pub settings: ContactSpec,
     pub surfaces: Vec<Surface>,
     pub tool_names: Vec<String>,
+    /// Each tool's trocar (the point it pivots about in a live session), if the scene names one.
+    pub trocars: Vec<Option<[f64; 3]>>,
     /// Tools with `surface` an index into `surfaces` and `path` into the problem's paths.
     pub tools: Vec<Tool>,
     pub pairs: Vec<ContactPair>,
@@ -169,6 +171,7 @@ impl ContactSetup {
         Ok(ContactSetup {
             settings,
             surfaces,
+            trocars: vec![None; tool_names.len()],
             tool_names,
             tools,
             pairs,
@@ -290,6 +293,7 @@ pub fn resolve(
     };
     let mut tools = Vec::new();
     let mut names = Vec::new();
+    let mut trocars = Vec::new();
     for (k, t) in scene.tool.iter().enumerate() {
         let what = format!("[[tool]] {k} ({:?})", t.name);
         if t.shape != "capsule" {
@@ -313,6 +317,10 @@ pub fn resolve(
             surface: surface as u8,
         });
         names.push(t.name.clone());
+        if let Some(p) = t.trocar.filter(|p| p.iter().any(|v| !v.is_finite())) {
+            bail!("{what}: trocar {p:?} must be finite (m)");
+        }
+        trocars.push(t.trocar);
     }
     let mut pairs = Vec::new();
     for (k, p) in scene.contact_pair.iter().enumerate() {
@@ -331,5 +339,5 @@ pub fn resolve(
         pairs,
         cell_length,
     )
-    .map(Some)
+    .map(|setup| Some(ContactSetup { trocars, ..setup }))
 }

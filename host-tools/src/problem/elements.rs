@@ -1,17 +1,19 @@
 //! The problem's hexahedra as the physics kernels take them, in scalar type `T`: full
 //! integration, or reduced with one kernel per element kind, chosen from the reference
-//! geometry ([`kernel_of`]): the cuboid kernel ([`HexCuboid`]) for cells that are
-//! axis-aligned rectangular cuboids to round-off, the parallelepiped kernel ([`HexBox`]) for
-//! the other parallelepipeds, the general one ([`HexReduced`]) for the rest. The serial
-//! solver runs the general elements, then the parallelepipeds, then the cuboids, each in
-//! mesh order: the order a one-board machine runs them in (see `compile::image`), so the
-//! two compute the same bits.
+//! geometry ([`kind_of`], the firmware's [`ElementKind::of`]): the cuboid kernel
+//! ([`HexCuboid`]) for cells that are axis-aligned rectangular cuboids to round-off, the
+//! parallelepiped kernel ([`HexBox`]) for the other parallelepipeds, the general one
+//! ([`HexReduced`]) for the rest. The serial solver runs the general elements, then the
+//! parallelepipeds, then the cuboids (the image's element tables, [`ElementKind::table`]),
+//! each in mesh order: the order a one-board machine runs them in (see `compile::image`),
+//! so the two compute the same bits.
 
 use pe_firmware::image::Integration;
 use pe_firmware::physics::explicit::{accumulate_internal_forces, stored_energy};
-pub use pe_firmware::physics::Kernel;
+pub use pe_firmware::physics::ElementKind;
 use pe_firmware::physics::{
-    HexBox, HexCuboid, HexFull, HexReduced, MaterialLaw, PhysicsError, Real,
+    Connectivity, Element, HexBox, HexCuboid, HexFull, HexReduced, Hourglass, MaterialLaw,
+    PhysicsError, Real,
 };
 
 use crate::problem::Problem;
@@ -29,41 +31,43 @@ pub enum Elements<T> {
     Full(Vec<HexFull<T>>),
 }
 
-/// The kernel mesh cell `e` of `p` takes.
-pub fn kernel_of(p: &Problem, e: usize) -> Kernel {
-    let r = &p.reference[e];
-    if p.solver.integration != Integration::Reduced || !r.is_parallelepiped() {
-        Kernel::General
-    } else if r.is_cuboid() {
-        Kernel::Cuboid
-    } else {
-        Kernel::Parallelepiped
-    }
+/// The kind mesh cell `e` of `p` takes ([`ElementKind::of`] under the scene's integration).
+pub fn kind_of(p: &Problem, e: usize) -> ElementKind {
+    ElementKind::of(&p.reference[e], p.solver.integration)
+}
+
+/// The record of kind `E` of mesh cell `e` of `p`, its nodes numbered by `nodes`: the one
+/// place the problem's cells become element records (the serial solver's and every image's).
+pub fn record_of<T: Real, E: Element<T>>(p: &Problem, e: usize, nodes: [u32; 8]) -> E {
+    let material = p.cell_material[e];
+    let hourglass = Hourglass {
+        modulus_pa: p.laws[material as usize].hourglass_modulus(),
+        coefficient: p.solver.hourglass,
+    };
+    E::from_reference(&p.reference[e], Connectivity { nodes, material }, hourglass)
 }
 
 impl<T: Real> Elements<T> {
     pub fn build(p: &Problem) -> Self {
-        let cells = p.mesh.cells.iter().zip(&p.reference).zip(&p.cell_material);
-        if p.solver.integration == Integration::Full {
-            return Elements::Full(cells.map(|((c, r), m)| r.full(*c, *m)).collect());
+        // Each element table's cells, in mesh order.
+        let mut cells = [const { Vec::new() }; ElementKind::TABLES];
+        for e in 0..p.mesh.cells.len() {
+            cells[kind_of(p, e).table()].push(e as u32);
         }
-        let (mut general, mut boxes, mut cuboids) = (Vec::new(), Vec::new(), Vec::new());
-        let mut kind_cells = [Vec::new(), Vec::new(), Vec::new()];
-        for (e, ((c, r), m)) in cells.enumerate() {
-            let (modulus, hg) = (p.laws[*m as usize].hourglass_modulus(), p.solver.hourglass);
-            let kind = kernel_of(p, e);
-            match kind {
-                Kernel::General => general.push(r.reduced(*c, *m, modulus, hg)),
-                Kernel::Parallelepiped => boxes.push(r.parallelepiped(*c, *m, modulus, hg)),
-                Kernel::Cuboid => cuboids.push(r.cuboid(*c, *m, modulus, hg)),
-            }
-            kind_cells[kind as usize].push(e as u32);
+        fn table<T: Real, E: Element<T>>(p: &Problem, cells: &[u32]) -> Vec<E> {
+            cells
+                .iter()
+                .map(|&e| record_of(p, e as usize, p.mesh.cells[e as usize]))
+                .collect()
         }
-        Elements::Reduced {
-            general,
-            boxes,
-            cuboids,
-            cells: kind_cells.concat(),
+        match p.solver.integration {
+            Integration::Full => Elements::Full(table(p, &cells[0])),
+            Integration::Reduced => Elements::Reduced {
+                general: table(p, &cells[0]),
+                boxes: table(p, &cells[1]),
+                cuboids: table(p, &cells[2]),
+                cells: cells.concat(),
+            },
         }
     }
 

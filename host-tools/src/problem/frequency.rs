@@ -4,9 +4,9 @@
 use anyhow::{anyhow, Result};
 use pe_firmware::physics::{MaterialLaw, Real};
 
+use crate::problem::batched::Batched;
 use crate::problem::elements::Elements;
 use crate::problem::{NodeKind, Problem};
-use crate::solver::batched::Batched;
 
 /// The mesh in one state: its elements and laws in scalar `T` and the displacements `u`.
 pub struct Linearised<'a, T: Real> {
@@ -141,7 +141,7 @@ pub fn max_frequency_from<T: Real>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solver::batched::Isa;
+    use crate::problem::batched::Isa;
 
     /// The batched kernel (and the two evaluations side by side) changes no bit of `ω_max`,
     /// so of the critical step every command derives from it: the built-in coarse scene's

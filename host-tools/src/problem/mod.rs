@@ -1,6 +1,7 @@
 //! A scene resolved against its mesh: per-cell materials, node sets, constraints and loads,
 //! all in `f64`. This is what the serial solver and the schedule compiler start from.
 
+pub mod batched;
 pub mod contact;
 pub mod elements;
 pub mod frequency;
@@ -13,7 +14,7 @@ use pe_firmware::physics::{LameParameters, MaterialLaw, ReferenceHex, Volumetric
 
 use crate::mesh::Mesh;
 use crate::scene::{Law, MaterialSpec, RegionRef, Scene, Selector, SolverSpec};
-use crate::solver::batched::{Batched, Isa};
+use batched::{Batched, Isa};
 
 /// A piecewise-linear function of time through `(t, value)` points, held constant outside.
 #[derive(Clone, Debug, PartialEq)]

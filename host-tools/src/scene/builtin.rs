@@ -4,6 +4,7 @@
 
 use anyhow::{anyhow, Result};
 
+use crate::geom::norm;
 use crate::mesh::builtin::{self, Level, REGION_RIGHT_OVIDUCT};
 use crate::mesh::ovary::REGION_RIGHT_OVARY;
 use crate::mesh::Mesh;
@@ -119,6 +120,8 @@ pub fn builtin_scene(level: &str) -> Result<Scene> {
             radius: r,
             path: vec![[0.0, 0.0, 0.0, 0.0], [PROBE_PUSH_S, d[0], d[1], d[2]]],
             surface: "right_tube".into(),
+            // The trocar in the abdominal wall, 15 cm up the shaft from the tip.
+            trocar: Some(core::array::from_fn(|i| tip[i] + 0.15 * lean[i])),
         }],
         // The pushed tube presses on the ovary and slides over its curved top.
         contact_pair: vec![ContactPairSpec {
@@ -146,10 +149,7 @@ pub fn builtin_summary(mesh: &Mesh, u: &[[f64; 3]]) -> BuiltinSummary {
             .zip(&mesh.cell_regions)
             .filter(|(_, r)| **r == region)
             .flat_map(|(c, _)| c.iter().map(|&n| n as usize))
-            .map(|n| {
-                let d = u[n];
-                (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
-            })
+            .map(|n| norm(u[n]))
             .fold(0.0, f64::max)
     };
     BuiltinSummary {

@@ -94,7 +94,7 @@ fn load_in_file_units(
                 );
             }
             check_box_size(&format!("[[mesh.blocks]] {k} ({:?})", b.name), b.cells)?;
-            let part = crate::mesh::io::generate_box(b.size, b.cells);
+            let part = crate::mesh::grid::generate_box(b.size, b.cells);
             let base = mesh.nodes.len() as u32;
             let region = k as i32 + 1;
             mesh.nodes.extend(
@@ -129,7 +129,7 @@ fn load_in_file_units(
         }
         check_box_size("[mesh] generate", g.cells)?;
         return Ok((
-            crate::mesh::io::generate_box(g.size, g.cells),
+            crate::mesh::grid::generate_box(g.size, g.cells),
             BTreeMap::new(),
         ));
     }

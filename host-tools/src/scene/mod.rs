@@ -1,6 +1,7 @@
 //! Scene files (TOML, SI units): mesh, materials, boundary conditions, loads and solver
 //! settings. Every key is documented in the README; unknown keys are errors.
 
+pub mod args;
 pub mod builders;
 pub mod builtin;
 pub mod mesh_source;
@@ -11,6 +12,7 @@ use std::path::{Path, PathBuf};
 pub use pe_firmware::image::{Integration, Precision};
 use serde::{Deserialize, Serialize};
 
+pub use args::SceneArgs;
 pub use settings::Law;
 
 /// A whole scene as read from a file (or built in code for the built-in scene).
@@ -86,7 +88,10 @@ pub struct SurfaceSpec {
 
 /// `[[tool]]`: a rigid capsule (`shape = "capsule"`: every point within `radius` of the
 /// segment `a`–`b`, m) moved by the displacement `path = [[t, dx, dy, dz], ...]`
-/// (piecewise linear, held after the last point), touching the nodes of `surface`.
+/// (piecewise linear, held after the last point), touching the nodes of `surface`. In a
+/// live session (`pe live`) the poses a trainer gives replace the path; `trocar` (m), if
+/// given, is the point the instrument pivots about (the page's controls keep its axis
+/// through it).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ToolSpec {
@@ -97,6 +102,8 @@ pub struct ToolSpec {
     pub radius: f64,
     pub path: Vec<[f64; 4]>,
     pub surface: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trocar: Option<[f64; 3]>,
 }
 
 /// `[[contact_pair]]`: the nodes of each surface against the faces of the other.

@@ -4,25 +4,28 @@
 
 use anyhow::{anyhow, Result};
 use pe_firmware::physics::contact::{
-    build_candidates, check_travel, evaluate_pairs_at, evaluate_tools, Candidate, ContactModel,
-    ContactStats, FaceGeometry, QuadBounds,
+    contact_step, Candidate, ContactError, ContactModel, ContactStats, ContactWork, FaceGeometries,
+    FaceGeometry, QuadBounds,
 };
-use pe_firmware::physics::{CentralDifference, MaterialLaw, PhysicsError, Real};
+use pe_firmware::physics::{CentralDifference, MaterialLaw, PhysicsError, Pose, Real};
 
 use crate::problem::elements::Elements;
 use crate::problem::Problem;
+use crate::team;
 
-pub mod batched;
+/// The batched element loop lives with the elements it packs ([`crate::problem::batched`]);
+/// re-exported here for the solver's users (board-sim's boards).
+pub use crate::problem::batched;
+
 mod monitor;
 mod nodes;
 mod run;
 pub mod stable_step;
-pub mod team;
 
 pub use monitor::{DtChange, DtMonitor, Energies};
 pub use run::{
-    describe_step_error, run, run_threads, run_typed, ContactReport, Observer, RunOutput,
-    RunReport, StepState,
+    describe_step_error, run, run_threads, run_typed, run_typed_with, run_with_poses,
+    ContactReport, Observer, PoseSchedule, RunOutput, RunReport, StepState, Stepper,
 };
 
 /// Serial explicit model in scalar type `T`.
@@ -84,12 +87,15 @@ const NODE_BLOCK: usize = 2048;
 /// The serial solver's contact state: the tables, the search and the forces of the last step.
 pub struct ContactState {
     pub run: crate::problem::contact::ContactRun,
-    pub candidates: Vec<Candidate>,
-    /// The faces the candidates name (ascending, once each), and each face's geometry at
-    /// the current step (refreshed every step for those faces).
+    /// The room for the candidates (grown when a check needs more) and how many of them
+    /// the last check kept (all it found: this solver applies every contact).
+    candidates: Vec<Candidate>,
+    kept: usize,
+    /// The faces the candidates name (bit `f % 32` of word `f / 32`), and each face's
+    /// geometry at the current step (refreshed every step for those faces).
     faces_used: Vec<u32>,
     geometry: Vec<Option<FaceGeometry>>,
-    /// The candidate search's boxes, one per contact face (`build_candidates`' scratch).
+    /// The candidate search's boxes, one per contact face (its scratch).
     search_boxes: Vec<QuadBounds>,
     /// Contact-node positions at the last check.
     pub at_check: Vec<[f64; 3]>,
@@ -97,6 +103,9 @@ pub struct ContactState {
     pub force: Vec<[f64; 3]>,
     /// Force of the tissue on each tool at the last step (N).
     pub tool_force: Vec<[f64; 3]>,
+    /// A pose per tool that replaces its scripted path from the step it was set on (a live
+    /// session's or a replay's; `None`: the path).
+    pub live_pose: Vec<Option<Pose>>,
     pub stats: ContactStats,
     /// Checks done and the most candidates any check found.
     pub checks: u64,
@@ -117,12 +126,14 @@ impl ContactState {
         Some(ContactState {
             run,
             candidates: Vec::new(),
-            faces_used: Vec::new(),
+            kept: 0,
+            faces_used: vec![0; faces.div_ceil(32)],
             geometry: vec![None; faces],
             search_boxes: vec![QuadBounds::default(); faces],
             at_check: vec![[0.0; 3]; n],
             force: vec![[0.0; 3]; n],
             tool_force: vec![[0.0; 3]; tools],
+            live_pose: vec![None; tools],
             stats: ContactStats::default(),
             checks: 0,
             candidates_max: 0,
@@ -130,8 +141,9 @@ impl ContactState {
         })
     }
 
-    /// Contact forces at the state `u` (step `step`, time `t`), the same sequence of
-    /// operations the board runtime performs for the nodes it owns.
+    /// Contact forces at the state `u` (step `step`, time `t`): the board runtime's
+    /// sequence ([`contact_step`]) with every contact node applied, the faces held as their
+    /// geometry, and the room for candidates grown until a check's search fits.
     fn evaluate<T: Real>(
         &mut self,
         problem: &Problem,
@@ -152,75 +164,45 @@ impl ContactState {
             Some(core::array::from_fn(|i| n.reference[i] + d[i].to_f64()))
         };
         let p = run.params;
-        if step.is_multiple_of(p.check_interval_steps.max(1) as u64) {
-            for (c, x) in self.at_check.iter_mut().enumerate() {
-                *x = pos(c).unwrap_or([0.0; 3]);
-            }
-            if !run.pairs.is_empty() {
-                // Search into the room the last check needed; grow and search again only
-                // when this one needs more.
-                let cap = self.candidates.capacity().max(self.candidates.len());
-                self.candidates.resize(cap, Candidate::default());
-                let boxes = &mut self.search_boxes;
-                let margin = p.candidate_margin_m;
-                let n = match build_candidates(&m, pos, margin, boxes, &mut self.candidates) {
-                    Ok(n) => n,
-                    Err(needed) => {
-                        self.candidates.resize(needed, Candidate::default());
-                        build_candidates(&m, pos, margin, boxes, &mut self.candidates)
-                            .unwrap_or(needed)
-                    }
-                };
-                self.candidates.truncate(n);
-                self.candidates_max = self.candidates_max.max(n);
-                self.faces_used = self.candidates.iter().map(|c| c.face).collect();
-                self.faces_used.sort_unstable();
-                self.faces_used.dedup();
-            }
-            self.checks += 1;
-        }
-        check_travel(
-            &m,
-            pos,
-            &self.at_check,
-            |_| true,
-            p.pair_surfaces,
-            p.travel_max_m,
-        )?;
-        self.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-        self.tool_force.iter_mut().for_each(|f| *f = [0.0; 3]);
-        self.stats = ContactStats::default();
+        let check = step.is_multiple_of(p.check_interval_steps.max(1) as u64);
         let capsules: Vec<_> = run
             .tools
             .iter()
-            .map(|tl| tl.capsule.translated(problem.paths[tl.path as usize].at(t)))
+            .zip(&self.live_pose)
+            .map(|(tl, live)| match live {
+                Some(pose) => tl.capsule.posed(pose),
+                None => tl.capsule.translated(problem.paths[tl.path as usize].at(t)),
+            })
             .collect();
-        evaluate_tools(
-            &m,
-            &capsules,
-            pos,
-            |_| true,
-            p.tolerance_m,
-            &mut self.force,
-            &mut self.tool_force,
-            &mut self.stats,
-        )?;
-        for &f in &self.faces_used {
-            let g = m.face_geometry(f as usize, &pos)?;
-            if let Some(slot) = self.geometry.get_mut(f as usize) {
-                *slot = g;
+        let found = loop {
+            let mut work = ContactWork {
+                at_check: &mut self.at_check,
+                candidates: &mut self.candidates,
+                kept: &mut self.kept,
+                faces_used: &mut self.faces_used,
+                faces: FaceGeometries {
+                    geometry: &mut self.geometry,
+                    search_boxes: &mut self.search_boxes,
+                },
+                force: &mut self.force,
+                tool_force: &mut self.tool_force,
+                stats: &mut self.stats,
+            };
+            match contact_step(&m, &p, check, &capsules, pos, |_| true, &mut work, |_| {}) {
+                Ok(found) => break found,
+                // Room for what this check needs, and the step again.
+                Err(ContactError::Candidates { needed }) => {
+                    self.candidates.resize(needed, Candidate::default())
+                }
+                Err(ContactError::Physics(e)) => return Err(e),
             }
+        };
+        if check {
+            self.checks += 1;
         }
-        evaluate_pairs_at(
-            &m,
-            &self.candidates,
-            pos,
-            &self.geometry,
-            |_| true,
-            p.tolerance_m,
-            &mut self.force,
-            &mut self.stats,
-        )?;
+        if let Some(n) = found {
+            self.candidates_max = self.candidates_max.max(n);
+        }
         self.max_depth_m = self.max_depth_m.max(self.stats.max_depth_m);
         Ok(())
     }

@@ -5,10 +5,11 @@ use std::time::Instant;
 
 use anyhow::{anyhow, Result};
 use pe_firmware::image::Precision;
-use pe_firmware::physics::{PhysicsError, Real};
+use pe_firmware::physics::{PhysicsError, Pose, Real};
 use serde::Serialize;
 
 use super::{DtMonitor, Model, StepError};
+use crate::geom::norm;
 use crate::problem::Problem;
 
 /// What a run reports (`--report FILE.json`).
@@ -117,16 +118,12 @@ impl RunReport {
                 let peak = c.tool_force_peak_n.get(k).copied().unwrap_or(0.0);
                 s += &format!(
                     "\n  tool {name:?}: force of the tissue at the end [{:.4e}, {:.4e}, {:.4e}] N (|F| = {:.4e} N), peak |F| = {peak:.4e} N",
-                    f[0], f[1], f[2], norm3(f)
+                    f[0], f[1], f[2], norm(f)
                 );
             }
         }
         s
     }
-}
-
-fn norm3(f: [f64; 3]) -> f64 {
-    (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt()
 }
 
 /// Result of a run: final displacements (f64) and the report.
@@ -176,67 +173,174 @@ pub fn run_threads(
     observer: &mut dyn Observer,
     threads: usize,
 ) -> Result<RunOutput> {
+    run_with_poses(problem, name, observer, threads, PoseSchedule::default())
+}
+
+/// [`run_threads`] with tool poses applied at the steps `poses` names (a recorded live
+/// session replayed: the same bits as the session).
+pub fn run_with_poses(
+    problem: &Problem,
+    name: &str,
+    observer: &mut dyn Observer,
+    threads: usize,
+    poses: PoseSchedule,
+) -> Result<RunOutput> {
     match problem.solver.precision {
-        Precision::F32 => run_typed::<f32>(problem, name, observer, threads),
-        Precision::F64 => run_typed::<f64>(problem, name, observer, threads),
+        Precision::F32 => run_typed_with::<f32>(problem, name, observer, threads, poses),
+        Precision::F64 => run_typed_with::<f64>(problem, name, observer, threads, poses),
     }
 }
 
+/// Tool poses to apply, each before the step it names: `(step, tool, pose)`, in step order.
+#[derive(Clone, Debug, Default)]
+pub struct PoseSchedule {
+    pub poses: Vec<(u64, usize, Pose)>,
+}
+
+/// A run's step sequence, one step at a time: the poses due, the step, and the critical
+/// step's tracking (which may lower `dt`). `pe solve`, its replays and live sessions all
+/// step through it, so they compute the same bits.
+pub struct Stepper<'p, T: Real> {
+    pub model: Model<'p, T>,
+    pub monitor: DtMonitor<'p>,
+    /// The step count the run ends at (`u64::MAX`: open-ended, a live session); follows
+    /// `dt` when the scene gives a duration.
+    pub steps: u64,
+    name: String,
+    poses: PoseSchedule,
+    next_pose: usize,
+}
+
+impl<'p, T: Real> Stepper<'p, T> {
+    /// The problem at rest, at its time step, on `threads` threads.
+    pub fn new(problem: &'p Problem, name: &str, threads: usize) -> Result<Self> {
+        let (dt, dt_crit) = (
+            problem.time_step.dt_s,
+            problem.time_step.critical.dt_critical_s,
+        );
+        let mut model = Model::<T>::new(problem, dt);
+        model.set_threads(threads)?;
+        Ok(Stepper {
+            model,
+            monitor: DtMonitor::new(problem, dt_crit),
+            steps: problem.steps(dt),
+            name: name.to_string(),
+            poses: PoseSchedule::default(),
+            next_pose: 0,
+        })
+    }
+
+    /// Poses to apply before the steps they name (replaces any schedule not yet applied).
+    pub fn schedule(&mut self, poses: PoseSchedule) {
+        self.poses = poses;
+        self.next_pose = 0;
+    }
+
+    /// Sets `tool`'s pose from the next step on. Err: the scene has no such tool.
+    pub fn set_pose(&mut self, tool: usize, pose: Pose) -> Result<()> {
+        let slot = self
+            .model
+            .contact
+            .as_mut()
+            .and_then(|c| c.live_pose.get_mut(tool))
+            .ok_or_else(|| anyhow!("{}: no tool {tool}", self.name))?;
+        *slot = Some(pose);
+        Ok(())
+    }
+
+    /// One step: the scheduled poses due, the step, then the critical step's check.
+    pub fn step(&mut self) -> Result<()> {
+        while let Some(&(at, tool, pose)) = self.poses.poses.get(self.next_pose) {
+            if at > self.model.step {
+                break;
+            }
+            self.set_pose(tool, pose)?;
+            self.next_pose += 1;
+        }
+        let problem = self.model.problem;
+        if let Err(e) = self.model.advance() {
+            return Err(anyhow!(
+                "{}: {}{}",
+                self.name,
+                describe_step_error(problem, &e),
+                instability_note(&self.monitor, &self.model)
+            ));
+        }
+        if self.monitor.due(self.model.step) && self.model.step < self.steps {
+            let name = &self.name;
+            if let Some(dt_new) = self
+                .monitor
+                .check(&self.model)
+                .map_err(|e| anyhow!("{name}: {e}"))?
+            {
+                self.model.set_dt(dt_new);
+                if problem.solver.steps.is_none() && self.steps != u64::MAX {
+                    let left = problem.solver.duration.unwrap_or(1.0) - self.model.time_s();
+                    self.steps = self.model.step + (left / dt_new).ceil().max(0.0) as u64;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// [`run_threads`] in the scalar type `T`, whatever the scene's precision.
 pub fn run_typed<T: Real>(
     problem: &Problem,
     name: &str,
     observer: &mut dyn Observer,
     threads: usize,
 ) -> Result<RunOutput> {
+    run_typed_with::<T>(problem, name, observer, threads, PoseSchedule::default())
+}
+
+/// [`run_typed`] with tool poses applied at the steps `poses` names.
+pub fn run_typed_with<T: Real>(
+    problem: &Problem,
+    name: &str,
+    observer: &mut dyn Observer,
+    threads: usize,
+    poses: PoseSchedule,
+) -> Result<RunOutput> {
     let (dt, dt_crit) = (
         problem.time_step.dt_s,
         problem.time_step.critical.dt_critical_s,
     );
-    let mut steps = problem.steps(dt);
-    let mut model = Model::<T>::new(problem, dt);
-    model.set_threads(threads)?;
-    let mut monitor = DtMonitor::new(problem, dt_crit);
+    let mut stepper = Stepper::<T>::new(problem, name, threads)?;
+    stepper.schedule(poses);
     let start = Instant::now();
     let mut tool_force = Vec::new();
     let mut peak: Vec<f64> = Vec::new();
     let mut pair_rel: f64 = 0.0;
-    while model.step < steps {
-        if let Err(e) = model.advance() {
-            return Err(anyhow!(
-                "{name}: {}{}",
-                describe_step_error(problem, &e),
-                instability_note(&monitor, &model)
-            ));
-        }
+    while stepper.model.step < stepper.steps {
+        stepper.step()?;
+        let (model, steps) = (&stepper.model, stepper.steps);
         if let Some(c) = &model.contact {
             tool_force.extend_from_slice(&c.tool_force);
             peak.resize(c.tool_force.len(), 0.0);
             for (p, f) in peak.iter_mut().zip(&c.tool_force) {
-                *p = p.max((f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt());
+                *p = p.max(norm(*f));
             }
             for (s, m) in c.stats.pair_sum_n.iter().zip(&c.stats.pair_magnitude_n) {
                 if *m > 0.0 {
-                    pair_rel = pair_rel.max((s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt() / m);
+                    pair_rel = pair_rel.max(norm(*s) / m);
                 }
             }
         }
-        if monitor.due(model.step) && model.step < steps {
-            if let Some(dt_new) = monitor.check(&model).map_err(|e| anyhow!("{name}: {e}"))? {
-                model.set_dt(dt_new);
-                if problem.solver.steps.is_none() {
-                    let left = problem.solver.duration.unwrap_or(1.0) - model.time_s();
-                    steps = model.step + (left / dt_new).ceil().max(0.0) as u64;
-                }
-            }
-        }
-        observer.after_step(model.step, model.time_s(), steps, &model);
+        observer.after_step(model.step, model.time_s(), steps, model);
     }
     let wall_s = start.elapsed().as_secs_f64();
+    let Stepper {
+        model,
+        monitor,
+        steps,
+        ..
+    } = stepper;
     let displacements = model.displacements();
     let (max_node, max_disp) = displacements
         .iter()
         .enumerate()
-        .map(|(k, u)| (k, (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()))
+        .map(|(k, u)| (k, norm(*u)))
         .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
     let elements = model.elements.len();
     let report = RunReport {

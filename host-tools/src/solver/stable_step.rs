@@ -36,8 +36,8 @@
 //! kernel; at the default interval it is a few percent of a step (measured in the run
 //! report's `dt_tracking_s`).
 
-use pe_firmware::physics::hex::deformation_gradient;
-use pe_firmware::physics::{tensor, MaterialLaw, Real, Volumetric};
+use pe_firmware::physics::element::hex::deformation_gradient;
+use pe_firmware::physics::{tensor, vec3, MaterialLaw, Real, Volumetric};
 
 use crate::problem::Problem;
 
@@ -127,7 +127,7 @@ impl<'p> StableStepTracker<'p> {
         let f = deformation_gradient(&ua, &tracked.gradients);
         // F⁻ᵀ = cof F / J, J = det F (along the first row).
         let c = tensor::cofactor(&f);
-        let jac = tensor::dot(&f[0], &c[0]);
+        let jac = vec3::dot(f[0], c[0]);
         if !(jac > 0.0) {
             return 0.0;
         }

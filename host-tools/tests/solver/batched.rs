@@ -1,4 +1,4 @@
-//! The batched element loop (`solver::batched`) against the scalar loop it replaces
+//! The batched element loop (`problem::batched`) against the scalar loop it replaces
 //! (`Elements::internal_forces`, the firmware's kernels one element at a time): the same
 //! bits, in f64 and f32, reduced (general, parallelepiped and cuboid kernels) and full
 //! integration, on distorted cells, with element counts that are not a multiple of the
@@ -8,9 +8,9 @@
 //! Bit-identity is the property (the board computes the scalar loop's bits), so the
 //! tolerance is zero; each comparison first checks that the forces are far from trivial.
 
+use host_tools::problem::batched::{Batched, Isa};
 use host_tools::problem::elements::Elements;
 use host_tools::problem::Problem;
-use host_tools::solver::batched::{Batched, Isa};
 use pe_firmware::physics::{
     LameParameters, MaterialLaw, PhysicsError, Real, ReferenceHex, Volumetric,
 };
@@ -313,7 +313,7 @@ fn a_node_outside_the_mesh_is_named_as_the_scalar_loop_names_it() {
     bad_index_for::<f32>();
 }
 
-/// One board's batches (board-sim: `solver::batched::board`) from zero forces, batch by
+/// One board's batches (board-sim: `problem::batched::board`) from zero forces, batch by
 /// batch in step order, by the firmware's scalar loop and by the packs; `cuts` are the
 /// batch ends (fractions of each list), so batches of 0, 1 and uneven counts occur.
 #[allow(clippy::type_complexity)]
@@ -325,7 +325,7 @@ fn board_both<T: Real>(
     (Result<(), PhysicsError>, Vec<[T; 3]>),
     (Result<(), PhysicsError>, Vec<[T; 3]>),
 ) {
-    use host_tools::solver::batched::board::{BoardBatches, BoardElements};
+    use host_tools::problem::batched::board::{BoardBatches, BoardElements};
     use pe_firmware::physics::{HexBox, HexCuboid, HexElement};
     use pe_firmware::runtime::{batch_range, BatchForces, BatchSlices, ScalarBatches};
     fn run<T: Real, E: HexElement<T>>(

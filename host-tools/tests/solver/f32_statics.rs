@@ -6,6 +6,7 @@
 
 use crate::common;
 
+use host_tools::geom::norm;
 use host_tools::problem::Problem;
 use host_tools::solver::{self, RunOutput};
 
@@ -30,10 +31,6 @@ fn tip(p: &Problem, u: &[[f64; 3]]) -> [f64; 3] {
         .collect();
     assert_eq!(end.len(), 25);
     core::array::from_fn(|i| end.iter().map(|&k| u[k][i]).sum::<f64>() / end.len() as f64)
-}
-
-fn norm(v: [f64; 3]) -> f64 {
-    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
 /// The kinetic energy f32 cannot go below at rest, J: every component of every node

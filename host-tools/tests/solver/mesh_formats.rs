@@ -11,7 +11,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use crate::common::*;
-use host_tools::mesh::io::{generate_box, load_mesh};
+use host_tools::mesh::grid::generate_box;
+use host_tools::mesh::io::load_mesh;
 use host_tools::mesh::{is_prism, prism_as_hexahedron, Mesh};
 use host_tools::problem::{NodeKind, Problem};
 use host_tools::scene::Scene;

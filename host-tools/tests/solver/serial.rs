@@ -2,6 +2,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use crate::common::*;
+use host_tools::geom::norm;
 use host_tools::problem::Problem;
 use host_tools::solver::{self, Model};
 
@@ -131,16 +132,9 @@ ramp = [[0.0, 0.0], [0.1, 1.0], [0.2, 1.0], [0.3, 0.0]]
     let steps = (2.0 / dt) as u64;
     for _ in 0..steps {
         m.advance().unwrap();
-        peak = peak.max(
-            m.u.iter()
-                .map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt())
-                .fold(0.0, f64::max),
-        );
+        peak = peak.max(m.u.iter().map(|u| norm(*u)).fold(0.0, f64::max));
     }
-    let rest =
-        m.u.iter()
-            .map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt())
-            .fold(0.0, f64::max);
+    let rest = m.u.iter().map(|u| norm(*u)).fold(0.0, f64::max);
     println!("peak {peak:e} m, residual {rest:e} m after {steps} steps");
     assert!(
         peak > 0.01,

@@ -90,6 +90,17 @@ pub fn data_frame(envelope: &[u8]) -> Option<&[u8]> {
     super::envelope::carried(envelope)
 }
 
+/// The frame that bytes sent on a face carry: a bare frame (recovery off) itself, a data
+/// envelope's frame (unchecked, as [`data_frame`]); `None` for a control envelope (ack,
+/// nack, status). For observers such as fault injectors.
+pub fn carried_frame(bytes: &[u8]) -> Option<&[u8]> {
+    match bytes.get(field::TYPE) {
+        Some(&code::DATA) => data_frame(bytes),
+        Some(c) if *c >= code::ACK => None,
+        _ => Some(bytes),
+    }
+}
+
 /// Writes the header of a face envelope at the start of `e`.
 fn write_header(e: &mut [u8], kind: u8, seq: u16, ack: u16) {
     e[field::TYPE] = kind;

@@ -69,11 +69,12 @@ fn send_fault_packet(board: [u8; 3], text: &str) {
         kind: PacketKind::FaultReport,
         payload: text.as_bytes(),
     };
-    let mut packet = [0u8; 8 + FAULT_MESSAGE_MAX + 4];
+    let mut packet = [0u8; link_proto::packet::packet_len(FAULT_MESSAGE_MAX)];
     let Ok(len) = repr.emit(&mut packet) else {
         return;
     };
-    let mut wire = [0u8; link_proto::cobs_len_max(8 + FAULT_MESSAGE_MAX + 4) + 2];
+    let mut wire =
+        [0u8; link_proto::wire_len_max(link_proto::packet::packet_len(FAULT_MESSAGE_MAX))];
     let Ok(n) = link_proto::encode_wire(packet.get(..len).unwrap_or(&[]), &mut wire) else {
         return;
     };

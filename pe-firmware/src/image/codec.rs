@@ -19,7 +19,7 @@
 use serde::{de::DeserializeOwned, Serialize};
 
 use super::*;
-use crate::physics::{HexBox, HexCuboid, HexElement, HexFull, HexReduced, MaterialLaw, Real};
+use crate::physics::{Element, ElementKind, HexBox, HexCuboid, HexElement, MaterialLaw, Real};
 
 /// A scalar an image can hold.
 pub trait ImageReal: Real + Serialize + DeserializeOwned {
@@ -34,17 +34,60 @@ impl ImageReal for f64 {
     const PRECISION: Precision = Precision::F64;
 }
 
-/// An element record: the image header's `integration` says which one an image holds.
-pub trait ElementRecord<T: Real>: HexElement<T> + Serialize + DeserializeOwned + Copy {
-    const INTEGRATION: Integration;
+/// An element record an image can hold: an element kind ([`Element`]) in an image scalar,
+/// serialised as postcard. The image's general table holds the kind
+/// [`ElementKind::in_table`] gives for its header's integration, table 0; the runtime, the
+/// compiler and the decoder are generic over it (one [`crate::with_element_types`] picks it
+/// from a header).
+pub trait ElementRecord<T: Real>: Element<T> + Serialize + DeserializeOwned + Copy {
+    /// The element choice the kind belongs to.
+    const INTEGRATION: Integration = Self::KIND.integration();
 }
 
-impl<T: ImageReal> ElementRecord<T> for HexReduced<T> {
-    const INTEGRATION: Integration = Integration::Reduced;
+impl<T: ImageReal, E: Element<T> + Serialize + DeserializeOwned + Copy> ElementRecord<T> for E {}
+
+/// `$body` with `$t` the scalar type and `$e` the element record type of the general table
+/// of an image of `$precision` and `$integration` (an [`crate::image::Precision`] and an
+/// [`crate::image::Integration`], e.g. a header's): the one place that maps those settings
+/// to the generic types the image codec, the runtime and the compiler are instantiated
+/// with. Each arm declares the two types and evaluates `$body` with them:
+///
+/// ```ignore
+/// let caps = with_element_types!(h.precision, h.integration, |T, E| {
+///     Capacities::for_board::<T, E>(profile)
+/// });
+/// ```
+#[macro_export]
+macro_rules! with_element_types {
+    ($precision:expr, $integration:expr, |$t:ident, $e:ident| $body:expr) => {
+        match ($precision, $integration) {
+            ($crate::image::Precision::F32, $crate::image::Integration::Reduced) => {
+                type $t = f32;
+                type $e = $crate::physics::HexReduced<f32>;
+                $body
+            }
+            ($crate::image::Precision::F32, $crate::image::Integration::Full) => {
+                type $t = f32;
+                type $e = $crate::physics::HexFull<f32>;
+                $body
+            }
+            ($crate::image::Precision::F64, $crate::image::Integration::Reduced) => {
+                type $t = f64;
+                type $e = $crate::physics::HexReduced<f64>;
+                $body
+            }
+            ($crate::image::Precision::F64, $crate::image::Integration::Full) => {
+                type $t = f64;
+                type $e = $crate::physics::HexFull<f64>;
+                $body
+            }
+        }
+    };
 }
 
-impl<T: ImageReal> ElementRecord<T> for HexFull<T> {
-    const INTEGRATION: Integration = Integration::Full;
+/// Whether `E` is the record of the general table of an image of `integration`.
+fn is_general_record<T: Real, E: ElementRecord<T>>(integration: Integration) -> bool {
+    matches!(ElementKind::in_table(integration, 0), Some(k) if k == E::KIND)
 }
 
 /// Where an image's records live: one slice per section, at least as long as its count (the
@@ -153,28 +196,43 @@ fn index_ok(what: &'static str, index: usize, ok: bool) -> Result<(), ImageError
 }
 
 /// Checks what a loaded image refers to: batch ends, element nodes and materials, list
-/// lengths, local node indices, contact surfaces. `p` holds the records `c` counts.
+/// lengths, local node indices, contact surfaces. `p` holds the records `c` counts. The
+/// checks run in this order, each a function of its own; the first failure is the error.
 pub fn validate<T: ImageReal, E: ElementRecord<T>>(
     c: &Counts,
     p: &ImageParts<'_, T, E>,
 ) -> Result<(), ImageError> {
-    let (ne, nn, nc) = (
-        c.elements as usize,
-        c.nodes as usize,
-        c.contact_nodes as usize,
-    );
-    let (nb, nq) = (c.boxes as usize, c.cuboids as usize);
-    let ordered =
-        |b: [u32; 4], n: usize| b[0] <= b[1] && b[1] <= b[2] && b[2] <= b[3] && b[3] as usize == n;
-    if !ordered(c.batch_ends, ne)
-        || !ordered(c.box_batch_ends, nb)
-        || !ordered(c.cuboid_batch_ends, nq)
+    check_batch_ends(c)?;
+    check_elements(c, p)?;
+    check_exchange(c, p)?;
+    check_external(c, p)?;
+    check_contact(c, p)?;
+    check_graphics(c, p)
+}
+
+/// Each element table's batch ends ascend and end at the table's count.
+fn check_batch_ends(c: &Counts) -> Result<(), ImageError> {
+    let ordered = |b: [u32; 4], n: u32| b[0] <= b[1] && b[1] <= b[2] && b[2] <= b[3] && b[3] == n;
+    if !ordered(c.batch_ends, c.elements)
+        || !ordered(c.box_batch_ends, c.boxes)
+        || !ordered(c.cuboid_batch_ends, c.cuboids)
     {
         return Err(ImageError::Malformed {
             record: "batch ends",
         });
     }
-    if nb + nq > 0 && E::INTEGRATION != Integration::Reduced {
+    Ok(())
+}
+
+/// The element tables the image's integration holds ([`ElementKind::in_table`]), and every
+/// element's nodes and material in range.
+fn check_elements<T: ImageReal, E: ElementRecord<T>>(
+    c: &Counts,
+    p: &ImageParts<'_, T, E>,
+) -> Result<(), ImageError> {
+    let (ne, nb, nq) = (c.elements as usize, c.boxes as usize, c.cuboids as usize);
+    let held = |table, n| n == 0 || ElementKind::in_table(E::INTEGRATION, table).is_some();
+    if !held(1, nb) || !held(2, nq) {
         return Err(ImageError::Malformed {
             record: "parallelepipeds or cuboids in a fully integrated image",
         });
@@ -185,6 +243,7 @@ pub fn validate<T: ImageReal, E: ElementRecord<T>>(
         .map(|e| e.connectivity())
         .chain(p.boxes[..nb].iter().map(|e| e.connectivity()))
         .chain(p.cuboids[..nq].iter().map(|e| e.connectivity()));
+    let nn = c.nodes as usize;
     for (k, e) in all.enumerate() {
         index_ok(
             "node of element",
@@ -197,6 +256,12 @@ pub fn validate<T: ImageReal, E: ElementRecord<T>>(
             (e.material as usize) < c.materials as usize,
         )?;
     }
+    Ok(())
+}
+
+/// The exchange rounds: late rounds within the rounds (none along z), the lists' lengths
+/// summing to the send and receive sections, every entry a local node.
+fn check_exchange<T, E>(c: &Counts, p: &ImageParts<'_, T, E>) -> Result<(), ImageError> {
     if c.late_rounds[2] > 0 || (0..3).any(|a| c.late_rounds[a] > c.rounds[a]) {
         return Err(ImageError::Malformed {
             record: "late exchange rounds",
@@ -210,6 +275,7 @@ pub fn validate<T: ImageReal, E: ElementRecord<T>>(
             record: "exchange list lengths",
         });
     }
+    let nn = c.nodes as usize;
     for &v in &p.sends[..c.sends as usize] {
         index_ok("node of send list", v as usize, (v as usize) < nn)?;
     }
@@ -220,11 +286,17 @@ pub fn validate<T: ImageReal, E: ElementRecord<T>>(
             (r.node as usize) < nn,
         )?;
     }
+    Ok(())
+}
+
+/// Loads and external records: every load's node local; the external records on owned
+/// nodes, their loads one run each, in order, covering the loads section; their contact
+/// node held here, by them, and owned; and every owned contact node with a record.
+fn check_external<T, E>(c: &Counts, p: &ImageParts<'_, T, E>) -> Result<(), ImageError> {
+    let (nn, nc) = (c.nodes as usize, c.contact_nodes as usize);
     for (k, l) in p.loads[..c.loads as usize].iter().enumerate() {
         index_ok("node of load", k, (l.node as usize) < nn)?;
     }
-    // External records: owned nodes; their loads one run each, in order, covering the
-    // loads section; their contact node held here, by them, and owned.
     let mut next_load = 0usize;
     for (k, x) in p.external[..c.external_records()].iter().enumerate() {
         let node = x.node as usize;
@@ -270,6 +342,13 @@ pub fn validate<T: ImageReal, E: ElementRecord<T>>(
             record: "owned contact nodes without an external force",
         });
     }
+    Ok(())
+}
+
+/// The contact tables: contact nodes' local nodes, faces' contact nodes, the surfaces of
+/// pairs and tools.
+fn check_contact<T, E>(c: &Counts, p: &ImageParts<'_, T, E>) -> Result<(), ImageError> {
+    let (nn, nc) = (c.nodes as usize, c.contact_nodes as usize);
     for (k, pl) in p.contact_places[..nc].iter().enumerate() {
         index_ok(
             "local node of contact node",
@@ -298,11 +377,16 @@ pub fn validate<T: ImageReal, E: ElementRecord<T>>(
     for (k, t) in p.tools[..c.tools as usize].iter().enumerate() {
         index_ok("surface of tool", k, (t.surface as usize) < surfaces)?;
     }
+    Ok(())
+}
+
+/// The graphics nodes are local nodes.
+fn check_graphics<T, E>(c: &Counts, p: &ImageParts<'_, T, E>) -> Result<(), ImageError> {
     for (k, &g) in p.graphics_nodes[..c.graphics_nodes as usize]
         .iter()
         .enumerate()
     {
-        index_ok("graphics node", k, (g as usize) < nn)?;
+        index_ok("graphics node", k, (g as usize) < c.nodes as usize)?;
     }
     Ok(())
 }
@@ -313,7 +397,7 @@ pub fn write_image<T: ImageReal, E: ElementRecord<T>>(
     header: &ImageHeader,
     parts: &mut ImageParts<'_, T, E>,
 ) -> Result<usize, ImageError> {
-    if header.precision != T::PRECISION || header.integration != E::INTEGRATION {
+    if header.precision != T::PRECISION || !is_general_record::<T, E>(header.integration) {
         return Err(ImageError::Malformed {
             record: "header's precision or integration differs from its records",
         });
@@ -337,7 +421,7 @@ pub fn read_image<T: ImageReal, E: ElementRecord<T>>(
             record: "precision differs from this runtime's",
         });
     }
-    if h.integration != E::INTEGRATION {
+    if !is_general_record::<T, E>(h.integration) {
         return Err(ImageError::Malformed {
             record: "integration differs from this runtime's",
         });

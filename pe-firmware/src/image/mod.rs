@@ -27,7 +27,8 @@ pub use path::{path_value, piecewise_linear};
 
 use serde::{Deserialize, Serialize};
 
-pub use crate::physics::contact::{ContactFace, ContactNode, ContactPair, Tool};
+pub use crate::physics::contact::{ContactFace, ContactNode, ContactPair, ContactParams, Tool};
+pub use crate::physics::element::Integration;
 
 /// First four bytes of every schedule image.
 pub const MAGIC: [u8; 4] = *b"PESI";
@@ -69,13 +70,6 @@ pub enum Precision {
     F64,
 }
 
-/// Element kind of the image.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub enum Integration {
-    Reduced,
-    Full,
-}
-
 impl Precision {
     /// The name scenes, manifests and reports use: "f32" | "f64".
     pub const fn name(self) -> &'static str {
@@ -95,23 +89,7 @@ impl Precision {
     }
 }
 
-impl Integration {
-    /// The name scenes, manifests and reports use: "reduced" | "full".
-    pub const fn name(self) -> &'static str {
-        match self {
-            Integration::Reduced => "reduced",
-            Integration::Full => "full",
-        }
-    }
-}
-
 impl core::fmt::Display for Precision {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl core::fmt::Display for Integration {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.write_str(self.name())
     }
@@ -263,25 +241,6 @@ impl Counts {
         .iter()
         .sum()
     }
-}
-
-/// Contact search parameters (all zero without contact).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct ContactParams {
-    /// Bounding boxes are exchanged (and the candidates rebuilt) every this many steps.
-    pub check_interval_steps: u32,
-    /// Farthest a pair-surface node may move between two checks (m): `speed_bound ·
-    /// check_interval · Δt`, at most half the scene's gap.
-    pub travel_max_m: f64,
-    /// A slave node is a candidate of a face whose bounding box, grown by this, holds it.
-    pub candidate_margin_m: f64,
-    /// Boards whose boxes, grown by this, overlap exchange nodes until the next check:
-    /// twice (face diameter + contact depth) plus twice the travel.
-    pub box_margin_m: f64,
-    /// Deepest penetration tolerated (m).
-    pub tolerance_m: f64,
-    /// Bit mask of the surfaces that take part in a pair.
-    pub pair_surfaces: u8,
 }
 
 /// The graphics stream: every `interval_steps` steps the owned surface nodes go to the

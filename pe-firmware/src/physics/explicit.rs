@@ -20,7 +20,7 @@
 //! applied with the true mass by whoever builds `f_ext`, so static answers do not change.
 //! Nothing here panics: bad indices and numerical failure come back as [`PhysicsError`].
 
-use super::hex::{HexElement, KernelFault};
+use super::element::{HexElement, KernelFault};
 use super::material::MaterialLaw;
 use super::real::Real;
 

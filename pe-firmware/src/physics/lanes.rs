@@ -19,7 +19,6 @@
 use core::cmp::Ordering;
 use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 
-use super::hex::{GaussPoint, HexBox, HexCuboid, HexFull, HexReduced};
 use super::material::{LameParameters, MaterialLaw};
 use super::real::{array, Real};
 
@@ -214,18 +213,21 @@ pub trait Pack<S: Real, L: LaneReal<S, N>, const N: usize>: Sized {
     fn pack(items: [&Self; N]) -> Option<Self::Packed>;
 }
 
-fn lanes<S: Real, L: LaneReal<S, N>, X, const N: usize>(items: &[&X; N], f: impl Fn(&X) -> S) -> L {
+pub(crate) fn lanes<S: Real, L: LaneReal<S, N>, X, const N: usize>(
+    items: &[&X; N],
+    f: impl Fn(&X) -> S,
+) -> L {
     L::from_lanes(core::array::from_fn(|l| f(items[l])))
 }
 
-fn lanes_3<S: Real, L: LaneReal<S, N>, X, const N: usize, const M: usize>(
+pub(crate) fn lanes_3<S: Real, L: LaneReal<S, N>, X, const N: usize, const M: usize>(
     items: &[&X; N],
     f: impl Fn(&X) -> &[[S; 3]; M],
 ) -> [[L; 3]; M] {
     core::array::from_fn(|k| core::array::from_fn(|i| lanes(items, |x| f(x)[k][i])))
 }
 
-fn lanes_1<S: Real, L: LaneReal<S, N>, X, const N: usize>(
+pub(crate) fn lanes_1<S: Real, L: LaneReal<S, N>, X, const N: usize>(
     items: &[&X; N],
     f: impl Fn(&X) -> &[S; 3],
 ) -> [L; 3] {
@@ -288,60 +290,4 @@ fn collect<X: Copy + Default, const N: usize>(items: [Option<X>; N]) -> Option<[
         *o = i?;
     }
     Some(out)
-}
-
-impl<S: Real, L: LaneReal<S, N>, const N: usize> Pack<S, L, N> for HexReduced<S> {
-    type Packed = HexReduced<L>;
-    fn pack(items: [&Self; N]) -> Option<Self::Packed> {
-        let first = items.first()?;
-        Some(HexReduced {
-            connectivity: first.connectivity,
-            volume: lanes(&items, |e| e.volume),
-            gradient_moments: lanes_3(&items, |e| &e.gradient_moments),
-            hourglass_geometry: lanes_3(&items, |e| &e.hourglass_geometry),
-            hourglass_stiffness: lanes(&items, |e| e.hourglass_stiffness),
-        })
-    }
-}
-
-impl<S: Real, L: LaneReal<S, N>, const N: usize> Pack<S, L, N> for HexBox<S> {
-    type Packed = HexBox<L>;
-    fn pack(items: [&Self; N]) -> Option<Self::Packed> {
-        let first = items.first()?;
-        Some(HexBox {
-            connectivity: first.connectivity,
-            basis: lanes_3(&items, |e| &e.basis),
-            basis_volume: lanes_3(&items, |e| &e.basis_volume),
-            volume: lanes(&items, |e| e.volume),
-            hourglass_stiffness: lanes(&items, |e| e.hourglass_stiffness),
-        })
-    }
-}
-
-impl<S: Real, L: LaneReal<S, N>, const N: usize> Pack<S, L, N> for HexCuboid<S> {
-    type Packed = HexCuboid<L>;
-    fn pack(items: [&Self; N]) -> Option<Self::Packed> {
-        let first = items.first()?;
-        Some(HexCuboid {
-            connectivity: first.connectivity,
-            scale: lanes_1(&items, |e| &e.scale),
-            scale_volume: lanes_1(&items, |e| &e.scale_volume),
-            volume: lanes(&items, |e| e.volume),
-            hourglass_stiffness: lanes(&items, |e| e.hourglass_stiffness),
-        })
-    }
-}
-
-impl<S: Real, L: LaneReal<S, N>, const N: usize> Pack<S, L, N> for HexFull<S> {
-    type Packed = HexFull<L>;
-    fn pack(items: [&Self; N]) -> Option<Self::Packed> {
-        let first = items.first()?;
-        Some(HexFull {
-            connectivity: first.connectivity,
-            gauss: core::array::from_fn(|g| GaussPoint {
-                gradients: lanes_3(&items, |e| &e.gauss[g].gradients),
-                volume: lanes(&items, |e| e.gauss[g].volume),
-            }),
-        })
-    }
 }

@@ -2,7 +2,6 @@
 
 use super::real::{array, Real};
 
-pub type Vec3<T> = [T; 3];
 pub type Mat3<T> = [[T; 3]; 3];
 
 #[inline(always)]
@@ -131,28 +130,4 @@ pub fn ddot<T: Real>(a: &Mat3<T>, b: &Mat3<T>) -> T {
         }
     }
     s
-}
-
-#[inline(always)]
-pub fn cross<T: Real>(a: &Vec3<T>, b: &Vec3<T>) -> Vec3<T> {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-#[inline(always)]
-pub fn dot<T: Real>(a: &Vec3<T>, b: &Vec3<T>) -> T {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-#[inline(always)]
-pub fn norm<T: Real>(a: &Vec3<T>) -> T {
-    dot(a, a).sqrt()
-}
-
-#[inline(always)]
-pub fn sub<T: Real>(a: &Vec3<T>, b: &Vec3<T>) -> Vec3<T> {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }

@@ -87,6 +87,12 @@ pub enum FaultKind {
         needed: u32,
         max: u32,
     },
+    /// The host's pose of `tool` for step `at_step` was refused ([`super::pose`]).
+    Pose {
+        tool: u8,
+        at_step: u32,
+        problem: super::pose::PoseProblem,
+    },
 }
 
 /// A fault with its board and step.
@@ -152,6 +158,9 @@ impl core::fmt::Display for Fault {
                 f,
                 "contact: {needed} {what} needed, this firmware holds {max}"
             ),
+            FaultKind::Pose { tool, at_step, problem } => {
+                write!(f, "tool {tool}: the host's pose for step {at_step} refused: {problem}")
+            }
         }
     }
 }

@@ -5,7 +5,8 @@
 //! capacities), `load` (an image into storage), [`program`] (the step's operations, also
 //! walked by board-sim's timing model), `exchange` (force frames over the point-to-point
 //! links), `hello` (the compilation ids checked with the neighbours before step 0), `global` (packets on the global network), `contact` (bounding boxes, node
-//! exchange, contact and tool forces), `graphics` (surface nodes to the graphics engine);
+//! exchange, contact and tool forces), [`pose`] (the host's tool poses, applied at their
+//! step), `graphics` (surface nodes to the graphics engine);
 //! this file holds the runtime itself and the step loop.
 //!
 //! Storage is the caller's ([`Storage`], lent by a [`StorageBuf`]). Time and idling come in
@@ -21,6 +22,7 @@ mod graphics;
 mod hello;
 mod load;
 mod marks;
+pub mod pose;
 pub mod program;
 pub mod storage;
 
@@ -225,6 +227,13 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
     /// Force of the tissue on each tool from this board's nodes at the last step (N).
     pub fn tool_forces(&self) -> &[[f64; 3]] {
         &self.contact.tool_force[..self.header.counts.tools as usize]
+    }
+
+    /// Tool `t`'s pose from the host now (`None`: it follows its path), and the poses
+    /// received and not yet due.
+    pub fn tool_pose(&self, t: usize) -> (Option<crate::physics::pose::Pose>, usize) {
+        let q = &self.contact.poses;
+        (q.current(t), q.pending())
     }
 
     /// What the last step's contact evaluation found.

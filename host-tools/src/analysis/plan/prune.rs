@@ -208,6 +208,50 @@ pub fn prune(
             "the scene has no tool, contact surface, load, prescribed motion or gravity: nothing moves it, nothing to plan"
         );
     }
+    let (node_map, nodes) = kept_nodes(mesh, &keep);
+    let (reduced_mesh, cell_kind) =
+        kept_mesh(mesh, &keep, &held, driven, &node_map, nodes, fraction);
+    let mut sets: BTreeMap<String, Vec<u32>> = BTreeMap::new();
+    for (name, set) in &p.node_sets {
+        let s = set_of(&node_map, &|n| set.binary_search(&(n as u32)).is_ok());
+        if !s.is_empty() {
+            sets.insert(name.clone(), s);
+        }
+    }
+    let mut out = scene.clone();
+    out.mesh = written_mesh();
+    selections_as_sets(p, scene, &held, &node_map, &mut sets, &mut out)?;
+    // A material whose region lost every cell would be refused.
+    out.materials.retain(|m| match &m.region {
+        None => true,
+        Some(r) => {
+            let tag = match r {
+                RegionRef::Tag(t) => Some(*t),
+                RegionRef::Name(name) => mesh
+                    .region_names
+                    .iter()
+                    .find(|(_, v)| *v == name)
+                    .map(|(t, _)| *t),
+            };
+            reduced_mesh.cell_regions.iter().any(|&c| Some(c) == tag)
+        }
+    });
+    Ok(Reduced {
+        scene: out,
+        held_nodes: held.iter().filter(|&&h| h).count(),
+        mesh: reduced_mesh,
+        node_sets: sets,
+        node_map,
+        cell_kind,
+        full_mesh: mesh.clone(),
+        fraction,
+        coarsened: false,
+    })
+}
+
+/// The nodes of the kept cells: full-mesh node → reduced node, and the reduced nodes'
+/// positions (in full-mesh order).
+fn kept_nodes(mesh: &Mesh, keep: &[bool]) -> (Vec<Option<u32>>, Vec<[f64; 3]>) {
     let mut used = vec![false; mesh.nodes.len()];
     for (c, cell) in mesh.cells.iter().enumerate() {
         if keep[c] {
@@ -224,6 +268,20 @@ pub fn prune(
             nodes.push(mesh.nodes[n]);
         }
     }
+    (node_map, nodes)
+}
+
+/// The mesh of the kept cells on `nodes` (pruned at `fraction`), and what became of each
+/// full-mesh cell.
+fn kept_mesh(
+    mesh: &Mesh,
+    keep: &[bool],
+    held: &[bool],
+    driven: &[bool],
+    node_map: &[Option<u32>],
+    nodes: Vec<[f64; 3]>,
+    fraction: Option<f64>,
+) -> (Mesh, Vec<CellKind>) {
     let map = |n: u32| node_map[n as usize].unwrap_or(u32::MAX);
     let mut cells = Vec::new();
     let mut cell_regions = Vec::new();
@@ -256,22 +314,29 @@ pub fn prune(
         node_sets: BTreeMap::new(),
         notes: Vec::new(),
     };
-    let set_of = |f: &dyn Fn(usize) -> bool| -> Vec<u32> {
-        (0..mesh.nodes.len())
-            .filter(|&n| f(n))
-            .filter_map(|n| node_map[n])
-            .collect()
-    };
-    let mut sets: BTreeMap<String, Vec<u32>> = BTreeMap::new();
-    for (name, set) in &p.node_sets {
-        let s = set_of(&|n| set.binary_search(&(n as u32)).is_ok());
-        if !s.is_empty() {
-            sets.insert(name.clone(), s);
-        }
-    }
-    let mut out = scene.clone();
-    out.mesh = written_mesh();
-    let fixed = set_of(&|n| held[n] || p.node_kind[n] == NodeKind::Fixed);
+    (reduced_mesh, cell_kind)
+}
+
+/// The reduced nodes of the full-mesh nodes `n` for which `f(n)` holds, ascending.
+fn set_of(node_map: &[Option<u32>], f: &dyn Fn(usize) -> bool) -> Vec<u32> {
+    (0..node_map.len())
+        .filter(|&n| f(n))
+        .filter_map(|n| node_map[n])
+        .collect()
+}
+
+/// The scene's selections rewritten as node sets of the reduced mesh (into `sets`):
+/// `plan_fixed` (the fixed nodes kept and the held ones), `plan_prescribed_K`,
+/// `plan_load_K` and `plan_surface_K`, and `out`'s selections pointed at them.
+fn selections_as_sets(
+    p: &Problem,
+    scene: &Scene,
+    held: &[bool],
+    node_map: &[Option<u32>],
+    sets: &mut BTreeMap<String, Vec<u32>>,
+    out: &mut Scene,
+) -> Result<()> {
+    let fixed = set_of(node_map, &|n| held[n] || p.node_kind[n] == NodeKind::Fixed);
     out.fixed = if fixed.is_empty() {
         vec![]
     } else {
@@ -286,7 +351,9 @@ pub fn prune(
             let name = format!("plan_prescribed_{k}");
             sets.insert(
                 name.clone(),
-                set_of(&|n| p.node_kind[n] == NodeKind::Prescribed(k as u32)),
+                set_of(node_map, &|n| {
+                    p.node_kind[n] == NodeKind::Prescribed(k as u32)
+                }),
             );
             PrescribedSpec {
                 box_: None,
@@ -302,7 +369,7 @@ pub fn prune(
         let name = format!("plan_load_{k}");
         sets.insert(
             name.clone(),
-            set_of(&|n| chosen.binary_search(&(n as u32)).is_ok()),
+            set_of(node_map, &|n| chosen.binary_search(&(n as u32)).is_ok()),
         );
         loads.push(LoadSpec {
             box_: None,
@@ -315,45 +382,20 @@ pub fn prune(
     out.load = loads;
     if let Some(c) = &p.contact {
         for (k, (spec, s)) in out.surface.iter_mut().zip(&c.surfaces).enumerate() {
-            let mut on = vec![false; mesh.nodes.len()];
+            let mut on = vec![false; node_map.len()];
             for (q, _) in &s.faces {
                 for &n in q {
                     on[n as usize] = true;
                 }
             }
             let name = format!("plan_surface_{k}");
-            sets.insert(name.clone(), set_of(&|n| on[n]));
+            sets.insert(name.clone(), set_of(node_map, &|n| on[n]));
             spec.box_ = None;
             spec.sphere = None;
             spec.set = Some(name);
         }
     }
-    // A material whose region lost every cell would be refused.
-    out.materials.retain(|m| match &m.region {
-        None => true,
-        Some(r) => {
-            let tag = match r {
-                RegionRef::Tag(t) => Some(*t),
-                RegionRef::Name(name) => mesh
-                    .region_names
-                    .iter()
-                    .find(|(_, v)| *v == name)
-                    .map(|(t, _)| *t),
-            };
-            reduced_mesh.cell_regions.iter().any(|&c| Some(c) == tag)
-        }
-    });
-    Ok(Reduced {
-        scene: out,
-        held_nodes: held.iter().filter(|&&h| h).count(),
-        mesh: reduced_mesh,
-        node_sets: sets,
-        node_map,
-        cell_kind,
-        full_mesh: mesh.clone(),
-        fraction,
-        coarsened: false,
-    })
+    Ok(())
 }
 
 fn set_spec(name: &str) -> FixedSpec {

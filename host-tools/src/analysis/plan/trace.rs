@@ -3,9 +3,10 @@
 //! motion), and its cost.
 //!
 //! Displacements are sampled at `t_k = duration · k / SAMPLES`, `k = 1..=SAMPLES`, linearly
-//! interpolated between the two steps around `t_k`; tool forces are averaged over each
-//! window `(t_{k-1}, t_k]`. Runs with different steps are so compared at the same times,
-//! not at the same step numbers.
+//! interpolated between the two steps around `t_k`. Tool forces are averaged over the
+//! windows their consumers sample at: every millisecond (the haptic loop, [`HAPTIC_WINDOW_S`])
+//! and every 40 ms (the graphics, [`GRAPHICS_WINDOW_S`]), each window `(t_{k-1}, t_k]`. Runs
+//! with different steps are so compared at the same times, not at the same step numbers.
 
 use anyhow::Result;
 
@@ -16,6 +17,21 @@ use crate::solver::{self, Observer, StepState};
 /// Sample times per run.
 pub const SAMPLES: usize = 40;
 
+/// The haptic loop's period: it feels the mean force over each millisecond (s).
+pub const HAPTIC_WINDOW_S: f64 = 1e-3;
+
+/// The graphics' period: a frame shows the mean force over its 40 ms (s).
+pub const GRAPHICS_WINDOW_S: f64 = 0.04;
+
+/// The ends of the windows of width `window_s` over `(0, duration_s]`: `k · window_s` while
+/// below the end, then the end (a last, shorter window when the duration is not a multiple).
+pub fn window_ends(duration_s: f64, window_s: f64) -> Vec<f64> {
+    let n = (duration_s / window_s - 1e-9).ceil().max(1.0) as usize;
+    (1..=n)
+        .map(|k| (k as f64 * window_s).min(duration_s))
+        .collect()
+}
+
 /// One run's samples and figures.
 #[derive(Clone, Debug)]
 pub struct Trace {
@@ -23,11 +39,13 @@ pub struct Trace {
     pub times_s: Vec<f64>,
     /// Displacement of every node of the run's mesh at each sample: `u[sample][node]`.
     pub u: Vec<Vec<[f64; 3]>>,
-    /// Force of the tissue on each tool, the mean over each sample window `(t_{k-1}, t_k]`:
-    /// `tool_force[tool][sample]` (N). A penalty contact's force rings step to step; the
-    /// window mean is the force a haptic or graphics loop running slower than the solver
-    /// sees, and compares runs whose steps differ.
-    pub tool_force: Vec<Vec<[f64; 3]>>,
+    /// Force of the tissue on each tool, the mean over each millisecond (the haptic
+    /// loop's): `tool_force_haptic[tool][window]` (N). A penalty contact's force rings step
+    /// to step; the window mean is the force a haptic or graphics loop running slower than
+    /// the solver sees, and compares runs whose steps differ.
+    pub tool_force_haptic: Vec<Vec<[f64; 3]>>,
+    /// The same over each 40 ms (a graphics frame's).
+    pub tool_force_graphics: Vec<Vec<[f64; 3]>>,
     pub tool_names: Vec<String>,
     /// Largest |u| of each node over every step of the run (m).
     pub motion_m: Vec<f64>,
@@ -137,12 +155,14 @@ pub fn run(problem: &Problem, name: &str) -> Result<Trace> {
             .copied()
             .collect()
     };
-    let tool_force = (0..tools.len())
-        .map(|t| {
-            let series = per_step(t);
-            window_means(&rec.step_times_s, &series, &times_s)
-        })
-        .collect();
+    let means = |window_s: f64| -> Vec<Vec<[f64; 3]>> {
+        let ends = window_ends(duration, window_s);
+        (0..tools.len())
+            .map(|t| window_means(&rec.step_times_s, &per_step(t), &ends))
+            .collect()
+    };
+    let (tool_force_haptic, tool_force_graphics) =
+        (means(HAPTIC_WINDOW_S), means(GRAPHICS_WINDOW_S));
     let elements = crate::problem::elements::Elements::<f64>::build(problem);
     let mut energy_j = vec![0.0f64; problem.mesh.cells.len()];
     for u in &rec.u {
@@ -158,7 +178,8 @@ pub fn run(problem: &Problem, name: &str) -> Result<Trace> {
         energy_j,
         times_s,
         u: rec.u,
-        tool_force,
+        tool_force_haptic,
+        tool_force_graphics,
         tool_names: tools,
         motion_m: rec.motion_m,
         elements: r.elements,

@@ -2,6 +2,7 @@
 //! beams, 50 % compression, rigid rotation, soft next to stiff.
 
 use super::*;
+use crate::geom::{cross, dot};
 
 /// Nearly incompressible neo-Hookean beam (ν = 0.49, 0.499, 0.4999) under gravity.
 pub fn poisson(nu: f64) -> Result<Case> {
@@ -91,31 +92,11 @@ pub fn compression_50() -> Result<Case> {
         "compression_50",
         |c| {
             let (e, nu) = (1e4, 0.45);
-            let mk = |solver: &dyn Fn(&mut SolverSpec)| -> Result<Problem> {
-                let mut p = problem(&box_scene(
-                    [0.01; 3],
-                    [4, 4, 4],
-                    e,
-                    nu,
-                    false,
-                    solver,
-                ))?;
-                let lame = pe_firmware::physics::LameParameters::from_young_poisson(e, nu);
-                let (lt, _) = uniaxial_neo_hookean(lame.mu, lame.lambda, 0.5);
-                // Boundary on the homogeneous field, ramped over 50 ms then held: the
-                // interior must follow (patch test) and the top force match the closed form.
-                let g = [lt - 1.0, lt - 1.0, -0.5];
-                prescribe_boundary(&mut p, &[0.0, 0.05], |x, t| {
-                    let s = t / 0.05;
-                    core::array::from_fn(|i| s * g[i] * (x[i] - 0.005))
-                })?;
-                Ok(p)
-            };
             let lame = pe_firmware::physics::LameParameters::from_young_poisson(e, nu);
             let (lt, p33) = uniaxial_neo_hookean(lame.mu, lame.lambda, 0.5);
             // 1. Without tracking the step: the rest step's safety margin is eaten by the
             // compression (expected: a fault, or at best a completed run; reported).
-            let p = mk(&|s| {
+            let p = compressed_cube(e, nu, &|s| {
                 s.damping = 1000.0;
                 s.duration = Some(0.1);
                 s.dt_track_interval = 0;
@@ -131,79 +112,12 @@ pub fn compression_50() -> Result<Case> {
             // 2. The documented defaults (the step tracked element by element every
             // `dt_track_interval` steps and lowered), at dt_safety 0.9 and 0.99: complete.
             for safety in [0.9, 0.99] {
-                let p = mk(&|s| {
+                let p = compressed_cube(e, nu, &|s| {
                     s.damping = 1000.0;
                     s.duration = Some(0.1);
                     s.dt_safety = safety;
                 })?;
-                let (dt0, crit0) = (p.time_step.dt_s, p.time_step.critical.dt_critical_s);
-                let out = solver::run(&p, "compression, default dt tracking", &mut ())
-                    .map_err(|e| anyhow!("dt_safety {safety}: {e}"))?;
-                let r = &out.report;
-                c.lt(
-                    &format!("dt_safety {safety}: critical step at 50% compression / at rest (expected to shrink)"),
-                    r.dt_critical_min_s / crit0,
-                    1.0,
-                );
-                c.note(format!(
-                    "dt_safety {safety}: rest critical {crit0:.3e} s, dt {dt0:.3e} s; smallest critical found {:.3e} s; final dt {:.3e} s; {} steps, {} element bounds, {} dt reductions",
-                    r.dt_critical_min_s, r.dt_final_s, r.steps, r.dt_tracks, r.dt_reductions
-                ));
-                // Interior nodes on the homogeneous field within 1e-6 of the height
-                // (settled: damping 1000/s over the 50 ms hold decays the transient by
-                // e^-25).
-                let mut err = 0.0f64;
-                for (n, k) in p.node_kind.iter().enumerate() {
-                    if *k == NodeKind::Free {
-                        let x = p.mesh.nodes[n];
-                        let want = [
-                            (lt - 1.0) * (x[0] - 0.005),
-                            (lt - 1.0) * (x[1] - 0.005),
-                            -0.5 * (x[2] - 0.005),
-                        ];
-                        err = err.max(norm(core::array::from_fn(|i| {
-                            out.displacements[n][i] - want[i]
-                        })));
-                    }
-                }
-                c.lt(
-                    &format!("dt_safety {safety}: interior error vs homogeneous field / height"),
-                    err / 0.01,
-                    1e-6,
-                );
-                // Top-face force Σ f_int,z = P₃₃ A₀ (closed form), within 1e-4 (settled).
-                let model = {
-                    let mut m = Model::<f64>::new(&p, r.dt_final_s);
-                    m.u = out.displacements.clone();
-                    m
-                };
-                let mut f = vec![[0.0; 3]; p.mesh.nodes.len()];
-                model
-                    .elements
-                    .internal_forces(&model.laws, &model.u, &mut f)
-                    .map_err(|e| anyhow!("{e}"))?;
-                let top: f64 = (0..p.mesh.nodes.len())
-                    .filter(|&n| p.mesh.nodes[n][2] > 0.01 - 1e-9)
-                    .map(|n| f[n][2])
-                    .sum();
-                let want = p33 * 1e-4;
-                c.lt(
-                    &format!("dt_safety {safety}: top-face force vs closed form P33·A0, relative"),
-                    (top / want - 1.0).abs(),
-                    1e-4,
-                );
-                c.note(format!(
-                    "lateral stretch {lt:.4}, top force {top:.5e} N, closed form {want:.5e} N"
-                ));
-                // The tracked step stays under the critical step of the compressed state,
-                // estimated afresh (200 iterations from a cold start): at most the safety
-                // factor of it, with 2% for the estimate.
-                let fresh = 2.0 / model.max_frequency(200)?;
-                c.lt(
-                    &format!("dt_safety {safety}: final dt / fresh critical step at 50% compression"),
-                    r.dt_final_s / fresh,
-                    safety * 1.02,
-                );
+                check_tracked_compression(c, &p, safety, lt, p33)?;
             }
             Ok(())
         },
@@ -211,15 +125,109 @@ pub fn compression_50() -> Result<Case> {
     )
 }
 
+/// The cube of [`compression_50`] (E = `e`, ν = `nu`, 1 cm, 4³ cells) with the case's
+/// `[solver]` settings, its boundary moved on the homogeneous field of uniaxial stress at
+/// 50% height, ramped over 50 ms then held: the interior must follow (patch test) and the
+/// top force match the closed form.
+fn compressed_cube(e: f64, nu: f64, solver: &dyn Fn(&mut SolverSpec)) -> Result<Problem> {
+    let mut p = problem(&box_scene([0.01; 3], [4, 4, 4], e, nu, false, solver))?;
+    let lame = pe_firmware::physics::LameParameters::from_young_poisson(e, nu);
+    let (lt, _) = uniaxial_neo_hookean(lame.mu, lame.lambda, 0.5);
+    let g = [lt - 1.0, lt - 1.0, -0.5];
+    prescribe_boundary(&mut p, &[0.0, 0.05], |x, t| {
+        let s = t / 0.05;
+        core::array::from_fn(|i| s * g[i] * (x[i] - 0.005))
+    })?;
+    Ok(p)
+}
+
+/// The compressed cube `p` run with the step tracked at `dt_safety` `safety`: it
+/// completes, the critical step shrinks, the interior follows the homogeneous field
+/// (lateral stretch `lt`) and the top force is the closed form `P₃₃ A₀` (`p33`).
+fn check_tracked_compression(
+    c: &mut Case,
+    p: &Problem,
+    safety: f64,
+    lt: f64,
+    p33: f64,
+) -> Result<()> {
+    let (dt0, crit0) = (p.time_step.dt_s, p.time_step.critical.dt_critical_s);
+    let out = solver::run(p, "compression, default dt tracking", &mut ())
+        .map_err(|e| anyhow!("dt_safety {safety}: {e}"))?;
+    let r = &out.report;
+    c.lt(
+        &format!(
+            "dt_safety {safety}: critical step at 50% compression / at rest (expected to shrink)"
+        ),
+        r.dt_critical_min_s / crit0,
+        1.0,
+    );
+    c.note(format!(
+        "dt_safety {safety}: rest critical {crit0:.3e} s, dt {dt0:.3e} s; smallest critical found {:.3e} s; final dt {:.3e} s; {} steps, {} element bounds, {} dt reductions",
+        r.dt_critical_min_s, r.dt_final_s, r.steps, r.dt_tracks, r.dt_reductions
+    ));
+    // Interior nodes on the homogeneous field within 1e-6 of the height
+    // (settled: damping 1000/s over the 50 ms hold decays the transient by
+    // e^-25).
+    let mut err = 0.0f64;
+    for (n, k) in p.node_kind.iter().enumerate() {
+        if *k == NodeKind::Free {
+            let x = p.mesh.nodes[n];
+            let want = [
+                (lt - 1.0) * (x[0] - 0.005),
+                (lt - 1.0) * (x[1] - 0.005),
+                -0.5 * (x[2] - 0.005),
+            ];
+            err = err.max(norm(core::array::from_fn(|i| {
+                out.displacements[n][i] - want[i]
+            })));
+        }
+    }
+    c.lt(
+        &format!("dt_safety {safety}: interior error vs homogeneous field / height"),
+        err / 0.01,
+        1e-6,
+    );
+    // Top-face force Σ f_int,z = P₃₃ A₀ (closed form), within 1e-4 (settled).
+    let model = {
+        let mut m = Model::<f64>::new(p, r.dt_final_s);
+        m.u = out.displacements.clone();
+        m
+    };
+    let mut f = vec![[0.0; 3]; p.mesh.nodes.len()];
+    model
+        .elements
+        .internal_forces(&model.laws, &model.u, &mut f)
+        .map_err(|e| anyhow!("{e}"))?;
+    let top: f64 = (0..p.mesh.nodes.len())
+        .filter(|&n| p.mesh.nodes[n][2] > 0.01 - 1e-9)
+        .map(|n| f[n][2])
+        .sum();
+    let want = p33 * 1e-4;
+    c.lt(
+        &format!("dt_safety {safety}: top-face force vs closed form P33·A0, relative"),
+        (top / want - 1.0).abs(),
+        1e-4,
+    );
+    c.note(format!(
+        "lateral stretch {lt:.4}, top force {top:.5e} N, closed form {want:.5e} N"
+    ));
+    // The tracked step stays under the critical step of the compressed state,
+    // estimated afresh (200 iterations from a cold start): at most the safety
+    // factor of it, with 2% for the estimate.
+    let fresh = 2.0 / model.max_frequency(200)?;
+    c.lt(
+        &format!("dt_safety {safety}: final dt / fresh critical step at 50% compression"),
+        r.dt_final_s / fresh,
+        safety * 1.02,
+    );
+    Ok(())
+}
+
 /// Rodrigues rotation of `x` by `theta` about unit axis `n`.
 fn rotate(x: [f64; 3], n: [f64; 3], theta: f64) -> [f64; 3] {
     let (s, co) = theta.sin_cos();
-    let d = n[0] * x[0] + n[1] * x[1] + n[2] * x[2];
-    let cr = [
-        n[1] * x[2] - n[2] * x[1],
-        n[2] * x[0] - n[0] * x[2],
-        n[0] * x[1] - n[1] * x[0],
-    ];
+    let (d, cr) = (dot(n, x), cross(n, x));
     core::array::from_fn(|i| x[i] * co + cr[i] * s + n[i] * d * (1.0 - co))
 }
 
@@ -326,7 +334,7 @@ pub fn soft_stiff() -> Result<Case> {
                 [[0.0999, -1.0, -1.0], [1.0, 1.0, 1.0]],
                 vec![[0.0, 0.0, 0.0, 0.0], [0.2, d, 0.0, 0.0]],
             );
-            let mut mesh = crate::mesh::io::generate_box([0.1, 0.01, 0.01], [10, 2, 2]);
+            let mut mesh = crate::mesh::grid::generate_box([0.1, 0.01, 0.01], [10, 2, 2]);
             split_regions(&mut mesh, 0.05);
             let p = Problem::new(&sc, mesh, BTreeMap::new())?;
             // The stiff half sets the critical step: the same as an all-stiff bar's (1%).

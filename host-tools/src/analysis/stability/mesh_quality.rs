@@ -94,7 +94,7 @@ fn distorted(name: &str, mesh_of: impl Fn() -> Mesh, expected: &str) -> Result<C
 pub fn distorted_aspect() -> Result<Case> {
     distorted(
         "distorted_aspect_10",
-        || crate::mesh::io::generate_box([0.1, 0.01, 0.01], [4, 4, 4]),
+        || crate::mesh::grid::generate_box([0.1, 0.01, 0.01], [4, 4, 4]),
         "aspect ratio 10: stable at 0.99 of critical; the patch test passes in both integrations",
     )
 }
@@ -111,7 +111,7 @@ pub fn distorted_skew() -> Result<Case> {
 /// The skewed, perturbed 4×4×4 cube of [`distorted_skew`].
 pub fn skewed_mesh() -> Mesh {
     let h = 0.01 / 4.0;
-    let mut mesh = crate::mesh::io::generate_box([0.01; 3], [4, 4, 4]);
+    let mut mesh = crate::mesh::grid::generate_box([0.01; 3], [4, 4, 4]);
     let boundary: std::collections::HashSet<u32> = mesh.boundary_nodes().into_iter().collect();
     let shear = 40f64.to_radians().tan();
     for (n, x) in mesh.nodes.iter_mut().enumerate() {

@@ -55,7 +55,7 @@ impl<'m> Interpolator<'m> {
         let mut xi = [0.0; 3];
         for _ in 0..20 {
             let n = shape(xi);
-            let g = pe_firmware::physics::hex::natural_gradients(xi);
+            let g = pe_firmware::physics::element::hex::natural_gradients(xi);
             let mut r = [0.0; 3];
             let mut j = [[0.0; 3]; 3];
             for a in 0..8 {
@@ -112,7 +112,7 @@ impl<'m> Interpolator<'m> {
 
 fn shape(xi: [f64; 3]) -> [f64; 8] {
     core::array::from_fn(|a| {
-        let q = pe_firmware::physics::hex::NODE_XI[a];
+        let q = pe_firmware::physics::element::hex::NODE_XI[a];
         0.125 * (1.0 + q[0] * xi[0]) * (1.0 + q[1] * xi[1]) * (1.0 + q[2] * xi[2])
     })
 }

@@ -24,6 +24,7 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use pe_firmware::image::{Integration, Precision};
+use pe_firmware::profile::BoardProfile;
 use serde::Serialize;
 
 use crate::geom::norm;
@@ -39,8 +40,14 @@ pub use interpolate::Interpolator;
 pub use report::*;
 
 /// Board instructions per element-step: not measured until the board firmware exists.
-/// Where the board column comes from.
-pub const BOARD_NOTE: &str = "instructions per element-step of a whole board step (elements, gather/scatter, node updates; `pe_firmware::profile::MEASURED_COST`, measured under QEMU with `scripts/board-cost.sh`), and the board real-time factor at 480 MHz taking one instruction per cycle, for the whole scene on one board";
+/// Where the board column comes from, on a board of `profile`.
+pub fn board_note(profile: &BoardProfile) -> String {
+    format!(
+        "instructions per element-step of a whole board step (elements, gather/scatter, node updates; `pe_firmware::profile::MEASURED_COST`, measured under QEMU with `scripts/board-cost.sh`), and the board real-time factor at {} MHz ({}) taking one instruction per cycle, for the whole scene on one board",
+        profile.clock_hz as f64 / 1e6,
+        profile.name
+    )
+}
 
 /// One configuration of the grid.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -137,6 +144,8 @@ pub struct Options {
     pub fine: bool,
     /// Baseline level of the built-in scene.
     pub level: Option<String>,
+    /// The board whose clock gives the board real-time factor.
+    pub profile: &'static BoardProfile,
 }
 
 fn level_names(levels: &Levels) -> Vec<String> {
@@ -279,7 +288,14 @@ struct Done {
     mesh: Mesh,
 }
 
-fn run_one(base: &Scene, dir: &Path, levels: &Levels, c: &Config, name: &str) -> Result<Done> {
+fn run_one(
+    base: &Scene,
+    dir: &Path,
+    levels: &Levels,
+    c: &Config,
+    name: &str,
+    profile: &BoardProfile,
+) -> Result<Done> {
     let mut sc = scene_at(base, levels, &c.level)?;
     sc.solver.precision = c.precision;
     sc.solver.integration = c.integration;
@@ -316,10 +332,11 @@ fn run_one(base: &Scene, dir: &Path, levels: &Levels, c: &Config, name: &str) ->
         real_time_factor: r.real_time_factor,
         board_instructions_per_element_step: {
             let c = pe_firmware::profile::measured_cost(c.precision, c.integration);
-            let step_s = c.per_element_of_mix(r.kernel_mix) * r.elements as f64
-                + c.per_node_update as f64 * r.nodes as f64
-                + c.per_contact_node as f64 * r.contact_nodes as f64;
-            let step_s = step_s / pe_firmware::profile::PE_BOARD.clock_hz as f64;
+            let per_kernel = r.kernel_mix.map(|m| m * r.elements as f64);
+            let step = c
+                .step_cost()
+                .step(per_kernel, r.nodes as f64, r.contact_nodes as f64);
+            let step_s = step / profile.clock_hz as f64;
             format!("{} (board RTF {:.3})", c.step_per_element, r.dt_s / step_s)
         },
         compared_nodes: 0,
@@ -436,7 +453,7 @@ pub fn run(
     let mut done: Vec<Done> = Vec::new();
     for (k, c) in configs.iter().enumerate() {
         progress(&format!("[{}/{}] {}", k + 1, configs.len(), c.label()));
-        done.push(run_one(&scene, dir, &levels, c, name)?);
+        done.push(run_one(&scene, dir, &levels, c, name, opts.profile)?);
     }
     let Some((reference, rest)) = done.split_first_mut() else {
         bail!("empty grid");
@@ -461,7 +478,7 @@ pub fn run_cli(scene: &Scene, dir: &Path, name: &str, opts: &Options, out: &Path
     let rows = run(scene, dir, name, opts, &mut |s| eprintln!("{s}"))?;
     let csv = out.join("tradeoff.csv");
     std::fs::write(&csv, to_csv(&rows)?).with_context(|| format!("writing {}", csv.display()))?;
-    let md = to_markdown(&rows, name);
+    let md = to_markdown(&rows, name, opts.profile);
     let mdp = out.join("tradeoff.md");
     std::fs::write(&mdp, &md).with_context(|| format!("writing {}", mdp.display()))?;
     let png = out.join("tradeoff.png");

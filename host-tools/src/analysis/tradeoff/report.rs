@@ -85,13 +85,13 @@ pub fn full_reduced(rows: &[Row]) -> Vec<(String, f64, f64, f64)> {
 }
 
 /// The markdown report: table, full/reduced cost ratio, how errors were measured.
-pub fn to_markdown(rows: &[Row], name: &str) -> String {
+pub fn to_markdown(rows: &[Row], name: &str, profile: &BoardProfile) -> String {
     let mut s = format!("# Speed/accuracy trade-off: {name}\n\n");
     if let Some(r) = rows.first() {
         let _ = writeln!(
             s,
-            "Reference: {} {} integration, level {}, dt safety {}, mass scaling {} ({} elements, {} steps, {:.1} s wall). Errors are at the end of {:.3} s simulated, relative ones over the reference's largest displacement (u) or its value (quantity of interest `{}`, energy = stored + kinetic). Cost: host wall time on one thread of this machine. `board instr/elem-step`: {BOARD_NOTE}. `*` marks the Pareto front of (wall s per simulated s, RMS displacement error).\n",
-            r.precision, r.integration, r.level, r.dt_safety, r.mass_scaling, r.elements, r.steps, r.wall_s, r.simulated_s, r.qoi
+            "Reference: {} {} integration, level {}, dt safety {}, mass scaling {} ({} elements, {} steps, {:.1} s wall). Errors are at the end of {:.3} s simulated, relative ones over the reference's largest displacement (u) or its value (quantity of interest `{}`, energy = stored + kinetic). Cost: host wall time on one thread of this machine. `board instr/elem-step`: {}. `*` marks the Pareto front of (wall s per simulated s, RMS displacement error).\n",
+            r.precision, r.integration, r.level, r.dt_safety, r.mass_scaling, r.elements, r.steps, r.wall_s, r.simulated_s, r.qoi, board_note(profile)
         );
     }
     s.push_str("| varied | prec. | integr. | hg | safety | level | mass sc. | elements | steps | wall s | ns/elem-step | RTF | board instr/elem-step | u max err | u RMS err | QoI err | energy err | Pareto |\n");

@@ -9,7 +9,7 @@
 //!
 //! [`refine`] then moves single elements between boards holding face neighbours to
 //! minimise the force vectors the exchange rounds send (the exact count of
-//! [`crate::compile::plan`]'s scheme, in which a held node is not exchanged), the relays
+//! [`crate::compile::trees`]' scheme, in which a held node is not exchanged), the relays
 //! and the busiest links' loads, keeping every board within [`BALANCE_MAX`] times the mean
 //! load, non-empty, and its pieces as connected as they
 //! were: simulated annealing from a fixed seed, then greedy passes. The result is the same
@@ -23,7 +23,7 @@
 use anyhow::{bail, Result};
 
 use crate::mesh::Mesh;
-use crate::problem::elements::kernel_of;
+use crate::problem::elements::kind_of;
 use crate::problem::{NodeKind, Problem};
 
 pub mod refine;
@@ -110,7 +110,7 @@ pub fn cost_weights(problem: &Problem) -> Vec<u64> {
         .iter()
         .enumerate()
         .map(|(e, cell)| {
-            let kernel = cost.element_step(kernel_of(problem, e));
+            let kernel = cost.element_step(kind_of(problem, e));
             let contact: f64 = cell
                 .iter()
                 .filter(|&&n| on_contact[n as usize])

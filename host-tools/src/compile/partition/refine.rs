@@ -16,8 +16,8 @@
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
-use super::Machine;
-use crate::compile::plan::{box_vectors, default_roots, for_box_links};
+use crate::compile::trees::{box_vectors, default_roots, for_box_links};
+use link_proto::Machine;
 
 /// Objective units per board a node spans beyond two along an axis (a relay): more than
 /// any move's gain in vectors, so relays are removed first and never added for vectors.
@@ -170,7 +170,7 @@ impl State<'_> {
 
     /// Calls `f` with every link a node of box `b` is sent over with its default roots
     /// (each way once per step; see [`box_vectors`]). The plan then chooses each node's
-    /// roots to spread the loads ([`crate::compile::plan::choose_roots`]).
+    /// roots to spread the loads ([`crate::compile::trees::choose_roots`]).
     fn for_links(&self, (lo, hi): Span, mut f: impl FnMut(u32)) {
         for_box_links(lo, hi, default_roots(lo, hi), |a, at| {
             f(self.link_index(a, at))

@@ -7,17 +7,19 @@
 //! path's whatever the force, so each of those boards computes it alone, and adds its part
 //! of the node's force to the reaction.
 
-pub mod trees;
-
 use anyhow::{bail, Result};
 use pe_firmware::image::{Combine, STAGE_NOT_OWNED};
 
+use link_proto::Machine;
+
 use super::partition::{
-    cost_weights, exchanged_nodes, node_board_range, node_elements, partition_weighted, Machine,
+    cost_weights, exchanged_nodes, node_board_range, node_elements, partition_weighted,
+};
+use super::trees::{
+    choose_roots, for_node_transfers, half_rounds, last_axis, line_rounds, BoardBox, LineTrees,
+    Roots,
 };
 use crate::problem::Problem;
-pub use trees::{box_vectors, default_roots, for_box_links, line_rounds, Roots};
-use trees::{choose_roots, for_node_transfers, half_rounds, last_axis, BoardBox, LineTrees};
 
 /// Faces in image order.
 pub use link_proto::link::FACE_NAMES;
@@ -59,7 +61,7 @@ pub struct Plan {
     /// Owner board of every node.
     pub node_owner: Vec<u32>,
     /// Exchange rounds per axis, of which the last `late_rounds` run after the z exchange
-    /// (the x and y broadcasts of [`trees::for_box_lines`]; none along z). Of the first ones,
+    /// (the x and y broadcasts of [`crate::compile::trees::for_box_lines`]; none along z). Of the first ones,
     /// round 0 holds what waits for no other board and round 1 what waits for the earlier
     /// axes (see `trees::for_node_transfers`); the program, [`pe_firmware::runtime::Program::new`], runs
     /// them in that order.
@@ -72,7 +74,7 @@ pub struct Plan {
 
 /// What the partition keeps within [`super::partition::BALANCE_MAX`] of the mean: the
 /// elements per board, or their cost ([`cost_weights`]: kernels and contact nodes).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Balance {
     Elements,

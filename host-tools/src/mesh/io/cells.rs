@@ -6,6 +6,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use super::*;
+use crate::geom::{cross, dot, sub};
 use crate::mesh::prism_as_hexahedron;
 
 /// What a cell type of a file is to the importer.
@@ -52,17 +53,11 @@ impl CellCollector {
     pub fn prism(&mut self, p: [u32; 6], region: i32, nodes: &[[f64; 3]]) {
         let signed = |q: [u32; 6]| {
             let x = q.map(|n| nodes.get(n as usize).copied().unwrap_or([0.0; 3]));
-            let d1: [f64; 3] = core::array::from_fn(|i| x[1][i] - x[0][i]);
-            let d2: [f64; 3] = core::array::from_fn(|i| x[2][i] - x[0][i]);
+            let (d1, d2) = (sub(x[1], x[0]), sub(x[2], x[0]));
             let up: [f64; 3] = core::array::from_fn(|i| {
                 (x[3][i] + x[4][i] + x[5][i] - x[0][i] - x[1][i] - x[2][i]) / 3.0
             });
-            let n = [
-                d1[1] * d2[2] - d1[2] * d2[1],
-                d1[2] * d2[0] - d1[0] * d2[2],
-                d1[0] * d2[1] - d1[1] * d2[0],
-            ];
-            n[0] * up[0] + n[1] * up[1] + n[2] * up[2]
+            dot(cross(d1, d2), up)
         };
         let turned = [p[0], p[2], p[1], p[3], p[5], p[4]];
         let q = if signed(p) < 0.0 && signed(turned) > 0.0 {

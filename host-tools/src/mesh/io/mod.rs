@@ -1,7 +1,7 @@
-//! Mesh import (Gmsh MSH 4.1 and 2.2, legacy VTK up to 5.1, VTK XML `.vtu`) and a
-//! structured box generator, all producing the common [`Mesh`]. What becomes of each kind of
-//! cell (hexahedra, prisms, boundary cells, others) is one rule for every format, in
-//! `cells.rs`.
+//! Mesh import (Gmsh MSH 4.1 and 2.2, legacy VTK up to 5.1, VTK XML `.vtu`), producing the
+//! common [`Mesh`] (the generated box is [`crate::mesh::grid::generate_box`]). What becomes
+//! of each kind of cell (hexahedra, prisms, boundary cells, others) is one rule for every
+//! format, in `cells.rs`.
 //!
 //! The MSH reader is a hand-written parser for the MSH sections volume meshes use
 //! (`$MeshFormat`, `$PhysicalNames`, `$Entities`, `$Nodes`, `$Elements`; other sections are
@@ -25,7 +25,6 @@ pub use crate::mesh::MeshError;
 
 mod cells;
 mod msh;
-mod msh2;
 mod vtk;
 mod write;
 
@@ -64,55 +63,6 @@ pub fn load_mesh(path: &Path) -> Result<Mesh, MeshError> {
         },
     })?;
     parse(path, &bytes)
-}
-
-/// A structured box of `cells[0] x cells[1] x cells[2]` hexahedra spanning from the origin to
-/// `size` (metres). Nodes are numbered x fastest, then y, then z; node tags are 1-based;
-/// every cell is in region 1, named "box". With positive `size` every cell has a positive
-/// Jacobian. A zero cell count in any direction gives an empty mesh. (Node indices are
-/// `u32`: counts past 2^32 nodes are beyond this generator, and beyond memory anyway.)
-pub fn generate_box(size: [f64; 3], cells: [usize; 3]) -> Mesh {
-    let [nx, ny, nz] = cells;
-    let (px, py) = (nx + 1, ny + 1);
-    let node = |i: usize, j: usize, k: usize| (i + px * (j + py * k)) as u32;
-    let mut mesh = Mesh {
-        source: format!("generate_box(size = {size:?}, cells = {cells:?})"),
-        ..Mesh::default()
-    };
-    if nx == 0 || ny == 0 || nz == 0 {
-        return mesh;
-    }
-    for k in 0..=nz {
-        for j in 0..=ny {
-            for i in 0..=nx {
-                mesh.nodes.push([
-                    size[0] * i as f64 / nx as f64,
-                    size[1] * j as f64 / ny as f64,
-                    size[2] * k as f64 / nz as f64,
-                ]);
-            }
-        }
-    }
-    mesh.node_tags = (1..=mesh.nodes.len() as u64).collect();
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                mesh.cells.push([
-                    node(i, j, k),
-                    node(i + 1, j, k),
-                    node(i + 1, j + 1, k),
-                    node(i, j + 1, k),
-                    node(i, j, k + 1),
-                    node(i + 1, j, k + 1),
-                    node(i + 1, j + 1, k + 1),
-                    node(i, j + 1, k + 1),
-                ]);
-            }
-        }
-    }
-    mesh.cell_regions = vec![1; mesh.cells.len()];
-    mesh.region_names.insert(1, "box".to_string());
-    mesh
 }
 
 // ---------------------------------------------------------------------------------------

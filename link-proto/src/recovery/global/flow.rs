@@ -33,6 +33,18 @@ pub mod code {
     pub const NACK: u8 = 0xB3;
 }
 
+/// The destination of a packet or of an envelope (both carry it first, where a network
+/// routes on it), or `None` for no bytes.
+pub fn destination(bytes: &[u8]) -> Option<u8> {
+    bytes.get(field::DST).copied()
+}
+
+/// The type of an envelope ([`code`]; unchecked: for observers), or `None` if it is too
+/// short to have one.
+pub fn envelope_type(envelope: &[u8]) -> Option<u8> {
+    envelope.get(field::TYPE).copied()
+}
+
 /// The packet inside a data envelope (unchecked: for observers such as fault injectors),
 /// or `None` for anything else.
 pub fn data_packet(envelope: &[u8]) -> Option<&[u8]> {

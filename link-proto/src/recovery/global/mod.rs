@@ -67,7 +67,10 @@ use crate::error::Error;
 use crate::link::{Clock, Face, Links, RecvError, SendError};
 use crate::packet::{self, ADDR_BROADCAST};
 
-pub use flow::{code, control, data_packet, emit_data, parse, Envelope, FlowRx, Verdict};
+pub use flow::{
+    code, control, data_packet, destination, emit_data, envelope_type, parse, Envelope, FlowRx,
+    Verdict,
+};
 
 /// Most peers (addresses with a flow) a board can keep.
 pub const PEERS_MAX: usize = crate::limits::BOARD_COUNT + 2;

@@ -1,0 +1,300 @@
+//! The static equilibrium of a problem's elements: the tangent stiffness by central
+//! differences of the internal forces (a distance-2 colouring probes many nodes at once),
+//! a banded Cholesky factorisation, linear and Newton solutions.
+
+use anyhow::{anyhow, bail, Result};
+use pe_firmware::physics::MaterialLaw;
+
+use crate::problem::elements::Elements;
+use crate::problem::Problem;
+
+/// A symmetric positive definite band matrix (lower band stored), factorised in place.
+struct Band {
+    n: usize,
+    w: usize,
+    a: Vec<f64>,
+}
+
+impl Band {
+    fn new(n: usize, w: usize) -> Band {
+        Band {
+            n,
+            w,
+            a: vec![0.0; n * (w + 1)],
+        }
+    }
+    fn at(&mut self, r: usize, c: usize) -> &mut f64 {
+        &mut self.a[r * (self.w + 1) + (r - c)]
+    }
+    fn get(&self, r: usize, c: usize) -> f64 {
+        if r < c || r - c > self.w {
+            0.0
+        } else {
+            self.a[r * (self.w + 1) + (r - c)]
+        }
+    }
+    /// Cholesky `A = L Lᵀ`, `L` over `A`.
+    fn factorise(&mut self) -> Result<()> {
+        let (n, w) = (self.n, self.w);
+        for j in 0..n {
+            let lo = j.saturating_sub(w);
+            let mut d = self.get(j, j);
+            for k in lo..j {
+                let l = self.get(j, k);
+                d -= l * l;
+            }
+            if !(d > 0.0) {
+                bail!("stiffness not positive definite at dof {j} (pivot {d:e})");
+            }
+            let d = d.sqrt();
+            *self.at(j, j) = d;
+            for i in j + 1..(j + w + 1).min(n) {
+                let lo = i.saturating_sub(w);
+                let mut s = self.get(i, j);
+                for k in lo..j {
+                    s -= self.get(i, k) * self.get(j, k);
+                }
+                *self.at(i, j) = s / d;
+            }
+        }
+        Ok(())
+    }
+    /// Solves `L Lᵀ x = b` in place.
+    fn solve(&self, b: &mut [f64]) {
+        let (n, w) = (self.n, self.w);
+        for i in 0..n {
+            let mut s = b[i];
+            for k in i.saturating_sub(w)..i {
+                s -= self.get(i, k) * b[k];
+            }
+            b[i] = s / self.get(i, i);
+        }
+        for i in (0..n).rev() {
+            let mut s = b[i];
+            for k in i + 1..(i + w + 1).min(n) {
+                s -= self.get(k, i) * b[k];
+            }
+            b[i] = s / self.get(i, i);
+        }
+    }
+}
+
+/// Static equilibrium of a problem's elements, with constraints per component.
+pub struct Statics<'p> {
+    problem: &'p Problem,
+    elements: Elements<f64>,
+    laws: Vec<MaterialLaw<f64>>,
+    /// Nodes sharing a cell with each node (itself included).
+    neighbours: Vec<Vec<usize>>,
+    colour: Vec<usize>,
+    colours: usize,
+    /// Half-bandwidth in dofs.
+    w: usize,
+}
+
+impl<'p> Statics<'p> {
+    pub fn new(problem: &'p Problem) -> Statics<'p> {
+        let n = problem.mesh.nodes.len();
+        let mut neighbours: Vec<Vec<usize>> = (0..n).map(|a| vec![a]).collect();
+        let mut w = 0;
+        for c in &problem.mesh.cells {
+            for &a in c {
+                for &b in c {
+                    let (a, b) = (a as usize, b as usize);
+                    if !neighbours[a].contains(&b) {
+                        neighbours[a].push(b);
+                    }
+                    w = w.max(3 * a.abs_diff(b) + 2);
+                }
+            }
+        }
+        // Distance-2 colouring: two nodes of one colour share no neighbour, so a probe of
+        // every node of a colour leaves each node's force changed by one probed node only.
+        let mut colour = vec![usize::MAX; n];
+        let mut colours = 0;
+        let mut used = Vec::new();
+        for a in 0..n {
+            used.clear();
+            for &b in &neighbours[a] {
+                for &c in &neighbours[b] {
+                    if colour[c] != usize::MAX {
+                        used.push(colour[c]);
+                    }
+                }
+            }
+            let c = (0..).find(|c| !used.contains(c)).unwrap_or(0);
+            colour[a] = c;
+            colours = colours.max(c + 1);
+        }
+        Statics {
+            problem,
+            elements: Elements::build(problem),
+            laws: problem.laws.clone(),
+            neighbours,
+            colour,
+            colours,
+            w,
+        }
+    }
+
+    /// Internal forces at `u`.
+    pub fn forces(&self, u: &[[f64; 3]]) -> Result<Vec<[f64; 3]>> {
+        let mut f = vec![[0.0; 3]; u.len()];
+        self.elements
+            .internal_forces(&self.laws, u, &mut f)
+            .map_err(|e| anyhow!("{e}"))?;
+        Ok(f)
+    }
+
+    /// Tangent stiffness at `u` by central differences of the internal forces, with the
+    /// constrained dofs replaced by identity rows and columns.
+    fn tangent(&self, u: &[[f64; 3]], fixed: &[[bool; 3]]) -> Result<Band> {
+        let n = u.len();
+        let scale = self
+            .problem
+            .reference
+            .iter()
+            .map(|r| r.characteristic_length)
+            .fold(f64::INFINITY, f64::min);
+        let eps = 1e-6 * scale;
+        let mut k = Band::new(3 * n, self.w);
+        for c in 0..self.colours {
+            for i in 0..3 {
+                let probe = |s: f64| -> Result<Vec<[f64; 3]>> {
+                    let mut up = u.to_vec();
+                    for (a, x) in up.iter_mut().enumerate() {
+                        if self.colour[a] == c {
+                            x[i] += s * eps;
+                        }
+                    }
+                    self.forces(&up)
+                };
+                let (fp, fm) = (probe(1.0)?, probe(-1.0)?);
+                for b in 0..n {
+                    let Some(&a) = self.neighbours[b].iter().find(|&&a| self.colour[a] == c) else {
+                        continue;
+                    };
+                    let col = 3 * a + i;
+                    for j in 0..3 {
+                        let row = 3 * b + j;
+                        if row >= col {
+                            let kv = (fp[b][j] - fm[b][j]) / (2.0 * eps);
+                            // Symmetrise: half from each triangle.
+                            *k.at(row, col) += 0.5 * kv;
+                            if row == col {
+                                *k.at(row, col) += 0.5 * kv;
+                            }
+                        } else {
+                            let kv = (fp[b][j] - fm[b][j]) / (2.0 * eps);
+                            *k.at(col, row) += 0.5 * kv;
+                        }
+                    }
+                }
+            }
+        }
+        for (a, fx) in fixed.iter().enumerate() {
+            for i in 0..3 {
+                if fx[i] {
+                    let d = 3 * a + i;
+                    for c in d.saturating_sub(self.w)..d {
+                        *k.at(d, c) = 0.0;
+                    }
+                    for r in d + 1..(d + self.w + 1).min(3 * n) {
+                        *k.at(r, d) = 0.0;
+                    }
+                    *k.at(d, d) = 1.0;
+                }
+            }
+        }
+        Ok(k)
+    }
+
+    /// Small-load static solution `K u = f` about the rest state, `u = 0` on `fixed`.
+    pub fn linear(&self, fixed: &[[bool; 3]], f: &[[f64; 3]]) -> Result<Vec<[f64; 3]>> {
+        let n = f.len();
+        let u0 = vec![[0.0; 3]; n];
+        let mut k = self.tangent(&u0, fixed)?;
+        k.factorise()?;
+        let mut b: Vec<f64> = (0..3 * n)
+            .map(|d| {
+                if fixed[d / 3][d % 3] {
+                    0.0
+                } else {
+                    f[d / 3][d % 3]
+                }
+            })
+            .collect();
+        k.solve(&mut b);
+        Ok((0..n)
+            .map(|a| [b[3 * a], b[3 * a + 1], b[3 * a + 2]])
+            .collect())
+    }
+
+    /// Large-strain static solution: the constrained dofs moved to `target` in `steps`
+    /// equal increments, Newton iterations at each until the free residual is below `tol`
+    /// of the largest internal force. No external load. The first iteration of a step uses
+    /// the tangent of the last converged state (the jump of the constrained dofs alone can
+    /// leave the elements next to them in a state whose tangent is indefinite); an
+    /// iteration whose tangent is indefinite falls back to the last positive definite one.
+    pub fn newton(
+        &self,
+        fixed: &[[bool; 3]],
+        target: &[[f64; 3]],
+        steps: usize,
+        tol: f64,
+    ) -> Result<Vec<[f64; 3]>> {
+        let n = target.len();
+        let mut u = vec![[0.0; 3]; n];
+        let mut good = self.tangent(&u, fixed)?;
+        good.factorise()?;
+        for s in 1..=steps {
+            let frac = s as f64 / steps as f64;
+            for a in 0..n {
+                for i in 0..3 {
+                    if fixed[a][i] {
+                        u[a][i] = frac * target[a][i];
+                    }
+                }
+            }
+            let mut converged = false;
+            for it in 0..100 {
+                let f = self.forces(&u)?;
+                let fmax = f.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+                let mut r = vec![0.0; 3 * n];
+                let mut rmax = 0.0f64;
+                for a in 0..n {
+                    for i in 0..3 {
+                        if !fixed[a][i] {
+                            r[3 * a + i] = -f[a][i];
+                            rmax = rmax.max(f[a][i].abs());
+                        }
+                    }
+                }
+                if rmax <= tol * fmax {
+                    converged = true;
+                    break;
+                }
+                if it > 0 {
+                    let mut k = self.tangent(&u, fixed)?;
+                    if k.factorise().is_ok() {
+                        good = k;
+                    }
+                }
+                good.solve(&mut r);
+                for a in 0..n {
+                    for i in 0..3 {
+                        u[a][i] += r[3 * a + i];
+                    }
+                }
+            }
+            if !converged {
+                bail!("Newton did not converge at load step {s}/{steps}");
+            }
+            let mut k = self.tangent(&u, fixed)?;
+            k.factorise()
+                .map_err(|e| anyhow!("equilibrium at load step {s}/{steps} is unstable: {e}"))?;
+            good = k;
+        }
+        Ok(u)
+    }
+}
