@@ -47,6 +47,23 @@ pub fn patch_identity(elf: &[u8], board: [u8; 3]) -> Result<Vec<u8>> {
     Ok(out)
 }
 
+/// A copy of the firmware ELF whose run options record ([`blob::find_run_options`]) holds
+/// `flags` ([`blob::RUN_HOST_GATE`]: the host's step gate, `link_proto::gate`).
+pub fn patch_run_options(elf: &[u8], flags: u8) -> Result<Vec<u8>> {
+    let hits: Vec<usize> = blob::find_run_options(elf).collect();
+    let [at] = hits[..] else {
+        bail!(
+            "the firmware ELF holds {} run options records (expected exactly one): built before run options?",
+            hits.len()
+        );
+    };
+    let mut out = elf.to_vec();
+    out.get_mut(at..at + blob::RUN_OPTIONS_LEN)
+        .context("run options record cut off at the end of the ELF")?
+        .copy_from_slice(&blob::run_options_record(flags));
+    Ok(out)
+}
+
 /// Largest `|a − b|` over all components, relative to the largest `|a|`; infinite when the
 /// two fields differ in length (a shorter output never passes for an equal one).
 pub fn max_rel_diff(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
@@ -465,6 +482,25 @@ mod tests {
         elf[52..56].copy_from_slice(&[0, 0, 0, 0xA5]);
         assert!(patch_identity(&elf, [1, 2, 3]).is_err());
         assert!(patch_identity(&[0u8; 8], [0; 3]).is_err());
+    }
+
+    #[test]
+    fn run_options_are_patched_once() {
+        let mut elf = vec![0u8; 64];
+        elf[8..24].copy_from_slice(&blob::run_options_record(0));
+        let p = patch_run_options(&elf, blob::RUN_HOST_GATE).unwrap();
+        assert_eq!(p.len(), elf.len());
+        assert_eq!(p[20], blob::RUN_HOST_GATE);
+        assert_eq!(p[23], blob::RUN_HOST_GATE ^ 0x5A);
+        let rec: [u8; blob::RUN_OPTIONS_LEN] = p[8..24].try_into().unwrap();
+        assert_eq!(blob::run_options_flags(&rec), Some(blob::RUN_HOST_GATE));
+        // A damaged check byte is no record; two records are refused.
+        let mut bad = rec;
+        bad[15] ^= 1;
+        assert_eq!(blob::run_options_flags(&bad), None);
+        elf[40..56].copy_from_slice(&blob::run_options_record(0));
+        assert!(patch_run_options(&elf, 1).is_err());
+        assert!(patch_run_options(&[0u8; 8], 1).is_err());
     }
 
     #[test]

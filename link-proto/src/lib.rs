@@ -76,6 +76,7 @@
 pub mod error;
 pub mod frame;
 pub mod framing;
+pub mod gate;
 pub mod limits;
 pub mod link;
 pub mod machine;

@@ -8,6 +8,7 @@ use anyhow::{anyhow, bail, Result};
 use host_tools::compile::{read_manifest, OutputMesh};
 use host_tools::output::write_nodes_csv;
 
+use crate::commands::run::replay_poses;
 use crate::outputs::{ResultArgs, OUTPUT_MESH_SOURCE};
 use crate::qemu::{parse_board, run_array, ArrayFault, ArrayOptions, Connector};
 use crate::report::array::{write_array_fault_report, write_array_report};
@@ -38,6 +39,15 @@ pub struct QemuArgs {
     /// The emulator.
     #[arg(long, default_value = "qemu-system-arm")]
     pub qemu: PathBuf,
+    /// Replay a recorded live session (`pe live`/`board-sim live --record FILE`): its poses
+    /// sent to the boards holding each tool, the boards held to them by the host's step
+    /// gate; bit for bit `board-sim run DIR --replay FILE`.
+    #[arg(long)]
+    pub replay: Option<PathBuf>,
+    /// The force on each tool every step (step,time_s,tool,fx_n,fy_n,fz_n), as the host
+    /// received it.
+    #[arg(long)]
+    pub tool_force: Option<PathBuf>,
     #[arg(long)]
     pub quiet: bool,
 }
@@ -53,6 +63,7 @@ impl QemuArgs {
             kill: self.kill.as_deref().map(parse_kill).transpose()?,
             cross: self.cross.as_deref().map(parse_cross).transpose()?,
             quiet: self.quiet,
+            poses: Default::default(),
         })
     }
 }
@@ -83,8 +94,12 @@ fn parse_cross(s: &str) -> Result<[Connector; 2]> {
 /// `board-sim qemu`: runs the array, writes the outputs, prints a summary.
 pub fn qemu_array(dir: &Path, args: QemuArgs) -> Result<()> {
     let result = args.result.clone();
-    let opts = args.options()?;
+    let (replay, tool_force) = (args.replay.clone(), args.tool_force.clone());
+    let mut opts = args.options()?;
     let manifest = read_manifest(dir)?;
+    if let Some(r) = &replay {
+        opts.poses = replay_poses(r, &manifest, &OutputMesh::read(dir)?)?;
+    }
     eprintln!(
         "{}: {} boards ({}x{}x{}) under QEMU mps2-an500, {} steps",
         manifest.scene,
@@ -120,8 +135,17 @@ pub fn qemu_array(dir: &Path, args: QemuArgs) -> Result<()> {
         let mesh = OutputMesh::read(dir)?.mesh(OUTPUT_MESH_SOURCE);
         write_nodes_csv(p, &mesh, &out.displacements)?;
     }
+    if out.pose_packets > 0 {
+        println!("{} tool-pose packets sent", out.pose_packets);
+    }
     if let Some(p) = &result.report {
         write_array_report(p, &out, max_u, per_step)?;
+    }
+    if let Some(p) = &tool_force {
+        let (tools, dt_s) = (OutputMesh::read(dir)?.tools.len(), manifest.dt_s);
+        host_tools::output::tool_force::write_tool_force_csv(p, &out.tool_force, tools, |s| {
+            s as f64 * dt_s
+        })?;
     }
     Ok(())
 }

@@ -240,7 +240,11 @@ fn sim_options(a: &RunArgs, manifest: &Manifest) -> Result<SimOptions> {
 
 /// The poses of the record `path` (host-tools' reader: the scene, time step and tools
 /// checked against the compiled scene's).
-fn replay_poses(path: &Path, manifest: &Manifest, mesh: &OutputMesh) -> Result<PoseSchedule> {
+pub(crate) fn replay_poses(
+    path: &Path,
+    manifest: &Manifest,
+    mesh: &OutputMesh,
+) -> Result<PoseSchedule> {
     // The images step at the manifest's dt and hold the tools `mesh.json` names.
     let tools: Vec<&str> = mesh.tools.iter().map(|t| t.name.as_str()).collect();
     let poses = replay_schedule_for(path, &manifest.scene, manifest.dt_s, &tools)?;

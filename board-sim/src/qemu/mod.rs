@@ -28,18 +28,20 @@ mod collect;
 mod options;
 mod output;
 mod relay;
+mod replay;
 mod start;
 mod watch;
 mod wiring;
 
 use std::path::Path;
 use std::process::Command;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
 use host_tools::compile::{read_manifest, Manifest};
+use link_proto::Machine;
 use pe_firmware::runtime::RuntimeConfig;
 
 pub use options::ArrayOptions;
@@ -47,8 +49,9 @@ pub use output::{ArrayFault, ArrayOutput, BoardRun};
 pub use wiring::{cables, parse_board, Connector, Linked};
 
 use crate::check::{collect_sinks, HostCheck};
-use crate::runner::manifest_machine;
+use crate::runner::{manifest_machine, one_per_tool_and_step, read_images, tool_holders};
 use relay::{Activity, Network};
+use replay::{feed, gated_elfs, Replay};
 use start::{connect, listen, start_boards, Emulated};
 use wiring::Wiring;
 
@@ -59,7 +62,11 @@ pub fn run_array(dir: &Path, opts: &ArrayOptions) -> Result<ArrayOutput> {
     check_setup(dir, &m, opts)?;
     let machine = manifest_machine(dir, &m)?;
     let images = opts.images.clone().unwrap_or_else(|| dir.join("qemu"));
-    let im = host_tools::firmware::image_dir(dir, &images, opts.firmware.as_deref())?;
+    let mut im = host_tools::firmware::image_dir(dir, &images, opts.firmware.as_deref())?;
+    let replay = replay_of(dir, &m, machine, opts)?;
+    if replay.is_some() {
+        gated_elfs(&mut im.boards, &images)?;
+    }
     let wiring = Wiring::read(dir, &m, opts.cross)?;
     let listeners = listen(wiring.board_uarts())?;
     let act = Arc::new(Activity::default());
@@ -67,10 +74,21 @@ pub fn run_array(dir: &Path, opts: &ArrayOptions) -> Result<ArrayOutput> {
     let mut boards = start_boards(&im.boards, &images, &listeners, opts, &act)?;
     let sockets = connect(&listeners, &mut boards)?;
     let mut net = Network::wire(&wiring, sockets, &act)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let feeder = replay.map(|r| {
+        let (switch, stop) = (net.switch.clone(), stop.clone());
+        std::thread::spawn(move || feed(&r, &switch, &switch.gate, &stop))
+    });
     let timeout = Duration::from_nanos(RuntimeConfig::default().link_timeout_ns);
     let quiet_limit = 2 * timeout + Duration::from_secs(5);
     watch::watch(&mut boards, &net.switch, &act, start, quiet_limit, opts);
     let wall_s = start.elapsed().as_secs_f64();
+    stop.store(true, Ordering::Relaxed);
+    let pose_packets = match feeder.map(|f| f.join()) {
+        None => 0,
+        Some(Ok(sent)) => sent?,
+        Some(Err(_)) => bail!("the host's pose feeder panicked"),
+    };
     end(&mut boards, std::mem::take(&mut net.threads));
     let runs = collect::failure(collect::account(&boards, &net, wall_s), &net, timeout)?;
     let displacements = collect::merged_state(&boards)?;
@@ -87,7 +105,23 @@ pub fn run_array(dir: &Path, opts: &ArrayOptions) -> Result<ArrayOutput> {
         packets_to_sinks: net.switch.to_sinks.load(Ordering::Relaxed),
         graphics_frames: frames.len(),
         tool_force,
+        pose_packets,
     })
+}
+
+/// The replay `opts` asks for: its poses, the boards holding each tool (from the images).
+fn replay_of(
+    dir: &Path,
+    m: &Manifest,
+    machine: Machine,
+    opts: &ArrayOptions,
+) -> Result<Option<Replay>> {
+    if opts.poses.poses.is_empty() {
+        return Ok(None);
+    }
+    let (images, _, tools) = read_images(dir, m, machine, true)?;
+    let holders = tool_holders(machine, &images, tools);
+    Replay::new(one_per_tool_and_step(&opts.poses), holders).map(Some)
 }
 
 /// Refuses images of another profile than QEMU's, and a missing emulator.

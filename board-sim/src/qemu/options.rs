@@ -24,6 +24,9 @@ pub struct ArrayOptions {
     pub cross: Option<[Connector; 2]>,
     /// Print the boards' fault reports as they arrive.
     pub quiet: bool,
+    /// Tool poses to replay (`--replay`), held to their steps by the host's step gate
+    /// ([`super::replay`]); none: the boards run free.
+    pub poses: host_tools::solver::PoseSchedule,
 }
 
 impl Default for ArrayOptions {
@@ -36,6 +39,7 @@ impl Default for ArrayOptions {
             kill: None,
             cross: None,
             quiet: true,
+            poses: Default::default(),
         }
     }
 }

@@ -34,6 +34,8 @@ pub struct ArrayOutput {
     /// Surface frames the graphics engine assembled, and the host's per-step tool force.
     pub graphics_frames: usize,
     pub tool_force: Vec<[f64; 3]>,
+    /// Tool-pose packets the host sent (a replay; 0 otherwise).
+    pub pose_packets: u64,
 }
 
 /// The boards' own account of a failed run: what the harness did (a kill, the deadline),

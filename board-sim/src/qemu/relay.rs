@@ -12,9 +12,10 @@ use std::thread::JoinHandle;
 
 use anyhow::{Context, Result};
 use link_proto::packet::{ADDR_BROADCAST, ADDR_GRAPHICS, ADDR_HOST};
-use link_proto::{PacketKind, PacketRepr};
+use link_proto::{Control, PacketKind, PacketRepr};
 use pe_firmware::profile::mps2_uarts;
 
+use super::replay::GateWaits;
 use super::wiring::{address, Connector, Uart, Wiring};
 use crate::fabric::{packet_header, GlobalNet};
 
@@ -67,10 +68,13 @@ pub(crate) struct GlobalSwitch {
     pub damaged: Mutex<Vec<(u8, String)>>,
     pub between_boards: AtomicU64,
     pub to_sinks: AtomicU64,
+    /// The steps the gated boards wait at (a replay: [`super::replay`]).
+    pub gate: GateWaits,
 }
 
 impl GlobalSwitch {
-    fn forward(&self, dst: u8, packet: &[u8]) {
+    /// Sends `packet` (unframed) to board `dst`'s global port.
+    pub fn forward(&self, dst: u8, packet: &[u8]) {
         let mut wire = vec![0u8; link_proto::PACKET_WIRE_LEN_MAX];
         let Ok(n) = link_proto::encode_wire(packet, &mut wire) else {
             return;
@@ -94,6 +98,13 @@ impl GlobalSwitch {
             }
         };
         match repr.dst {
+            ADDR_HOST if repr.kind == PacketKind::Control(Control::StepDone) => {
+                if let Err(e) = self.gate.report(repr.src, repr.payload) {
+                    if let Ok(mut d) = self.damaged.lock() {
+                        d.push((src, format!("step gate report: {e}")));
+                    }
+                }
+            }
             ADDR_HOST if repr.kind == PacketKind::FaultReport => {
                 let text = String::from_utf8_lossy(repr.payload).into_owned();
                 if let Ok(mut f) = self.faults.lock() {
@@ -206,6 +217,7 @@ impl Network {
             damaged: Mutex::new(Vec::new()),
             between_boards: AtomicU64::new(0),
             to_sinks: AtomicU64::new(0),
+            gate: GateWaits::default(),
         });
         let global_sent: BTreeMap<[usize; 3], Arc<AtomicU64>> = w
             .linked

@@ -24,8 +24,10 @@ use pe_firmware::image::ImageReader;
 use pe_firmware::runtime::RuntimeConfig;
 
 pub use images::manifest_machine;
+pub(crate) use images::read_images;
 pub use open::{start_open, OpenArray};
 pub use options::SimOptions;
+pub(crate) use poses::{one_per_tool_and_step, pose_repr};
 
 use crate::check::{attribute, collect_sinks, missing_sink_packets, sink_observations, HostCheck};
 use crate::clock::SweepClock;
@@ -33,7 +35,7 @@ use crate::fabric::{build_links, Doorbell, EmuLinks, GlobalNet};
 use crate::faults::{FaultyLinks, Injected};
 use crate::results::SimOutput;
 use collect::{Collected, Report};
-use poses::{one_per_tool_and_step, PoseFeed, PoseSender};
+use poses::{PoseFeed, PoseSender};
 use stack::{BoardLinks, Lower};
 use worker::{spawn_workers, BoardCtx, BoxedLinks};
 
@@ -234,7 +236,7 @@ fn prepare(dir: &Path, opts: &SimOptions) -> Result<Prepared> {
     })
 }
 
-fn tool_holders(machine: Machine, images: &[Vec<u8>], tools: usize) -> Vec<Vec<u8>> {
+pub(crate) fn tool_holders(machine: Machine, images: &[Vec<u8>], tools: usize) -> Vec<Vec<u8>> {
     let mut holders = vec![Vec::new(); tools];
     for (c, image) in machine.boards().zip(images) {
         let (Ok(r), Some(a)) = (ImageReader::new(image, None), Machine::address(c)) else {
@@ -303,6 +305,8 @@ impl Workers {
                 frame_every: opts.frame_every,
                 config: RuntimeConfig {
                     link_timeout_ns: opts.link_timeout.as_nanos() as u64,
+                    // board-sim's host gates its workers itself (`runner::poses`).
+                    host_gate: false,
                 },
                 progress: shared.progress.clone(),
                 stop: shared.stop.clone(),

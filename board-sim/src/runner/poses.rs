@@ -104,7 +104,7 @@ impl PoseSender {
                     "pose for tool {tool} at step {step}: no board's contact tables hold that tool"
                 );
             }
-            let repr = repr(step, tool, &pose)?;
+            let repr = pose_repr(step, tool, &pose)?;
             let mut buf = [0u8; ToolPoseRepr::LEN];
             repr.emit(&mut buf)?;
             ToolPoseRepr::parse_bytes(&buf)
@@ -161,7 +161,7 @@ impl PoseSender {
     ) -> Result<u64> {
         let mut sent = 0;
         for &dst in self.holders.get(tool).map_or(&[][..], |h| h) {
-            self.send(dst, &repr(step, tool, pose)?, seq, buf)?;
+            self.send(dst, &pose_repr(step, tool, pose)?, seq, buf)?;
             sent += 1;
         }
         Ok(sent)
@@ -198,7 +198,7 @@ impl PoseSender {
 }
 
 /// The payload of `tool`'s pose at `step`.
-fn repr(step: u64, tool: usize, pose: &Pose) -> Result<ToolPoseRepr> {
+pub(crate) fn pose_repr(step: u64, tool: usize, pose: &Pose) -> Result<ToolPoseRepr> {
     Ok(ToolPoseRepr {
         tool: u8::try_from(tool).map_err(|_| anyhow!("tool {tool}: past the wire's u8"))?,
         step: u32::try_from(step)

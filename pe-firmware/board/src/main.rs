@@ -10,7 +10,7 @@ use cortex_m_rt::{entry, exception, ExceptionFrame};
 use pe_board::clock;
 use pe_board::config::{Element, Scalar, CAPACITIES, PROFILE, VARIANT};
 use pe_board::log_info;
-use pe_board::region::{board_position, schedule_image};
+use pe_board::region::{self, board_position, schedule_image};
 use pe_board::{links, report, storage};
 use pe_firmware::physics::Real;
 use pe_firmware::runtime::{Fault, FaultKind, Runtime, RuntimeConfig};
@@ -42,9 +42,16 @@ fn main() -> ! {
     let Some(store) = storage::take() else {
         report::fault(board, format_args!("storage taken twice"));
     };
+    let Some(host_gate) = region::host_gate() else {
+        report::fault(board, format_args!("run options record damaged"));
+    };
+    let config = RuntimeConfig {
+        host_gate,
+        ..RuntimeConfig::default()
+    };
     // Straight into its place (the runtime is about 48 KiB: every copy on the way is stack).
-    let mut rt = Runtime::<Scalar, Element>::load(image, board, store, RuntimeConfig::default())
-        .unwrap_or_else(|e| {
+    let mut rt =
+        Runtime::<Scalar, Element>::load(image, board, store, config).unwrap_or_else(|e| {
             report::fault(
                 board,
                 format_args!(

@@ -6,7 +6,8 @@
 //! every record) is checked by the runtime's loader.
 
 use pe_firmware::image::blob::{
-    identity_position, identity_record, read_blob, BlobError, IDENTITY_LEN,
+    identity_position, identity_record, read_blob, run_options_flags, run_options_record,
+    BlobError, IDENTITY_LEN, RUN_HOST_GATE, RUN_OPTIONS_LEN,
 };
 
 /// The image linked into the region when built with `PE_SCHEDULE_IMAGE=FILE` (otherwise
@@ -52,4 +53,18 @@ pub fn board_position() -> Option<[u8; 3]> {
     // fold the shipped value: the host tool patches the bytes in the ELF after linking.
     let id = unsafe { core::ptr::read_volatile(core::ptr::addr_of!(PE_BOARD_IDENTITY)) };
     identity_position(&id)
+}
+
+/// The board's run options record ([`pe_firmware::image::blob`]): none set as shipped; a
+/// host that needs its step gate (`board-sim qemu --replay`) writes it into its copy of
+/// the ELF.
+#[used]
+#[no_mangle]
+pub static PE_RUN_OPTIONS: [u8; RUN_OPTIONS_LEN] = run_options_record(0);
+
+/// Whether the run options switch the host's step gate on (`None`: the record is damaged).
+pub fn host_gate() -> Option<bool> {
+    // SAFETY: as for PE_BOARD_IDENTITY: a valid static the host tool may patch in the ELF.
+    let r = unsafe { core::ptr::read_volatile(core::ptr::addr_of!(PE_RUN_OPTIONS)) };
+    run_options_flags(&r).map(|f| f & RUN_HOST_GATE != 0)
 }

@@ -7,6 +7,11 @@
 //! - The identity record is 16 bytes in the firmware: [`IDENTITY_MARKER`] (`PE-BOARD-ID`
 //!   and a NUL), then x, y, z and a check byte `x ^ y ^ z ^ 0xA5`. The firmware ships with
 //!   (0,0,0); `pe image` writes each board's position into its copy of the ELF.
+//! - The run options record is 16 bytes in the firmware: [`RUN_OPTIONS_MARKER`]
+//!   (`PE-RUN-OPTS` and a NUL), a flags byte ([`RUN_HOST_GATE`]), two zero bytes and a
+//!   check byte `flags ^ 0x5A`. The firmware ships with no flag set; a host that needs one
+//!   (`board-sim qemu --replay`: the host's step gate, `link_proto::gate`) writes it into
+//!   its copy of the ELF, as `pe image` writes the identity.
 //!
 //! Nothing here panics.
 
@@ -111,4 +116,42 @@ pub fn find_identity(elf: &[u8]) -> impl Iterator<Item = usize> + '_ {
         let r: &[u8; IDENTITY_LEN] = w.try_into().ok()?;
         (r[..12] == IDENTITY_MARKER && identity_position(r).is_some()).then_some(k)
     })
+}
+
+/// The marker that starts the run options record.
+pub const RUN_OPTIONS_MARKER: [u8; 12] = *b"PE-RUN-OPTS\0";
+/// Bytes of the run options record.
+pub const RUN_OPTIONS_LEN: usize = 16;
+/// Run option: a board whose contact tables hold a tool waits for the host's permits
+/// (`link_proto::gate`).
+pub const RUN_HOST_GATE: u8 = 1;
+
+/// The run options record with `flags`.
+pub const fn run_options_record(flags: u8) -> [u8; RUN_OPTIONS_LEN] {
+    let mut r = [0u8; RUN_OPTIONS_LEN];
+    let mut k = 0;
+    while k < RUN_OPTIONS_MARKER.len() {
+        r[k] = RUN_OPTIONS_MARKER[k];
+        k += 1;
+    }
+    r[12] = flags;
+    r[15] = flags ^ 0x5A;
+    r
+}
+
+/// The flags of a run options record, or `None` if it is damaged (its check byte or
+/// reserved bytes wrong).
+pub fn run_options_flags(record: &[u8; RUN_OPTIONS_LEN]) -> Option<u8> {
+    let flags = record[12];
+    (record[13] == 0 && record[14] == 0 && record[15] == flags ^ 0x5A).then_some(flags)
+}
+
+/// Offsets of the run options records in a firmware file.
+pub fn find_run_options(elf: &[u8]) -> impl Iterator<Item = usize> + '_ {
+    elf.windows(RUN_OPTIONS_LEN)
+        .enumerate()
+        .filter_map(|(k, w)| {
+            let r: &[u8; RUN_OPTIONS_LEN] = w.try_into().ok()?;
+            (r[..12] == RUN_OPTIONS_MARKER && run_options_flags(r).is_some()).then_some(k)
+        })
 }

@@ -127,12 +127,17 @@ impl<T: Real, E: HexElement<T>> BatchForces<T, E> for ScalarBatches {
 pub struct RuntimeConfig {
     /// A link that delivers nothing for this long is a fault (ns).
     pub link_timeout_ns: u64,
+    /// The host's step gate ([`link_proto::gate`]): a board holding a tool starts no
+    /// step's contact before the host permits it (a replay on boards faster than the
+    /// host). Off on a live array, whose host sends poses ahead of the wall clock.
+    pub host_gate: bool,
 }
 
 impl Default for RuntimeConfig {
     fn default() -> Self {
         RuntimeConfig {
             link_timeout_ns: 10_000_000_000,
+            host_gate: false,
         }
     }
 }
@@ -414,6 +419,9 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
     /// The fault of an operation that waited longer than the link timeout.
     fn timeout(&self, op: Op) -> Fault {
         match op {
+            Op::Contact if self.waits_for_permit() => self.fault(FaultKind::GlobalTimeout {
+                src: link_proto::packet::ADDR_HOST,
+            }),
             Op::Contact => self.fault(FaultKind::GlobalTimeout {
                 src: self
                     .contact

@@ -9,8 +9,15 @@
 //! A pose for a step whose contact this board already evaluated, for a tool it does not
 //! hold, or one more than the queue holds is a [`FaultKind::Pose`] naming the board, the
 //! step, the tool and the pose's step: never applied at another step, never a panic.
+//!
+//! With the host's step gate on ([`RuntimeConfig::host_gate`](super::RuntimeConfig), for a
+//! replay on boards that run faster than the host sends: [`link_proto::gate`]), a board
+//! holding a tool starts no step's contact at or past the host's permit: it tells the host
+//! the step it waits at once, and files the permits that come with the poses.
 
+use link_proto::gate::StepMarkRepr;
 use link_proto::tool_pose::{ToolPoseRepr, POSE_DELAY_STEPS};
+use link_proto::{Control, Links, PacketKind, PACKET_HEADER_LEN};
 
 use super::contact::TOOLS_MAX;
 use super::{Fault, FaultKind, Runtime, WireReal};
@@ -70,6 +77,10 @@ pub struct PoseQueue {
     current: [Option<Pose>; TOOLS_MAX],
     /// The first step whose poses are not applied yet.
     next_step: u64,
+    /// The host's gate: the first step not permitted yet (without the gate, unused).
+    permit: u64,
+    /// The step whose wait the host was told of.
+    reported: Option<u64>,
 }
 
 impl PoseQueue {
@@ -83,7 +94,14 @@ impl PoseQueue {
             len: 0,
             current: [None; TOOLS_MAX],
             next_step: 0,
+            permit: 0,
+            reported: None,
         }
+    }
+
+    /// Files a host's permit: steps below `until` may run (a permit never lowers the gate).
+    fn permit(&mut self, until: u32) {
+        self.permit = self.permit.max(u64::from(until));
     }
 
     /// Files `p` (for a board holding `tools` tools); the problem if it is refused.
@@ -148,6 +166,41 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                 problem,
             })
         })
+    }
+
+    /// A permit from the host (`link_proto::gate`): steps below `until` may run (without
+    /// the gate it changes nothing).
+    pub(super) fn file_permit(&mut self, until: u32) {
+        self.contact.poses.permit(until);
+    }
+
+    /// Whether this step's contact may start: always without the host's gate; with it,
+    /// once the host permits the step. While it waits, the host is told the step once
+    /// (`Ok(false)` also while the port is busy).
+    pub(super) fn gate_open(&mut self, links: &mut impl Links) -> Result<bool, Fault> {
+        if !self.waits_for_permit() {
+            return Ok(true);
+        }
+        if self.contact.poses.reported == Some(self.step) {
+            return Ok(false);
+        }
+        let step = u32::try_from(self.step).unwrap_or(u32::MAX);
+        let len = StepMarkRepr { step }
+            .emit(&mut self.st.tx[PACKET_HEADER_LEN..])
+            .map_err(|error| self.fault(FaultKind::BadPacket { error }))?;
+        let host = link_proto::packet::ADDR_HOST;
+        let kind = PacketKind::Control(Control::StepDone);
+        if self.send_global(links, host, kind, len)? {
+            self.contact.poses.reported = Some(self.step);
+        }
+        Ok(false)
+    }
+
+    /// Whether this step's contact waits for the host's permit.
+    pub(super) fn waits_for_permit(&self) -> bool {
+        self.config.host_gate
+            && self.header.counts.tools > 0
+            && self.step >= self.contact.poses.permit
     }
 
     /// The poses due at this step, before its contact evaluation.
@@ -224,5 +277,22 @@ mod tests {
         }
         assert_eq!(q.push(&pose(0, 200, 0.0), 1), Err(PoseProblem::QueueFull));
         assert_eq!(q.pending(), POSE_QUEUE_MAX);
+    }
+
+    #[test]
+    fn a_permit_only_raises_the_gate() {
+        let mut q = PoseQueue::new();
+        assert_eq!(
+            q.permit, 0,
+            "a gated board waits at step 0 for the first permit"
+        );
+        q.permit(32);
+        q.permit(16);
+        assert_eq!(
+            q.permit, 32,
+            "a late, lower permit does not close steps again"
+        );
+        q.permit(u32::MAX);
+        assert_eq!(q.permit, u64::from(u32::MAX));
     }
 }

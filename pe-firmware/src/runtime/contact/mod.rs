@@ -6,11 +6,12 @@
 //! to the host. The state of that protocol is [`ContactState`]; the tables and buffers are
 //! in [`ContactStorage`](super::storage::ContactStorage); the evaluation of a step's contact is [`evaluate`]'s.
 
+use link_proto::gate::StepMarkRepr;
 use link_proto::payload::{
     emit_node_entry, node_entry, nodes_per_packet_max, BoxPayload, NodesHeader, ToolForcePayload,
 };
 use link_proto::tool_pose::ToolPoseRepr;
-use link_proto::{Links, PacketKind, PacketRepr, PACKET_HEADER_LEN};
+use link_proto::{Control, Links, PacketKind, PacketRepr, PACKET_HEADER_LEN};
 
 use super::marks::cost_mark;
 use super::pose::PoseQueue;
@@ -225,6 +226,9 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
             self.receive_contact(links)?;
             match self.contact.phase {
                 Phase::Start => {
+                    if !self.gate_open(links)? {
+                        return Ok(false);
+                    }
                     self.contact.phase = if !self.has_pairs() {
                         Phase::Evaluate
                     } else if self.is_check_step() {
@@ -504,6 +508,12 @@ impl<T: WireReal, E: ElementRecord<T>> Runtime<'_, T, E> {
                 (PacketKind::ToolPose, _) if src == link_proto::packet::ADDR_HOST => {
                     let pose = ToolPoseRepr::parse_bytes(payload).map_err(bad)?;
                     self.file_pose(&pose)?
+                }
+                (PacketKind::Control(Control::Start), _)
+                    if src == link_proto::packet::ADDR_HOST =>
+                {
+                    let mark = StepMarkRepr::parse_bytes(payload).map_err(bad)?;
+                    self.file_permit(mark.step)
                 }
                 _ => return Err(self.fault(unexpected(now))),
             }
