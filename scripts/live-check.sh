@@ -13,7 +13,8 @@
 # of building one), LEVEL (the built-in level served, default coarse) and THREADS (solver
 # threads, default 1): `LEVEL=medium THREADS=2` measures the built-in medium scene live
 # (the server's summary, with the real-time factor and the pose-to-force latency, ends
-# $OUT/server.log).
+# $OUT/server.log); LIVE_ARGS adds pe live options (e.g. `--plan DIR`: the model pe plan
+# finds for real time where the full one cannot keep up, docs/live.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -56,7 +57,7 @@ echo "live-check: pe live --builtin --level ${LEVEL:-coarse} on 127.0.0.1:$PORT 
 # --duration as a backstop: the trap below stops it first. One solver thread: the coarse
 # scene runs faster on one, and the browser's software WebGL needs the other core.
 "$PE" live --builtin --level "${LEVEL:-coarse}" --listen "127.0.0.1:$PORT" --igtl-port 0 --duration 900 \
-    --threads "${THREADS:-1}" \
+    --threads "${THREADS:-1}" ${LIVE_ARGS:-} \
     </dev/null >"$LOG" 2>&1 &
 SERVER=$!
 # Ctrl-C (SIGINT) ends pe live with its summary; a server that has not ended after 5 s is

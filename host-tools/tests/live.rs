@@ -91,7 +91,7 @@ fn live(cfg: Config) -> Live {
     let flag = stop.clone();
     let done = std::thread::spawn(move || {
         let p = problem();
-        let mut engine = SolverEngine::<f64>::new(&p, SCENE_NAME, 1).expect("engine");
+        let mut engine = SolverEngine::<f64>::new(&p, SCENE_NAME, 1, "").expect("engine");
         let summary = serve(&mut engine, "127.0.0.1:0", 0, &cfg, &flag, |a| {
             tx.send(a).expect("test waits")
         })

@@ -301,6 +301,48 @@ fn the_planned_builtin_scene_stays_within_its_budget_and_runs_everywhere() {
         pe_firmware::image::Precision::F32 => 1e-4,
     };
     assert!(d < tol, "2x2x2 against the solver: {d:e}");
+    live_serves_the_plan(&scene, &out, &planned, full_elements);
+}
+
+/// `pe live --plan DIR` (issue 60) on the plan just made: where the full model cannot keep
+/// up (a `--min-rtf` no machine reaches) it serves the plan, read back, not planned again,
+/// and says so; where it can (`--min-rtf 0`), the full model; a plan for another scene is
+/// refused, naming both.
+fn live_serves_the_plan(scene: &Scene, out: &Path, planned: &Problem, full_elements: usize) {
+    use host_tools::live::model::{choose, read_plan, ModelArgs};
+    let plan_json = std::fs::read(out.join("plan.json")).expect("plan.json");
+    assert!(plan_json.len() > 100, "plan.json written");
+    let args = |min_rtf| ModelArgs {
+        plan: Some(out.to_path_buf()),
+        plan_budget: "2%".into(),
+        min_rtf,
+    };
+    let here = Path::new(".");
+    let (name, arg) = ("builtin:coarse", "--builtin --level coarse");
+    let c = choose(scene, here, name, arg, &args(1e9), 1).expect("the plan chosen");
+    println!("pe live --min-rtf 1e9: {}", c.note);
+    assert!(
+        c.planned && c.note.starts_with("planned model"),
+        "{}",
+        c.note
+    );
+    assert!(c.note.contains("budget 2.000%"), "{}", c.note);
+    assert_eq!(c.problem.mesh.cells.len(), planned.mesh.cells.len());
+    assert!(planned.mesh.cells.len() < full_elements);
+    assert_eq!(c.scene_arg, out.join("scene.toml").display().to_string());
+    let again = std::fs::read(out.join("plan.json")).expect("plan.json");
+    assert_eq!(again, plan_json, "the plan was read back, not made again");
+    let c = choose(scene, here, name, arg, &args(0.0), 1).expect("the full model chosen");
+    assert!(!c.planned && c.note.starts_with("full model"), "{}", c.note);
+    assert_eq!(c.problem.mesh.cells.len(), full_elements);
+    let e = read_plan(out, "builtin:medium")
+        .err()
+        .map(|e| e.to_string());
+    let e = e.expect("a plan for another scene is refused");
+    assert!(
+        e.contains("builtin:coarse") && e.contains("builtin:medium"),
+        "{e}"
+    );
 }
 
 /// A shared mesh with a load (no tool): the same, by the displacement of the loaded nodes.

@@ -8,13 +8,13 @@ use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 
 use super::engine::Engine;
 use super::http::{Link, Server};
+use super::model::{self, ModelArgs};
 use super::session::{self, Config, Summary, GRAPHICS_HZ_MIN};
 use super::solver_engine::solver_engine;
-use crate::problem::Problem;
 use crate::scene::SceneArgs;
 
 #[derive(clap::Args, Debug, Clone)]
@@ -24,6 +24,8 @@ pub struct LiveArgs {
     /// Solver threads (default: all cores); the same bits whatever the count.
     #[arg(long)]
     pub threads: Option<usize>,
+    #[command(flatten)]
+    pub model: ModelArgs,
     #[command(flatten)]
     pub session: SessionArgs,
 }
@@ -127,23 +129,25 @@ pub fn config(args: &SessionArgs) -> Result<Config> {
 pub fn run(args: &LiveArgs) -> Result<()> {
     let cfg = config(&args.session)?;
     let (scene, dir, name) = args.scene.load()?;
-    let problem = Problem::from_scene(&scene, &dir).with_context(|| format!("scene {name}"))?;
-    problem.print_notes();
     let threads = args
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
         .max(1);
-    let mut engine = solver_engine(&problem, &name, threads)?;
-    let summary = serve_until_stopped(engine.as_mut(), &name, &args.session, &cfg, "pe live")?;
+    let scene_arg = if args.scene.builtin {
+        format!("--builtin --level {}", args.scene.level)
+    } else {
+        name.clone()
+    };
+    let chosen = model::choose(&scene, &dir, &name, &scene_arg, &args.model, threads)?;
+    chosen.problem.print_notes();
+    let (problem, name) = (&chosen.problem, &chosen.name);
+    let mut engine = solver_engine(problem, name, threads, &chosen.note)?;
+    let summary = serve_until_stopped(engine.as_mut(), name, &args.session, &cfg, "pe live")?;
     if let Some(p) = &args.session.record {
         println!(
             "  recorded to {} (replay: pe solve {} --replay {} --steps {})",
             p.display(),
-            if args.scene.builtin {
-                format!("--builtin --level {}", args.scene.level)
-            } else {
-                name.clone()
-            },
+            chosen.scene_arg,
             p.display(),
             summary.steps
         );

@@ -9,6 +9,7 @@ pub mod engine;
 pub mod http;
 pub mod hub;
 pub mod igtl;
+pub mod model;
 pub mod pose;
 pub mod protocol;
 pub mod session;

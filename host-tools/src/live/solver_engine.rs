@@ -20,20 +20,22 @@ pub struct SolverEngine<'p, T: Real> {
     no_forces: Vec<[f64; 3]>,
 }
 
-/// The engine for `problem` in its scene's precision, on `threads` threads, open-ended.
+/// The engine for `problem` in its scene's precision, on `threads` threads, open-ended;
+/// `note` (which model and why, [`super::model`]) heads its model line when not empty.
 pub fn solver_engine<'p>(
     problem: &'p Problem,
     name: &str,
     threads: usize,
+    note: &str,
 ) -> Result<Box<dyn Engine + Send + 'p>> {
     Ok(match problem.solver.precision {
-        Precision::F32 => Box::new(SolverEngine::<f32>::new(problem, name, threads)?),
-        Precision::F64 => Box::new(SolverEngine::<f64>::new(problem, name, threads)?),
+        Precision::F32 => Box::new(SolverEngine::<f32>::new(problem, name, threads, note)?),
+        Precision::F64 => Box::new(SolverEngine::<f64>::new(problem, name, threads, note)?),
     })
 }
 
 impl<'p, T: Real> SolverEngine<'p, T> {
-    pub fn new(problem: &'p Problem, name: &str, threads: usize) -> Result<Self> {
+    pub fn new(problem: &'p Problem, name: &str, threads: usize, note: &str) -> Result<Self> {
         let mut stepper = Stepper::<T>::new(problem, name, threads)?;
         stepper.steps = u64::MAX;
         let (surface, surface_nodes) = surface_of(problem);
@@ -46,7 +48,8 @@ impl<'p, T: Real> SolverEngine<'p, T> {
         let info = EngineInfo {
             scene: name.to_string(),
             model: format!(
-                "host solver, {} elements, {} nodes, {} {}",
+                "{note}{}host solver, {} elements, {} nodes, {} {}",
+                if note.is_empty() { "" } else { ": " },
                 problem.mesh.cells.len(),
                 problem.mesh.nodes.len(),
                 T::NAME,

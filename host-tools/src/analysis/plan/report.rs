@@ -3,13 +3,13 @@
 
 use std::fmt::Write as _;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::*;
 use crate::output::render::{render_surface_png, CapsuleOverlay, SurfaceImage, View as Camera};
 
 /// One measured model: a row of the report.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Row {
     /// What this row tries ("reference", "level coarse", "prune below 1% of max |u|", ...).
     pub choice: String,
@@ -46,7 +46,7 @@ pub struct Row {
 }
 
 /// The whole plan (`DIR/plan.json`).
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct PlanReport {
     pub scene: String,
     pub budget_rel: f64,
@@ -72,7 +72,7 @@ pub struct PlanReport {
 }
 
 /// What one board runs in the final model.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct BoardUse {
     pub board: [usize; 3],
     pub elements: usize,
