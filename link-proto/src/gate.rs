@@ -4,16 +4,16 @@
 //! live array is).
 //!
 //! A gated board (one whose firmware's run options switch the gate on, and whose contact
-//! tables hold a tool) starts no step at or past the host's last permit (none before the
-//! first: it waits at step 0). At
-//! the first such step it sends the host one [`Control::StepDone`](crate::Control) packet
-//! naming the step it waits at, and goes on when a [`Control::Start`](crate::Control)
-//! packet permits steps past it. Both carry one [`StepMarkRepr`]:
+//! tables hold a tool) starts no step's contact at or past the host's last permit (there
+//! is none before the first: it waits at step 0). At the first such step it sends the
+//! host one [`Control::StepDone`](crate::Control) packet naming the step it waits at, and
+//! goes on when a [`Control::Start`](crate::Control) packet permits steps past it. Both
+//! carry one [`StepMarkRepr`]:
 //!
 //! | packet              | direction     | `step` means                          |
 //! |---------------------|---------------|---------------------------------------|
 //! | `Control::Start`    | host -> board | run the steps below `step`            |
-//! | `Control::StepDone` | board -> host | every step below `step` done; waiting |
+//! | `Control::StepDone` | board -> host | waiting at `step`'s contact           |
 //!
 //! The host sends a window's poses before its permit on the same port, so they arrive
 //! first: every pose is filed before its step (the run is deterministic), and a board
