@@ -61,12 +61,15 @@ pub(crate) struct Replay {
 
 impl Replay {
     pub fn new(poses: Vec<(u64, usize, Pose)>, holders: Vec<Vec<u8>>) -> Result<Replay> {
-        for &(step, tool, _) in &poses {
+        // Every pose checked before any board starts: a tool some board holds, a step and a
+        // tool the wire carries.
+        for &(step, tool, pose) in &poses {
             if holders.get(tool).is_none_or(|h| h.is_empty()) {
                 anyhow::bail!(
                     "pose for tool {tool} at step {step}: no board's contact tables hold that tool"
                 );
             }
+            pose_repr(step, tool, &pose)?;
         }
         let mut gated: Vec<u8> = holders.iter().flatten().copied().collect();
         gated.sort_unstable();
