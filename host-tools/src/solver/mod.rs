@@ -12,11 +12,13 @@ use pe_firmware::physics::{CentralDifference, MaterialLaw, PhysicsError, Pose, R
 use crate::problem::elements::Elements;
 use crate::problem::Problem;
 use crate::team;
+use curves::Curves;
 
 /// The batched element loop lives with the elements it packs ([`crate::problem::batched`]);
 /// re-exported here for the solver's users (board-sim's boards).
 pub use crate::problem::batched;
 
+mod curves;
 mod monitor;
 mod nodes;
 mod run;
@@ -58,6 +60,10 @@ pub struct Model<'p, T: Real> {
     pub f_ext: Vec<[T; 3]>,
     /// Nodes whose `f_ext` differs from gravity (loads, contact), restored each step.
     f_ext_dirty: Vec<usize>,
+    /// The loads' distinct ramps, each evaluated once per step ([`Curves`]).
+    ramps: Curves<1>,
+    /// The prescribed paths' values at the step's `t_{n+1}`, evaluated once per step.
+    path_at: Vec<[T; 3]>,
     /// Steps taken so far.
     pub step: u64,
     /// Time (s) and step at which the current `dt_s` took effect: the state is at
@@ -252,6 +258,8 @@ impl<'p, T: Real> Model<'p, T> {
             f_ext: gravity_force.clone(),
             gravity_force,
             f_ext_dirty: Vec::new(),
+            ramps: Curves::of(problem.loads.iter().map(|l| l.ramp.as_ref())),
+            path_at: vec![[T::ZERO; 3]; problem.paths.len()],
             step: 0,
             time_base_s: 0.0,
             step_base: 0,
@@ -353,8 +361,9 @@ impl<'p, T: Real> Model<'p, T> {
         for n in dirty.drain(..) {
             f_ext[n] = self.gravity_force[n];
         }
-        for l in &self.problem.loads {
-            let s = l.ramp.as_ref().map(|r| r.at(t)[0]).unwrap_or(1.0);
+        self.ramps.evaluate(t);
+        for (k, l) in self.problem.loads.iter().enumerate() {
+            let s = self.ramps.value(k).map_or(1.0, |v| v[0]);
             let n = l.node as usize;
             dirty.push(n);
             for i in 0..3 {
@@ -392,15 +401,18 @@ impl<'p, T: Real> Model<'p, T> {
             .map_err(|error| StepError { step, error })?;
         self.external_forces(t)
             .map_err(|error| StepError { step, error })?;
+        for (at, path) in self.path_at.iter_mut().zip(&self.problem.paths) {
+            *at = path.at(t_next).map(T::from_f64);
+        }
         let nodes = nodes::NodeStep {
             problem: self.problem,
+            path_at: &self.path_at,
             cd: self.cd,
             gain: &self.gain,
             ke_mass: &self.ke_mass,
             f_ext: &self.f_ext,
             inv_2dt_per_s: 1.0 / (2.0 * self.dt_s),
             speed_limit_m_per_s: self.problem.solver.speed_limit,
-            t_next_s: t_next,
         };
         let parts = self
             .u

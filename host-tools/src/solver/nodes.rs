@@ -32,10 +32,11 @@ pub(super) struct NodeStep<'a, T: Real> {
     /// `0.5 · m · mass_scaling` per node: the kinetic energy is `Σ ke_mass · v²`.
     pub ke_mass: &'a [f64],
     pub f_ext: &'a [[T; 3]],
+    /// Each prescribed path's value at the step's `t_{n+1}` (evaluated once per step, not
+    /// per node).
+    pub path_at: &'a [[T; 3]],
     pub inv_2dt_per_s: f64,
     pub speed_limit_m_per_s: f64,
-    /// Time the held nodes' paths are taken at (`t_{n+1}`), s.
-    pub t_next_s: f64,
 }
 
 /// What one block of the node update found.
@@ -88,12 +89,9 @@ impl<T: Real> NodeStep<'_, T> {
                 let held: Option<(&mut [f64; 3], [T; 3])> = match self.problem.node_kind[n] {
                     NodeKind::Free => None,
                     NodeKind::Fixed => Some((&mut sums.reaction_fixed, [T::ZERO; 3])),
-                    NodeKind::Prescribed(p) => Some((
-                        &mut sums.reaction_prescribed,
-                        self.problem.paths[p as usize]
-                            .at(self.t_next_s)
-                            .map(T::from_f64),
-                    )),
+                    NodeKind::Prescribed(p) => {
+                        Some((&mut sums.reaction_prescribed, self.path_at[p as usize]))
+                    }
                 };
                 let free = held.is_none();
                 if let Some((reaction, at)) = held {
