@@ -280,6 +280,13 @@ fn clock_ghz() -> Option<f64> {
         .map(|m| m / 1e3)
 }
 
+/// The CPU's model name as the kernel reports it, if it does.
+fn cpu_model() -> Option<String> {
+    let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("model name"))?;
+    Some(line.split_once(':')?.1.trim().to_string())
+}
+
 /// The configurations `pe bench` times: None times every one.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Only {
@@ -303,6 +310,15 @@ pub fn run_cli(elements: usize, seconds: f64, runs: usize, only: Only) -> Result
     };
     let ghz = clock_ghz();
     let isa = crate::problem::batched::Isa::detect();
+    println!(
+        "CPU: {}, {all} hardware thread(s); element loops: {isa:?} lanes{}",
+        cpu_model().unwrap_or_else(|| "unknown model".into()),
+        if std::env::var_os("PE_ISA").is_some() {
+            " (capped by PE_ISA)"
+        } else {
+            ""
+        }
+    );
     println!(
         "host cost of one element-step (whole steps of the seed's box / elements), median of {runs} runs of >= {seconds} s each, {isa:?} lanes:"
     );
