@@ -33,34 +33,44 @@ pub fn schedule_blob(image: &[u8]) -> Vec<u8> {
 /// A copy of the firmware ELF that believes it is board `board`: its one identity record
 /// ([`blob::find_identity`]) rewritten with [`blob::identity_record`].
 pub fn patch_identity(elf: &[u8], board: [u8; 3]) -> Result<Vec<u8>> {
-    let hits: Vec<usize> = blob::find_identity(elf).collect();
-    let [at] = hits[..] else {
-        bail!(
-            "the firmware ELF holds {} identity records (expected exactly one): not a pe-board ELF?",
-            hits.len()
-        );
-    };
-    let mut out = elf.to_vec();
-    out.get_mut(at..at + blob::IDENTITY_LEN)
-        .context("identity record cut off at the end of the ELF")?
-        .copy_from_slice(&blob::identity_record(board));
-    Ok(out)
+    let hits = blob::find_identity(elf).collect();
+    let record = blob::identity_record(board);
+    patch_record(elf, hits, &record, "identity", "not a pe-board ELF?")
 }
 
 /// A copy of the firmware ELF whose run options record ([`blob::find_run_options`]) holds
 /// `flags` ([`blob::RUN_HOST_GATE`]: the host's step gate, `link_proto::gate`).
 pub fn patch_run_options(elf: &[u8], flags: u8) -> Result<Vec<u8>> {
-    let hits: Vec<usize> = blob::find_run_options(elf).collect();
+    let hits = blob::find_run_options(elf).collect();
+    let record = blob::run_options_record(flags);
+    patch_record(
+        elf,
+        hits,
+        &record,
+        "run options",
+        "built before run options?",
+    )
+}
+
+/// A copy of `elf` with `record` written over the one record of its kind found at `hits`
+/// (`what` names the kind; `hint` says what several or none may mean).
+fn patch_record(
+    elf: &[u8],
+    hits: Vec<usize>,
+    record: &[u8],
+    what: &str,
+    hint: &str,
+) -> Result<Vec<u8>> {
     let [at] = hits[..] else {
         bail!(
-            "the firmware ELF holds {} run options records (expected exactly one): built before run options?",
+            "the firmware ELF holds {} {what} records (expected exactly one): {hint}",
             hits.len()
         );
     };
     let mut out = elf.to_vec();
-    out.get_mut(at..at + blob::RUN_OPTIONS_LEN)
-        .context("run options record cut off at the end of the ELF")?
-        .copy_from_slice(&blob::run_options_record(flags));
+    out.get_mut(at..at + record.len())
+        .with_context(|| format!("{what} record cut off at the end of the ELF"))?
+        .copy_from_slice(record);
     Ok(out)
 }
 

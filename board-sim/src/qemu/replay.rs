@@ -26,7 +26,7 @@ use pe_firmware::image::blob;
 use pe_firmware::physics::pose::Pose;
 
 use super::relay::GlobalSwitch;
-use crate::runner::pose_repr;
+use crate::runner::{check_schedule, pose_repr};
 
 /// The steps each gated board said it waits at (by global address).
 #[derive(Default)]
@@ -61,16 +61,7 @@ pub(crate) struct Replay {
 
 impl Replay {
     pub fn new(poses: Vec<(u64, usize, Pose)>, holders: Vec<Vec<u8>>) -> Result<Replay> {
-        // Every pose checked before any board starts: a tool some board holds, a step and a
-        // tool the wire carries.
-        for &(step, tool, pose) in &poses {
-            if holders.get(tool).is_none_or(|h| h.is_empty()) {
-                anyhow::bail!(
-                    "pose for tool {tool} at step {step}: no board's contact tables hold that tool"
-                );
-            }
-            pose_repr(step, tool, &pose)?;
-        }
+        check_schedule(&poses, &holders)?;
         let mut gated: Vec<u8> = holders.iter().flatten().copied().collect();
         gated.sort_unstable();
         gated.dedup();

@@ -27,7 +27,7 @@ pub use images::manifest_machine;
 pub(crate) use images::read_images;
 pub use open::{start_open, OpenArray};
 pub use options::SimOptions;
-pub(crate) use poses::{one_per_tool_and_step, pose_repr};
+pub(crate) use poses::{check_schedule, one_per_tool_and_step, pose_repr};
 
 use crate::check::{attribute, collect_sinks, missing_sink_packets, sink_observations, HostCheck};
 use crate::clock::SweepClock;

@@ -94,23 +94,27 @@ pub(crate) struct PoseSender {
     pub steps: u64,
 }
 
-impl PoseSender {
-    /// Checks the schedule against the boards (every tool held somewhere, every pose a
-    /// unit rotation the boards accept) before any board runs.
-    pub(crate) fn check(&self) -> Result<()> {
-        for &(step, tool, pose) in &self.poses {
-            if self.holders.get(tool).is_none_or(|h| h.is_empty()) {
-                bail!(
-                    "pose for tool {tool} at step {step}: no board's contact tables hold that tool"
-                );
-            }
-            let repr = pose_repr(step, tool, &pose)?;
-            let mut buf = [0u8; ToolPoseRepr::LEN];
-            repr.emit(&mut buf)?;
-            ToolPoseRepr::parse_bytes(&buf)
-                .map_err(|e| anyhow!("pose for tool {tool} at step {step}: {e}"))?;
+/// Checks a schedule against the boards (every tool held somewhere, every pose a unit
+/// rotation the boards accept, its step and tool on the wire) before any board runs:
+/// `holders[t]`, the boards holding tool `t`.
+pub(crate) fn check_schedule(poses: &[(u64, usize, Pose)], holders: &[Vec<u8>]) -> Result<()> {
+    for &(step, tool, pose) in poses {
+        if holders.get(tool).is_none_or(|h| h.is_empty()) {
+            bail!("pose for tool {tool} at step {step}: no board's contact tables hold that tool");
         }
-        Ok(())
+        let repr = pose_repr(step, tool, &pose)?;
+        let mut buf = [0u8; ToolPoseRepr::LEN];
+        repr.emit(&mut buf)?;
+        ToolPoseRepr::parse_bytes(&buf)
+            .map_err(|e| anyhow!("pose for tool {tool} at step {step}: {e}"))?;
+    }
+    Ok(())
+}
+
+impl PoseSender {
+    /// [`check_schedule`] of this sender's poses.
+    pub(crate) fn check(&self) -> Result<()> {
+        check_schedule(&self.poses, &self.holders)
     }
 
     /// Sends the poses as the boards go, raising the gate; returns the packets sent.

@@ -13,6 +13,7 @@ use pe_firmware::runtime::Capacities;
 use super::plan::{BoardPlan, Plan};
 use super::tables::ImageTables;
 use crate::problem::contact::ContactRun;
+use crate::problem::curves::Curves;
 use crate::problem::elements::{kind_of, record_of};
 use crate::problem::{NodeKind, Problem};
 
@@ -36,18 +37,11 @@ fn path_table(problem: &Problem) -> (Vec<PathPoint>, Vec<Option<u16>>) {
             });
         }
     }
-    let mut ramps: Vec<&crate::problem::Path1<1>> = Vec::new();
-    let mut load_ramp = Vec::new();
-    for l in &problem.loads {
-        load_ramp.push(l.ramp.as_ref().map(|r| {
-            let k = ramps.iter().position(|q| *q == r).unwrap_or_else(|| {
-                ramps.push(r);
-                ramps.len() - 1
-            });
-            (problem.paths.len() + k) as u16
-        }));
-    }
-    for (k, r) in ramps.iter().enumerate() {
+    let ramps = Curves::of(problem.loads.iter().map(|l| l.ramp.as_ref()));
+    let load_ramp = (0..problem.loads.len())
+        .map(|k| ramps.index(k).map(|c| (problem.paths.len() + c) as u16))
+        .collect();
+    for (k, r) in ramps.curves().iter().enumerate() {
         for (t, v) in &r.points {
             points.push(PathPoint {
                 path: (problem.paths.len() + k) as u16,

@@ -3,6 +3,7 @@
 
 pub mod batched;
 pub mod contact;
+pub mod curves;
 pub mod elements;
 pub mod frequency;
 

@@ -9,16 +9,15 @@ use pe_firmware::physics::contact::{
 };
 use pe_firmware::physics::{CentralDifference, MaterialLaw, PhysicsError, Pose, Real};
 
+use crate::problem::curves::Curves;
 use crate::problem::elements::Elements;
 use crate::problem::Problem;
 use crate::team;
-use curves::Curves;
 
 /// The batched element loop lives with the elements it packs ([`crate::problem::batched`]);
 /// re-exported here for the solver's users (board-sim's boards).
 pub use crate::problem::batched;
 
-mod curves;
 mod monitor;
 mod nodes;
 mod run;

@@ -76,24 +76,45 @@ pub fn read_blob(region: &[u8]) -> Result<&[u8], BlobError> {
     })
 }
 
+/// Bytes of a record the host finds in the firmware file by its marker (the identity, the
+/// run options): a 12-byte marker, then 4 bytes.
+const RECORD_LEN: usize = 16;
+
+/// The record of `marker` and `tail`.
+const fn marked_record(marker: [u8; 12], tail: [u8; 4]) -> [u8; RECORD_LEN] {
+    let mut r = [0u8; RECORD_LEN];
+    let mut k = 0;
+    while k < RECORD_LEN {
+        r[k] = if k < 12 { marker[k] } else { tail[k - 12] };
+        k += 1;
+    }
+    r
+}
+
+/// Offsets in a firmware file of the records that start with `marker` and that `valid`
+/// accepts.
+fn find_marked(
+    elf: &[u8],
+    marker: [u8; 12],
+    valid: fn(&[u8; RECORD_LEN]) -> bool,
+) -> impl Iterator<Item = usize> + '_ {
+    elf.windows(RECORD_LEN)
+        .enumerate()
+        .filter_map(move |(k, w)| {
+            let r: &[u8; RECORD_LEN] = w.try_into().ok()?;
+            (r[..12] == marker && valid(r)).then_some(k)
+        })
+}
+
 /// The marker that starts the identity record.
 pub const IDENTITY_MARKER: [u8; 12] = *b"PE-BOARD-ID\0";
 /// Bytes of the identity record.
-pub const IDENTITY_LEN: usize = 16;
+pub const IDENTITY_LEN: usize = RECORD_LEN;
 
 /// The identity record of the board at `board`.
 pub const fn identity_record(board: [u8; 3]) -> [u8; IDENTITY_LEN] {
-    let mut r = [0u8; IDENTITY_LEN];
-    let mut k = 0;
-    while k < IDENTITY_MARKER.len() {
-        r[k] = IDENTITY_MARKER[k];
-        k += 1;
-    }
-    r[12] = board[0];
-    r[13] = board[1];
-    r[14] = board[2];
-    r[15] = identity_check(board);
-    r
+    let tail = [board[0], board[1], board[2], identity_check(board)];
+    marked_record(IDENTITY_MARKER, tail)
 }
 
 /// The check byte of a position.
@@ -112,31 +133,20 @@ pub fn identity_position(record: &[u8; IDENTITY_LEN]) -> Option<[u8; 3]> {
 /// Offsets of the identity records in a firmware file: the marker followed by a valid
 /// position and check byte.
 pub fn find_identity(elf: &[u8]) -> impl Iterator<Item = usize> + '_ {
-    elf.windows(IDENTITY_LEN).enumerate().filter_map(|(k, w)| {
-        let r: &[u8; IDENTITY_LEN] = w.try_into().ok()?;
-        (r[..12] == IDENTITY_MARKER && identity_position(r).is_some()).then_some(k)
-    })
+    find_marked(elf, IDENTITY_MARKER, |r| identity_position(r).is_some())
 }
 
 /// The marker that starts the run options record.
 pub const RUN_OPTIONS_MARKER: [u8; 12] = *b"PE-RUN-OPTS\0";
 /// Bytes of the run options record.
-pub const RUN_OPTIONS_LEN: usize = 16;
+pub const RUN_OPTIONS_LEN: usize = RECORD_LEN;
 /// Run option: a board whose contact tables hold a tool waits for the host's permits
 /// (`link_proto::gate`).
 pub const RUN_HOST_GATE: u8 = 1;
 
 /// The run options record with `flags`.
 pub const fn run_options_record(flags: u8) -> [u8; RUN_OPTIONS_LEN] {
-    let mut r = [0u8; RUN_OPTIONS_LEN];
-    let mut k = 0;
-    while k < RUN_OPTIONS_MARKER.len() {
-        r[k] = RUN_OPTIONS_MARKER[k];
-        k += 1;
-    }
-    r[12] = flags;
-    r[15] = flags ^ 0x5A;
-    r
+    marked_record(RUN_OPTIONS_MARKER, [flags, 0, 0, flags ^ 0x5A])
 }
 
 /// The flags of a run options record, or `None` if it is damaged (its check byte or
@@ -148,10 +158,5 @@ pub fn run_options_flags(record: &[u8; RUN_OPTIONS_LEN]) -> Option<u8> {
 
 /// Offsets of the run options records in a firmware file.
 pub fn find_run_options(elf: &[u8]) -> impl Iterator<Item = usize> + '_ {
-    elf.windows(RUN_OPTIONS_LEN)
-        .enumerate()
-        .filter_map(|(k, w)| {
-            let r: &[u8; RUN_OPTIONS_LEN] = w.try_into().ok()?;
-            (r[..12] == RUN_OPTIONS_MARKER && run_options_flags(r).is_some()).then_some(k)
-        })
+    find_marked(elf, RUN_OPTIONS_MARKER, |r| run_options_flags(r).is_some())
 }

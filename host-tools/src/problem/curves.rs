@@ -1,4 +1,5 @@
-//! Functions of time that many nodes share, evaluated once per step: the loads' ramps.
+//! Functions of time that many nodes share, kept once: the loads' ramps (the solver
+//! evaluates each once per step; the compiler writes each once into the path table).
 //!
 //! A `[[load]]` spreads over its nodes, each with the load's ramp; evaluated per node, a
 //! ramp of `p` points costs `O(p)` per loaded node and step (a smooth 161-point ramp on
@@ -7,7 +8,7 @@
 //! value is [`Path1::at`]'s, the board's `piecewise_linear`, on the same inputs: the same
 //! bits as evaluating it per node.
 
-use crate::problem::Path1;
+use super::Path1;
 
 /// The distinct curves of a list of users (each `None` or one curve), and their values at
 /// the last time evaluated.
@@ -41,6 +42,16 @@ impl<const N: usize> Curves<N> {
         c
     }
 
+    /// The distinct curves, in the order their first users come.
+    pub fn curves(&self) -> &[Path1<N>] {
+        &self.curves
+    }
+
+    /// User `k`'s curve (an index into [`Self::curves`]; `None`: it has none).
+    pub fn index(&self, k: usize) -> Option<usize> {
+        self.of_user.get(k).copied().flatten()
+    }
+
     /// Evaluates every curve at `t`.
     pub fn evaluate(&mut self, t: f64) {
         for (v, curve) in self.at.iter_mut().zip(&self.curves) {
@@ -50,7 +61,7 @@ impl<const N: usize> Curves<N> {
 
     /// User `k`'s curve's value at the last [`Self::evaluate`] (`None`: it has none).
     pub fn value(&self, k: usize) -> Option<[f64; N]> {
-        self.of_user.get(k).copied().flatten().map(|c| self.at[c])
+        self.index(k).map(|c| self.at[c])
     }
 }
 
