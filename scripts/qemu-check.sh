@@ -71,6 +71,46 @@ for SCENE in builtin box turned; do
   done
 done
 
+# Subnormals: the host flushes them to zero as the board's FPSCR.FZ does
+# (host_tools::subnormals). A scene whose state passes through the subnormal range: the box
+# without gravity, pushed suddenly at its free end; for 100 steps the wave's numerical tail
+# ahead of it is subnormal in f32. Flushing must change the result (else this proves
+# nothing), and the board must compute the flushed bits.
+D=$OUT/subnormal
+mkdir -p "$D"
+sed 's/acceleration = .*/acceleration = [0.0, 0.0, 0.0]/' "$OUT/box.toml" >"$D/scene.toml"
+grep -q 'acceleration = \[0.0, 0.0, 0.0\]' "$D/scene.toml"
+cat >>"$D/scene.toml" <<'TOML'
+
+[[load]]
+box = [[0.199, -1.0, -1.0], [1.0, 1.0, 1.0]]
+force = [0.0, 0.0, -0.01]
+TOML
+SUB_STEPS=100
+echo "qemu-check: subnormal scene, 1x1x1, f32 reduced, $SUB_STEPS steps"
+"$PE" solve "$D/scene.toml" --precision f32 --steps $SUB_STEPS --quiet \
+    --output-nodes "$D/solve.csv" >/dev/null 2>&1
+"$PE" solve "$D/scene.toml" --precision f32 --steps $SUB_STEPS --quiet --keep-subnormals \
+    --output-nodes "$D/kept.csv" >/dev/null 2>&1
+if "$PE" compare "$D/solve.csv" "$D/kept.csv" >"$D/kept-vs-flushed.txt" 2>&1; then
+    echo "qemu-check: FAILED: flushing subnormals changed nothing on the subnormal scene; it proves nothing" >&2
+    exit 1
+fi
+echo "qemu-check: flushing subnormals changes $(grep -c component "$D/kept-vs-flushed.txt") components of the host's result"
+"$PE" compile "$D/scene.toml" --boards 1x1x1 --profile qemu-mps2-an500 --precision f32 \
+    --steps $SUB_STEPS -o "$D/compiled" >/dev/null
+"$SIM" run "$D/compiled" --quiet --output-nodes "$D/board-sim.csv" >/dev/null
+ELF=$(build_firmware qemu,f32,graphics,loads)
+"$PE" image "$D/compiled" -o "$D/image" --firmware "$ELF" >/dev/null
+(cd "$D/image" && "${QEMU[@]}" -kernel board-0-0-0.elf \
+    -device loader,file=board-0-0-0.sched,addr=$ORIGIN) >"$D/qemu.txt" 2>"$D/qemu.err" || {
+    echo "qemu-check: FAILED: the firmware failed on the subnormal scene:" >&2
+    tail -5 "$D/qemu.txt" "$D/qemu.err" >&2
+    exit 1
+}
+"$PE" compare "$D/solve.csv" "$D/qemu.txt"
+"$PE" compare "$D/solve.csv" "$D/board-sim.csv"
+
 # Faults end the run with a report and a failing exit.
 expect_fault() { # NAME PATTERN QEMU-ARGS...
     local name=$1 pattern=$2

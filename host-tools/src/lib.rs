@@ -15,4 +15,5 @@ pub mod output;
 pub mod problem;
 pub mod scene;
 pub mod solver;
+pub mod subnormals;
 pub mod team;

@@ -15,6 +15,10 @@
 //! caller whose result must not depend on the thread count makes every task's result
 //! independent of where it ran, and combines them in index order.
 //!
+//! The tasks run in the caller's floating-point mode (a worker takes the caller's
+//! [`Mode`] for each call): the solver's steps flush subnormals on every thread
+//! ([`crate::subnormals`]).
+//!
 //! Panics: a task that panics does not take its thread down; the first panic's payload is
 //! resumed on the caller once every thread is done with the call. A team is used from one
 //! thread at a time (it is `Send`, not `Sync`).
@@ -31,6 +35,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Result};
 
+use crate::subnormals::Mode;
+
 /// How long an idle thread spins for the next task before it parks: longer than the serial
 /// work between two phases of a step (contact, external forces: a few µs to tens of µs),
 /// short enough that an idle team costs nothing measurable.
@@ -46,6 +52,8 @@ const ACK_SPINS: u32 = 1 << 10;
 struct Job {
     task: *const (dyn Fn(usize) + Sync + 'static),
     count: usize,
+    /// The caller's floating-point mode, which the workers take for the call's tasks.
+    mode: Mode,
 }
 
 /// A value alone on its cache line(s), so threads polling one do not slow the others.
@@ -79,6 +87,7 @@ unsafe impl Send for Shared {}
 impl Shared {
     /// Claims and runs tasks of `job` until none is left.
     fn work(&self, job: Job) {
+        job.mode.set();
         loop {
             let i = self.next.0.fetch_add(1, Ordering::Relaxed);
             if i >= job.count {
@@ -155,6 +164,7 @@ impl Team {
             job: UnsafeCell::new(Job {
                 task: noop,
                 count: 0,
+                mode: Mode::current(),
             }),
             next: Padded(AtomicUsize::new(0)),
             done: (0..workers).map(|_| Padded(AtomicU64::new(0))).collect(),
@@ -206,7 +216,11 @@ impl Team {
                 *const (dyn Fn(usize) + Sync + 'static),
             >(task)
         };
-        let job = Job { task, count };
+        let job = Job {
+            task,
+            count,
+            mode: Mode::current(),
+        };
         let g = s.generation.load(Ordering::Relaxed).wrapping_add(1);
         // SAFETY: every worker acknowledged the last generation (below), so none reads it.
         unsafe { *s.job.get() = job };
@@ -305,6 +319,30 @@ impl Drop for Team {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The tasks run in the caller's floating-point mode, whichever thread runs them: with
+    /// subnormals flushed and kept in turn, every task (64 of them, on 2 and 3 threads)
+    /// reports the caller's mode, and its product `1e-30 · 1e-10` (subnormal in IEEE) is
+    /// zero exactly when flushed.
+    #[test]
+    #[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
+    fn tasks_run_in_the_callers_floating_point_mode() {
+        use crate::subnormals::{FlushGuard, Subnormals};
+        use std::hint::black_box;
+        for threads in [2, 3] {
+            let team = Team::new(threads).expect("threads");
+            for s in [Subnormals::Flush, Subnormals::Keep, Subnormals::Flush] {
+                let _g = FlushGuard::enter(s);
+                let seen = team.map(64, |_| {
+                    let p = black_box(1e-30f32) * black_box(1e-10f32);
+                    (Mode::current().flushes(), p.to_bits() == 0)
+                });
+                assert_eq!(seen.len(), 64);
+                let flush = s == Subnormals::Flush;
+                assert!(seen.iter().all(|&v| v == (flush, flush)), "{s:?}: {seen:?}");
+            }
+        }
+    }
 
     /// Every index runs exactly once, results come back in index order, on 1-4 threads
     /// and for counts below, at and above the thread count.

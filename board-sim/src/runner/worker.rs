@@ -10,6 +10,7 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use host_tools::solver::batched::board::{BoardBatches, BoardElements};
 use host_tools::solver::batched::Isa;
+use host_tools::subnormals::{FlushGuard, Subnormals};
 use link_proto::Links;
 use pe_firmware::image::{ElementRecord, ImageError, ImageHeader, Integration, Precision};
 use pe_firmware::runtime::{Fault, FaultKind, LinkStats, Runtime, RuntimeConfig, WireReal};
@@ -66,6 +67,8 @@ pub(crate) fn spawn_workers(
             .name(format!("board-worker-{w}"))
             .stack_size(16 << 20)
             .spawn(move || {
+                // The firmware runs with subnormals flushed (FPSCR.FZ), so do its boards here.
+                let _mode = FlushGuard::enter(Subnormals::Flush);
                 let mut env = ThreadEnv::new(bell, clock);
                 if let Err(f) = dispatch(ctxs, sizing, &mut ls, &mut env, &out, p, i) {
                     // A board's image was refused: nothing of this worker runs.

@@ -92,6 +92,9 @@ pub struct Problem {
     /// boundary cells, unit conversion) and warnings of a scene that looks mis-scaled.
     /// The commands print them before they start ([`Problem::print_notes`]).
     pub notes: Vec<String>,
+    /// How the host solver treats subnormal numbers: flushed as the boards do (the
+    /// default), or kept (`pe solve --keep-subnormals`; [`crate::subnormals`]).
+    pub subnormals: crate::subnormals::Subnormals,
 }
 
 /// A problem's time step and the stability limit it was chosen against.
@@ -507,6 +510,7 @@ impl Problem {
             surface_face_cells,
             time_step: TimeStep::default(),
             notes: Vec::new(),
+            subnormals: Default::default(),
         };
         problem.time_step = problem.choose_time_step()?;
         problem.notes = problem.mesh.notes.clone();

@@ -12,6 +12,7 @@ use pe_firmware::physics::{CentralDifference, MaterialLaw, PhysicsError, Pose, R
 use crate::problem::curves::Curves;
 use crate::problem::elements::Elements;
 use crate::problem::Problem;
+use crate::subnormals::FlushGuard;
 use crate::team;
 
 /// The batched element loop lives with the elements it packs ([`crate::problem::batched`]);
@@ -384,8 +385,12 @@ impl<'p, T: Real> Model<'p, T> {
 
     /// One central-difference step from `t_n` to `t_{n+1}`: the element phase and the node
     /// update on the team's threads when there are several ([`team`]: they wait for the
-    /// next phase awake).
+    /// next phase awake), subnormals flushed as on the boards unless the problem keeps
+    /// them ([`crate::subnormals`]).
     pub fn advance(&mut self) -> Result<(), StepError> {
+        // The boards' floating-point rule for the step (the team's threads take the
+        // caller's: [`team`]); the caller's mode is back when the step returns.
+        let _mode = FlushGuard::enter(self.problem.subnormals);
         let team = self.team.take();
         let r = self.advance_inner(team.as_ref());
         self.team = team;

@@ -21,6 +21,7 @@ use defmt_rtt as _;
 pub mod bsp;
 pub mod clock;
 pub mod config;
+pub mod fpu;
 pub mod links;
 pub mod region;
 pub mod report;

@@ -20,6 +20,8 @@ const UNKNOWN: [u8; 3] = [0xFF; 3];
 
 #[entry]
 fn main() -> ! {
+    // Subnormals flushed to zero, as the host computes: before any floating-point work.
+    pe_board::fpu::flush_subnormals();
     let Some(board) = board_position() else {
         report::fault(UNKNOWN, format_args!("board identity record damaged"));
     };

@@ -114,6 +114,11 @@ pub struct SolveArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Compute with IEEE subnormal numbers instead of flushing them to zero as the boards
+    /// do: slower where the tissue is nearly at rest, and no longer the boards' bits where
+    /// subnormals arise (to see whether they do).
+    #[arg(long)]
+    pub keep_subnormals: bool,
     /// Apply the poses a `pe live --record FILE` session recorded, at their steps (its
     /// bits; give --steps the session's step count to end where it ended).
     #[arg(long)]

@@ -96,7 +96,10 @@ fn solve(a: SolveArgs) -> Result<()> {
     }
     .apply(&mut sc);
     let threads = a.threads.unwrap_or_else(all_cores).max(1);
-    let problem = Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
+    let mut problem = Problem::from_scene(&sc, &dir).with_context(|| format!("scene {name}"))?;
+    if a.keep_subnormals {
+        problem.subnormals = host_tools::subnormals::Subnormals::Keep;
+    }
     problem.print_notes();
     let (dt, dt_crit) = (
         problem.time_step.dt_s,

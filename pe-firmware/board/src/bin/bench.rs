@@ -68,6 +68,8 @@ fn fail(what: &str) -> ! {
 
 #[entry]
 fn main() -> ! {
+    // The firmware's floating-point mode (src/main.rs).
+    pe_board::fpu::flush_subnormals();
     let board = board_position().unwrap_or_else(|| fail("identity"));
     let image = schedule_image().unwrap_or_else(|_| fail("no schedule image"));
     let store = storage::take().unwrap_or_else(|| fail("storage"));
