@@ -268,6 +268,121 @@ pub fn time_steps(
     })
 }
 
+/// The built-in anatomy's timing: whole steps from rest, the general kernel (every cell of
+/// the anatomy is general) and contact included.
+#[derive(Clone, Copy, Debug)]
+pub struct AnatomyTiming {
+    pub steps: Timing,
+    /// Contact evaluation (check, search, forces) per step, µs: median over the runs.
+    pub contact_us_per_step: f64,
+    /// Steps of the last run in which the probe touched the tissue, of `steps_per_run`.
+    pub steps_in_contact: u64,
+}
+
+/// Times whole steps of the built-in scene at `level` in its own precision and
+/// integration: `runs` runs from rest, each 20 steps then at least `seconds` (the probe's
+/// path starts on its way to the tube, so the first second holds few contacts at the
+/// medium level).
+pub fn time_anatomy(
+    level: &str,
+    threads: usize,
+    seconds: f64,
+    runs: usize,
+) -> Result<AnatomyTiming> {
+    let scene = crate::scene::builtin::builtin_scene(level)?;
+    let p = Problem::from_scene(&scene, std::path::Path::new("."))?;
+    let dt = p.time_step.dt_s;
+    // (steps, wall s, contact s, steps in contact)
+    fn one<T: Real>(p: &Problem, dt: f64, threads: usize, seconds: f64) -> Result<[f64; 4]> {
+        let mut m = Model::<T>::new(p, dt);
+        m.set_threads(threads)?;
+        for _ in 0..20 {
+            m.advance()?;
+        }
+        let contact_s = |m: &Model<T>| m.contact.as_ref().map_or(0.0, |c| c.evaluate_s);
+        let c0 = contact_s(&m);
+        let t = Instant::now();
+        let (mut steps, mut touching) = (0u64, 0u64);
+        loop {
+            m.advance()?;
+            steps += 1;
+            touching += u64::from(m.contact.as_ref().is_some_and(|c| c.stats.active > 0));
+            let s = t.elapsed().as_secs_f64();
+            if s >= seconds && steps.is_multiple_of(16) {
+                return Ok([steps as f64, s, contact_s(&m) - c0, touching as f64]);
+            }
+        }
+    }
+    let mut ns = Vec::new();
+    let mut contact_us = Vec::new();
+    let mut last = [0.0; 4];
+    for _ in 0..runs.max(1) {
+        last = if p.solver.precision == Precision::F32 {
+            one::<f32>(&p, dt, threads, seconds)?
+        } else {
+            one::<f64>(&p, dt, threads, seconds)?
+        };
+        let [steps, secs, contact, _] = last;
+        ns.push(secs * 1e9 / (p.mesh.cells.len() as f64 * steps));
+        contact_us.push(contact * 1e6 / steps);
+    }
+    ns.sort_by(f64::total_cmp);
+    contact_us.sort_by(f64::total_cmp);
+    Ok(AnatomyTiming {
+        steps: Timing {
+            elements: p.mesh.cells.len(),
+            nodes: p.mesh.nodes.len(),
+            threads,
+            steps_per_run: last[0] as u64,
+            ns_median: ns[ns.len() / 2],
+            ns_min: ns[0],
+            ns_max: ns[ns.len() - 1],
+        },
+        contact_us_per_step: contact_us[contact_us.len() / 2],
+        steps_in_contact: last[3] as u64,
+    })
+}
+
+/// The built-in medium scene's rows: the general kernel the anatomy uses, and contact (in
+/// the scene's precision and integration, which the filters must allow).
+fn anatomy_rows(thread_counts: &[usize], seconds: f64, runs: usize, only: Only) -> Result<()> {
+    let scene = crate::scene::builtin::builtin_scene("medium")?;
+    let (prec, integ) = (scene.solver.precision, scene.solver.integration);
+    if only.precision.is_some_and(|p| p != prec) || only.integration.is_some_and(|i| i != integ) {
+        return Ok(());
+    }
+    println!("\nthe built-in medium scene (anatomy: every cell on the general kernel; the probe's contact), whole steps from rest, median of {runs} runs of >= {seconds} s:");
+    println!(
+        "{:<8} {:<5} {:>8} {:>7} {:>12} {:>17} {:>10} {:>16} {:>11}",
+        "integr.",
+        "prec.",
+        "elements",
+        "threads",
+        "ns/elem-step",
+        "(min .. max)",
+        "steps/run",
+        "contact us/step",
+        "touching"
+    );
+    for &threads in thread_counts {
+        let a = time_anatomy("medium", threads, seconds, runs)?;
+        let t = a.steps;
+        println!(
+            "{:<8} {:<5} {:>8} {:>7} {:>12.1} {:>17} {:>10} {:>16.1} {:>11}",
+            integ.to_string(),
+            prec.to_string(),
+            t.elements,
+            threads,
+            t.ns_median,
+            format!("({:.1} .. {:.1})", t.ns_min, t.ns_max),
+            t.steps_per_run,
+            a.contact_us_per_step,
+            format!("{} steps", a.steps_in_contact)
+        );
+    }
+    Ok(())
+}
+
 /// The CPU's clock (GHz) as the kernel reports it, if it does.
 fn clock_ghz() -> Option<f64> {
     let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
@@ -373,6 +488,7 @@ pub fn run_cli(elements: usize, seconds: f64, runs: usize, only: Only) -> Result
             }
         }
     }
+    anatomy_rows(&thread_counts, seconds, runs, only)?;
     match ghz {
         Some(g) => println!(
             "% peak: flops per element-step (below) over {g:.2} GHz x 16 (f64) or 32 (f32) flops per cycle per thread (two 256-bit FMA units); the kernels use no FMA (the board's bits), so half of it is their ceiling"
