@@ -1,5 +1,6 @@
-//! The board's node update and external forces: free, fixed, prescribed, loaded and
-//! contact nodes in one scene give the serial solver's bits on one board (displacements,
+//! The board's node update and external forces: free, fixed, prescribed, loaded (one load
+//! ramped along a smooth POLY345 step) and contact nodes in one scene give the serial
+//! solver's bits on one board (displacements,
 //! kinetic energy, reactions), and the external-force lists of the images hold exactly the
 //! owned nodes that have an external force, once, at the stage the exchange rounds give
 //! them, with their own loads and contact node.
@@ -29,6 +30,12 @@ fn mixed_node_kinds_equal_serial_bit_for_bit() {
     assert!(kinds(|k| matches!(k, NodeKind::Prescribed(_))) > 0);
     assert!(!loaded.is_empty() && loaded.len() < p.mesh.nodes.len() / 4);
     assert!(p.loads.len() > loaded.len(), "a node with two loads");
+    let smooth = |l: &host_tools::problem::Load| {
+        l.ramp
+            .as_ref()
+            .is_some_and(|r| r.segment == pe_firmware::image::Segment::Poly345)
+    };
+    assert!(p.loads.iter().any(smooth), "a load ramped along POLY345");
     let serial = solver::run(&p, "serial", &mut ()).unwrap();
     let r = &serial.report;
     let c = r.contact.as_ref().unwrap();

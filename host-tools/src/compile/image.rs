@@ -34,6 +34,7 @@ fn path_table(problem: &Problem) -> (Vec<PathPoint>, Vec<Option<u16>>) {
                 path: k as u16,
                 t_s: *t,
                 value: *v,
+                segment: p.segment,
             });
         }
     }
@@ -47,6 +48,7 @@ fn path_table(problem: &Problem) -> (Vec<PathPoint>, Vec<Option<u16>>) {
                 path: (problem.paths.len() + k) as u16,
                 t_s: *t,
                 value: [v[0], 0.0, 0.0],
+                segment: r.segment,
             });
         }
     }

@@ -70,9 +70,7 @@ mod tests {
     use super::*;
 
     fn ramp(points: &[(f64, f64)]) -> Path1<1> {
-        Path1 {
-            points: points.iter().map(|&(t, v)| (t, [v])).collect(),
-        }
+        Path1::linear(points.iter().map(|&(t, v)| (t, [v])).collect())
     }
 
     #[test]

@@ -11,27 +11,39 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
+use pe_firmware::image::Segment;
 use pe_firmware::physics::{LameParameters, MaterialLaw, ReferenceHex, Volumetric};
 
 use crate::mesh::Mesh;
 use crate::scene::{Law, MaterialSpec, RegionRef, Scene, Selector, SolverSpec};
 use batched::{Batched, Isa};
 
-/// A piecewise-linear function of time through `(t, value)` points, held constant outside.
+/// A function of time through `(t, value)` points, each segment linear or smooth
+/// ([`Segment`]), held constant outside.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Path1<const N: usize> {
     pub points: Vec<(f64, [f64; N])>,
+    /// How every segment goes from one point to the next.
+    pub segment: Segment,
 }
 
 impl<const N: usize> Path1<N> {
-    /// Value at `t` (the firmware's [`pe_firmware::image::piecewise_linear`], so host and
-    /// board interpolate to the same bits).
+    /// Through `points`, straight from one to the next.
+    pub fn linear(points: Vec<(f64, [f64; N])>) -> Path1<N> {
+        Path1 {
+            points,
+            segment: Segment::Linear,
+        }
+    }
+
+    /// Value at `t` (the firmware's [`pe_firmware::image::piecewise`], so host and board
+    /// interpolate to the same bits).
     pub fn at(&self, t: f64) -> [f64; N] {
-        let v = pe_firmware::image::piecewise_linear(t, self.points.len(), |k| {
+        let v = pe_firmware::image::piecewise(t, self.points.len(), |k| {
             let (tk, p) = self.points[k];
             let mut q = [0.0; 3];
             q[..N].copy_from_slice(&p);
-            (tk, q)
+            (tk, q, self.segment)
         });
         core::array::from_fn(|i| v[i])
     }
@@ -365,6 +377,7 @@ fn constraints(scene: &Scene, sel: &NodeSelector) -> Result<(Vec<NodeKind>, Vec<
         }
         paths.push(Path1 {
             points: p.path.iter().map(|q| (q[0], [q[1], q[2], q[3]])).collect(),
+            segment: p.shape.unwrap_or_default(),
         });
     }
     Ok((node_kind, paths))
@@ -384,6 +397,7 @@ fn nodal_loads(scene: &Scene, sel: &NodeSelector) -> Result<Vec<Load>> {
                 }
                 Some(Path1 {
                     points: r.iter().map(|q| (q[0], [q[1]])).collect(),
+                    segment: l.shape.unwrap_or_default(),
                 })
             }
             None => None,
@@ -469,7 +483,7 @@ impl Problem {
         let (node_kind, mut paths) = constraints(scene, &sel)?;
         let loads = nodal_loads(scene, &sel)?;
         let mut add_path = |points: Vec<(f64, [f64; 3])>| {
-            paths.push(Path1 { points });
+            paths.push(Path1::linear(points));
             (paths.len() - 1) as u32
         };
         let (surface_faces, surface_face_cells): (Vec<[u32; 4]>, Vec<u32>) =

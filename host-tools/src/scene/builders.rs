@@ -116,6 +116,7 @@ impl Scene {
             set: None,
             force: force_n,
             ramp,
+            shape: None,
         });
         self
     }
@@ -128,6 +129,7 @@ impl Scene {
             sphere: None,
             set: None,
             path,
+            shape: None,
         });
         self
     }

@@ -9,6 +9,7 @@ pub mod settings;
 
 use std::path::{Path, PathBuf};
 
+use pe_firmware::image::Segment;
 pub use pe_firmware::image::{Integration, Precision};
 use serde::{Deserialize, Serialize};
 
@@ -249,10 +250,14 @@ pub struct PrescribedSpec {
     pub sphere: Option<SphereSpec>,
     pub set: Option<String>,
     pub path: Vec<[f64; 4]>,
+    /// How the path goes from one point to the next: `"linear"` (default) or `"poly345"`
+    /// (NiftySim's smooth step: no jump in velocity or acceleration at the points).
+    pub shape: Option<Segment>,
 }
 
 /// `[[load]]`: a total force (N) split equally over the selected nodes, scaled in time by
-/// the optional piecewise-linear `ramp = [[t, factor], ...]` (default: constant 1).
+/// the optional `ramp = [[t, factor], ...]` (default: constant 1), straight from point to
+/// point or along `shape = "poly345"`, NiftySim's smooth step.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LoadSpec {
@@ -262,6 +267,9 @@ pub struct LoadSpec {
     pub set: Option<String>,
     pub force: [f64; 3],
     pub ramp: Option<Vec<[f64; 2]>>,
+    /// How the ramp goes from one point to the next (`"linear"`, the default, or
+    /// `"poly345"`).
+    pub shape: Option<Segment>,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]

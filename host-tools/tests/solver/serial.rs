@@ -235,3 +235,85 @@ fn f32_and_f64_agree_on_a_short_run() {
     );
     assert!(umax > 0.0 && dmax < 1e-4 * umax);
 }
+
+/// A prescribed path along POLY345 (`shape = "poly345"`): the held nodes follow the closed
+/// form `u(t) = Δ w(t/T)`, `w(s) = 10s³ − 15s⁴ + 6s⁵`, to round-off (relative 1e-12 where
+/// |u| > Δ/100), and their velocity, the central difference `(u_n − u_{n−1})/dt`, is
+/// `Δ/T · w'(s)` at the half step, `w'(s) = 30s²(1 − s)²`, within the difference's own
+/// error `(Δ/T)(dt/T)² max|w'''|/24` (`w''' = 60 − 360s + 360s²`, at most 60), checked
+/// where the speed is above a tenth of its peak 1.875 Δ/T; and exactly zero once held:
+/// the push starts and stops without a jolt, which a linear path (a jump to Δ/T) would not.
+#[test]
+fn a_smooth_prescribed_path_follows_poly345() {
+    let (delta, period): (f64, f64) = (-0.002, 0.05);
+    let extra = format!(
+        r#"
+[[prescribed]]
+box = [[0.0999, -1.0, -1.0], [1.0, 1.0, 1.0]]
+path = [[0.0, 0.0, 0.0, 0.0], [{period}, 0.0, 0.0, {delta}]]
+shape = "poly345"
+"#
+    );
+    let sc = box_scene(
+        [0.1, 0.02, 0.02],
+        [10, 2, 2],
+        5e4,
+        0.45,
+        "damping = 20.0",
+        &extra,
+    );
+    let p = problem(&sc);
+    let held: Vec<usize> = (0..p.mesh.nodes.len())
+        .filter(|&n| matches!(p.node_kind[n], host_tools::problem::NodeKind::Prescribed(_)))
+        .collect();
+    assert_eq!(held.len(), 9, "the free end's 3 x 3 nodes");
+    let dt = p.time_step.dt_s;
+    let mut m = Model::<f64>::new(&p, dt);
+    let w = |s: f64| 10.0 * s.powi(3) - 15.0 * s.powi(4) + 6.0 * s.powi(5);
+    let dw = |s: f64| 30.0 * s * s * (1.0 - s) * (1.0 - s);
+    let steps = (1.2 * period / dt) as u64;
+    // The central difference of a smooth path is its derivative at the half step up to
+    // (dt^2/24) u''': |w'''| <= 60 on [0, 1], with 5% and round-off to spare.
+    let v_tolerance = delta.abs() / period * (dt / period).powi(2) * 60.0 / 24.0 * 1.05 + 1e-12;
+    let (mut checked_u, mut checked_v) = (0, 0);
+    for _ in 0..steps {
+        m.advance().expect("stable run");
+        let t = m.time_s();
+        let s = (t / period).min(1.0);
+        let want_u = delta * w(s);
+        let s_mid = ((t - 0.5 * dt) / period).clamp(0.0, 1.0);
+        let want_v = delta / period * dw(s_mid);
+        let v = m.velocities();
+        for &n in &held {
+            let u = m.u[n][2];
+            if want_u.abs() > delta.abs() / 100.0 {
+                assert!(
+                    (u - want_u).abs() <= 1e-12 * want_u.abs(),
+                    "t {t}: u {u} vs {want_u}"
+                );
+                checked_u += 1;
+            }
+            if want_v.abs() > 0.1 * 1.875 * delta.abs() / period {
+                let vz = v[n][2];
+                assert!(
+                    (vz - want_v).abs() <= v_tolerance,
+                    "t {t}: v {vz} vs {want_v} (tolerance {v_tolerance:e})"
+                );
+                checked_v += 1;
+            }
+            assert_eq!(m.u[n][0], 0.0);
+        }
+        if t > period + dt {
+            // Held at Δ: no motion, exactly.
+            assert!(held.iter().all(|&n| v[n][2] == 0.0), "t {t}: still moving");
+        }
+    }
+    println!(
+        "dt {dt:e} s, {steps} steps; velocity tolerance {v_tolerance:e} m/s, peak {:e} m/s",
+        1.875 * delta.abs() / period
+    );
+    assert!(
+        checked_u > 100 && checked_v > 100,
+        "{checked_u} {checked_v}"
+    );
+}

@@ -23,7 +23,7 @@ pub use codec::{
     read_image, stamp_compilation, transcode, validate, write_image, zero_record, Codec,
     ElementRecord, ImageParts, ImageReader, ImageReal, ImageWriter,
 };
-pub use path::{path_value, piecewise_linear};
+pub use path::{path_value, piecewise, piecewise_linear, Segment};
 
 use serde::{Deserialize, Serialize};
 
@@ -33,7 +33,7 @@ pub use crate::physics::element::Integration;
 /// First four bytes of every schedule image.
 pub const MAGIC: [u8; 4] = *b"PESI";
 /// Format version; bumped whenever a record type changes.
-pub const FORMAT_VERSION: u16 = 7;
+pub const FORMAT_VERSION: u16 = 8;
 
 /// The id of the compilation an image belongs to: a 64-bit hash the compiler computes over
 /// every image of the set (with this field zero) and the scene's mesh (see `pe compile`).
@@ -409,6 +409,8 @@ pub struct PathPoint {
     pub path: u16,
     pub t_s: f64,
     pub value: [f64; 3],
+    /// How the path goes to this point from the one before ([`path::Segment`]).
+    pub segment: Segment,
 }
 
 /// An external nodal force applied by the node's owner, scaled by an optional ramp path.

@@ -360,6 +360,7 @@ fn selections_as_sets(
                 sphere: None,
                 set: Some(name),
                 path: ps.path.clone(),
+                shape: ps.shape,
             }
         })
         .collect();
@@ -377,6 +378,7 @@ fn selections_as_sets(
             set: Some(name),
             force: l.force,
             ramp: l.ramp.clone(),
+            shape: l.shape,
         });
     }
     out.load = loads;

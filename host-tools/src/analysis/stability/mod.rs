@@ -162,9 +162,8 @@ fn prescribe_boundary(
     for n in p.mesh.boundary_nodes() {
         let x = p.mesh.nodes[n as usize];
         p.node_kind[n as usize] = NodeKind::Prescribed(p.paths.len() as u32);
-        p.paths.push(Path1 {
-            points: times.iter().map(|&t| (t, u(x, t))).collect(),
-        });
+        p.paths
+            .push(Path1::linear(times.iter().map(|&t| (t, u(x, t))).collect()));
     }
     p.update_time_step()
 }

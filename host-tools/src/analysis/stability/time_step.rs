@@ -331,9 +331,10 @@ pub fn guards() -> Result<Case> {
             let mut p = problem(&sc)?;
             let corner = node_near(&p, [0.05, 0.0, 0.0]);
             p.node_kind[corner] = NodeKind::Prescribed(p.paths.len() as u32);
-            p.paths.push(Path1 {
-                points: vec![(0.0, [0.0; 3]), (1e-9, [-0.03, 0.0, 0.0])],
-            });
+            p.paths.push(Path1::linear(vec![
+                (0.0, [0.0; 3]),
+                (1e-9, [-0.03, 0.0, 0.0]),
+            ]));
             p.update_time_step()?;
             let dt = p.time_step.dt_s;
             let mut m = Model::<f64>::new(&p, dt);
