@@ -1,14 +1,46 @@
-//! Functions of time that many nodes share, kept once: the loads' ramps (the solver
-//! evaluates each once per step; the compiler writes each once into the path table).
+//! Functions of time: a prescribed path or a load ramp ([`Path1`], linear or smooth from
+//! point to point), and those that many nodes share, kept once: the loads' ramps (the
+//! solver evaluates each once per step; the compiler writes each once into the path table).
 //!
 //! A `[[load]]` spreads over its nodes, each with the load's ramp; evaluated per node, a
 //! ramp of `p` points costs `O(p)` per loaded node and step (a smooth 161-point ramp on
 //! 1331 loaded nodes of the seed's box doubled the run). [`Curves`] keeps each distinct
 //! curve once and its value at the step's time, so a step costs `O(p)` per curve. The
-//! value is [`Path1::at`]'s, the board's `piecewise_linear`, on the same inputs: the same
+//! value is [`Path1::at`]'s, the board's `piecewise`, on the same inputs: the same
 //! bits as evaluating it per node.
 
-use super::Path1;
+use pe_firmware::image::Segment;
+
+/// A function of time through `(t, value)` points, each segment linear or smooth
+/// ([`Segment`]), held constant outside.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Path1<const N: usize> {
+    pub points: Vec<(f64, [f64; N])>,
+    /// How every segment goes from one point to the next.
+    pub segment: Segment,
+}
+
+impl<const N: usize> Path1<N> {
+    /// Through `points`, straight from one to the next.
+    pub fn linear(points: Vec<(f64, [f64; N])>) -> Path1<N> {
+        Path1 {
+            points,
+            segment: Segment::Linear,
+        }
+    }
+
+    /// Value at `t` (the firmware's [`pe_firmware::image::piecewise`], so host and board
+    /// interpolate to the same bits).
+    pub fn at(&self, t: f64) -> [f64; N] {
+        let v = pe_firmware::image::piecewise(t, self.points.len(), |k| {
+            let (tk, p) = self.points[k];
+            let mut q = [0.0; 3];
+            q[..N].copy_from_slice(&p);
+            (tk, q, self.segment)
+        });
+        core::array::from_fn(|i| v[i])
+    }
+}
 
 /// The distinct curves of a list of users (each `None` or one curve), and their values at
 /// the last time evaluated.

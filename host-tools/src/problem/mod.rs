@@ -11,43 +11,12 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
-use pe_firmware::image::Segment;
 use pe_firmware::physics::{LameParameters, MaterialLaw, ReferenceHex, Volumetric};
 
 use crate::mesh::Mesh;
 use crate::scene::{Law, MaterialSpec, RegionRef, Scene, Selector, SolverSpec};
 use batched::{Batched, Isa};
-
-/// A function of time through `(t, value)` points, each segment linear or smooth
-/// ([`Segment`]), held constant outside.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Path1<const N: usize> {
-    pub points: Vec<(f64, [f64; N])>,
-    /// How every segment goes from one point to the next.
-    pub segment: Segment,
-}
-
-impl<const N: usize> Path1<N> {
-    /// Through `points`, straight from one to the next.
-    pub fn linear(points: Vec<(f64, [f64; N])>) -> Path1<N> {
-        Path1 {
-            points,
-            segment: Segment::Linear,
-        }
-    }
-
-    /// Value at `t` (the firmware's [`pe_firmware::image::piecewise`], so host and board
-    /// interpolate to the same bits).
-    pub fn at(&self, t: f64) -> [f64; N] {
-        let v = pe_firmware::image::piecewise(t, self.points.len(), |k| {
-            let (tk, p) = self.points[k];
-            let mut q = [0.0; 3];
-            q[..N].copy_from_slice(&p);
-            (tk, q, self.segment)
-        });
-        core::array::from_fn(|i| v[i])
-    }
-}
+pub use curves::Path1;
 
 /// Dilatational wave speeds of soft tissue in SI units, with a wide margin (gels to
 /// nearly incompressible stiff tissue): outside it a material is probably in other units.
