@@ -256,16 +256,45 @@ pub fn time_steps(
         steps_per_run = steps;
         ns.push(secs * 1e9 / (n as f64 * steps as f64));
     }
-    ns.sort_by(f64::total_cmp);
-    Ok(Timing {
-        elements: n,
-        nodes: p.mesh.nodes.len(),
-        threads,
-        steps_per_run,
-        ns_median: ns[ns.len() / 2],
-        ns_min: ns[0],
-        ns_max: ns[ns.len() - 1],
-    })
+    Ok(Timing::of(&p, threads, steps_per_run, ns))
+}
+
+impl Timing {
+    /// The figures of `ns` (one ns per element-step per run, at least one) on `p`'s mesh.
+    fn of(p: &Problem, threads: usize, steps_per_run: u64, mut ns: Vec<f64>) -> Timing {
+        ns.sort_by(f64::total_cmp);
+        Timing {
+            elements: p.mesh.cells.len(),
+            nodes: p.mesh.nodes.len(),
+            threads,
+            steps_per_run,
+            ns_median: ns[ns.len() / 2],
+            ns_min: ns[0],
+            ns_max: ns[ns.len() - 1],
+        }
+    }
+
+    /// The columns both of `pe bench`'s tables start with (heads: [`columns_head`]).
+    fn columns(&self, integration: Integration, precision: Precision) -> String {
+        format!(
+            "{:<8} {:<5} {:>8} {:>7} {:>12.1} {:>17} {:>10}",
+            integration.to_string(),
+            precision.to_string(),
+            self.elements,
+            self.threads,
+            self.ns_median,
+            format!("({:.1} .. {:.1})", self.ns_min, self.ns_max),
+            self.steps_per_run,
+        )
+    }
+}
+
+/// The heads of [`Timing::columns`].
+fn columns_head() -> String {
+    format!(
+        "{:<8} {:<5} {:>8} {:>7} {:>12} {:>17} {:>10}",
+        "integr.", "prec.", "elements", "threads", "ns/elem-step", "(min .. max)", "steps/run"
+    )
 }
 
 /// The built-in anatomy's timing: whole steps from rest, the general kernel (every cell of
@@ -326,18 +355,9 @@ pub fn time_anatomy(
         ns.push(secs * 1e9 / (p.mesh.cells.len() as f64 * steps));
         contact_us.push(contact * 1e6 / steps);
     }
-    ns.sort_by(f64::total_cmp);
     contact_us.sort_by(f64::total_cmp);
     Ok(AnatomyTiming {
-        steps: Timing {
-            elements: p.mesh.cells.len(),
-            nodes: p.mesh.nodes.len(),
-            threads,
-            steps_per_run: last[0] as u64,
-            ns_median: ns[ns.len() / 2],
-            ns_min: ns[0],
-            ns_max: ns[ns.len() - 1],
-        },
+        steps: Timing::of(&p, threads, last[0] as u64, ns),
         contact_us_per_step: contact_us[contact_us.len() / 2],
         steps_in_contact: last[3] as u64,
     })
@@ -353,29 +373,16 @@ fn anatomy_rows(thread_counts: &[usize], seconds: f64, runs: usize, only: Only) 
     }
     println!("\nthe built-in medium scene (anatomy: every cell on the general kernel; the probe's contact), whole steps from rest, median of {runs} runs of >= {seconds} s:");
     println!(
-        "{:<8} {:<5} {:>8} {:>7} {:>12} {:>17} {:>10} {:>16} {:>11}",
-        "integr.",
-        "prec.",
-        "elements",
-        "threads",
-        "ns/elem-step",
-        "(min .. max)",
-        "steps/run",
+        "{} {:>16} {:>11}",
+        columns_head(),
         "contact us/step",
         "touching"
     );
     for &threads in thread_counts {
         let a = time_anatomy("medium", threads, seconds, runs)?;
-        let t = a.steps;
         println!(
-            "{:<8} {:<5} {:>8} {:>7} {:>12.1} {:>17} {:>10} {:>16.1} {:>11}",
-            integ.to_string(),
-            prec.to_string(),
-            t.elements,
-            threads,
-            t.ns_median,
-            format!("({:.1} .. {:.1})", t.ns_min, t.ns_max),
-            t.steps_per_run,
+            "{} {:>16.1} {:>11}",
+            a.steps.columns(integ, prec),
             a.contact_us_per_step,
             format!("{} steps", a.steps_in_contact)
         );
@@ -437,17 +444,7 @@ pub fn run_cli(elements: usize, seconds: f64, runs: usize, only: Only) -> Result
     println!(
         "host cost of one element-step (whole steps of the seed's box / elements), median of {runs} runs of >= {seconds} s each, {isa:?} lanes:"
     );
-    println!(
-        "{:<8} {:<5} {:>8} {:>7} {:>12} {:>17} {:>10} {:>9}",
-        "integr.",
-        "prec.",
-        "elements",
-        "threads",
-        "ns/elem-step",
-        "(min .. max)",
-        "steps/run",
-        "% peak"
-    );
+    println!("{} {:>9}", columns_head(), "% peak");
     let mut flops = Vec::new();
     for integ in [Integration::Reduced, Integration::Full] {
         let (kernels, node) = element_step_flops(integ)?;
@@ -475,14 +472,8 @@ pub fn run_cli(elements: usize, seconds: f64, runs: usize, only: Only) -> Result
                     format!("{:.1}", 100.0 * achieved / (lanes * g * threads as f64))
                 });
                 println!(
-                    "{:<8} {:<5} {:>8} {:>7} {:>12.1} {:>17} {:>10} {:>9}",
-                    integ.to_string(),
-                    prec.to_string(),
-                    t.elements,
-                    threads,
-                    t.ns_median,
-                    format!("({:.1} .. {:.1})", t.ns_min, t.ns_max),
-                    t.steps_per_run,
+                    "{} {:>9}",
+                    t.columns(*integ, prec),
                     peak.unwrap_or_else(|| "?".into())
                 );
             }
