@@ -321,3 +321,48 @@ fn pe_isa_caps_the_lanes() {
     assert!(!out.status.success());
     assert!(err.contains("PE_ISA") && err.contains("avx512"), "{err}");
 }
+
+/// `pe bench` names the CPU and its lanes, times the box and the built-in medium scene
+/// (the general kernel and contact), and its figures are consistent: a positive ns per
+/// element-step in every row, the medium scene's 2192 elements, a positive contact cost
+/// per step (the probe's tests run every step, touching or not), and no more steps in
+/// contact than steps timed.
+#[test]
+fn bench_times_the_box_and_the_builtin_scene_with_its_contact() {
+    let out = pe(&[
+        "bench",
+        "--elements",
+        "16",
+        "--seconds",
+        "0.05",
+        "--runs",
+        "1",
+        "--integration",
+        "reduced",
+        "--precision",
+        "f64",
+        "--threads",
+        "1",
+    ]);
+    assert!(out.starts_with("CPU: "), "{out}");
+    assert!(out.contains("element loops: "), "{out}");
+    let rows: Vec<Vec<&str>> = out
+        .lines()
+        .filter(|l| l.starts_with("reduced  f64"))
+        .map(|l| l.split_whitespace().collect())
+        .collect();
+    assert_eq!(rows.len(), 2, "the box and the built-in scene: {out}");
+    for r in &rows {
+        let ns: f64 = r[4].parse().unwrap();
+        assert!(ns > 0.0 && ns.is_finite(), "{r:?}");
+    }
+    let (bx, anatomy) = (&rows[0], &rows[1]);
+    assert_eq!(bx[2], "16", "{bx:?}");
+    assert_eq!(anatomy[2], "2192", "{anatomy:?}");
+    // integr. prec. elements threads ns (min .. max) steps contact touching "steps"
+    let steps: u64 = anatomy[8].parse().unwrap();
+    let contact_us: f64 = anatomy[9].parse().unwrap();
+    let touching: u64 = anatomy[10].parse().unwrap();
+    assert!(steps >= 16 && contact_us > 0.0, "{anatomy:?}");
+    assert!(touching <= steps, "{anatomy:?}");
+}
