@@ -224,39 +224,65 @@ pub fn time_steps(
 ) -> Result<Timing> {
     let scene = bench_scene(elements, integration, precision)?;
     let p = Problem::from_scene(&scene, std::path::Path::new("."))?;
-    let dt = p.time_step.dt_s;
-    fn one<T: Real>(p: &Problem, dt: f64, threads: usize, seconds: f64) -> Result<(u64, f64)> {
-        let mut m = Model::<T>::new(p, dt);
+    let timed = timed_runs(&p, threads, seconds, runs)?;
+    let ns = timed.iter().map(|r| r.ns_per_element_step(&p)).collect();
+    let steps_per_run = timed.last().map_or(0, |r| r.steps);
+    Ok(Timing::of(&p, threads, steps_per_run, ns))
+}
+
+/// One timed run of whole steps.
+struct Run {
+    steps: u64,
+    wall_s: f64,
+    /// Of it, in contact evaluations (s).
+    contact_s: f64,
+    /// Steps in which a tool touched the tissue.
+    touching: u64,
+}
+
+impl Run {
+    fn ns_per_element_step(&self, p: &Problem) -> f64 {
+        self.wall_s * 1e9 / (p.mesh.cells.len() as f64 * self.steps as f64)
+    }
+}
+
+/// `runs` runs of `p` in its precision on `threads` threads, each from rest: 20 steps to
+/// warm up, then whole steps for at least `seconds` (a multiple of 16).
+fn timed_runs(p: &Problem, threads: usize, seconds: f64, runs: usize) -> Result<Vec<Run>> {
+    fn one<T: Real>(p: &Problem, threads: usize, seconds: f64) -> Result<Run> {
+        let mut m = Model::<T>::new(p, p.time_step.dt_s);
         m.set_threads(threads)?;
         for _ in 0..20 {
             m.advance()?;
         }
+        let contact_s = |m: &Model<T>| m.contact.as_ref().map_or(0.0, |c| c.evaluate_s);
+        let c0 = contact_s(&m);
         let t = Instant::now();
-        let mut steps = 0u64;
+        let (mut steps, mut touching) = (0u64, 0u64);
         loop {
             for _ in 0..16 {
                 m.advance()?;
+                touching += u64::from(m.contact.as_ref().is_some_and(|c| c.stats.active > 0));
             }
             steps += 16;
-            let s = t.elapsed().as_secs_f64();
-            if s >= seconds {
-                return Ok((steps, s));
+            let wall_s = t.elapsed().as_secs_f64();
+            if wall_s >= seconds {
+                let contact_s = contact_s(&m) - c0;
+                return Ok(Run {
+                    steps,
+                    wall_s,
+                    contact_s,
+                    touching,
+                });
             }
         }
     }
-    let n = p.mesh.cells.len();
-    let mut ns = Vec::new();
-    let mut steps_per_run = 0;
-    for _ in 0..runs.max(1) {
-        let (steps, secs) = if precision == Precision::F32 {
-            one::<f32>(&p, dt, threads, seconds)?
-        } else {
-            one::<f64>(&p, dt, threads, seconds)?
-        };
-        steps_per_run = steps;
-        ns.push(secs * 1e9 / (n as f64 * steps as f64));
-    }
-    Ok(Timing::of(&p, threads, steps_per_run, ns))
+    (0..runs.max(1))
+        .map(|_| match p.solver.precision {
+            Precision::F32 => one::<f32>(p, threads, seconds),
+            Precision::F64 => one::<f64>(p, threads, seconds),
+        })
+        .collect()
 }
 
 impl Timing {
@@ -320,46 +346,18 @@ pub fn time_anatomy(
 ) -> Result<AnatomyTiming> {
     let scene = crate::scene::builtin::builtin_scene(level)?;
     let p = Problem::from_scene(&scene, std::path::Path::new("."))?;
-    let dt = p.time_step.dt_s;
-    // (steps, wall s, contact s, steps in contact)
-    fn one<T: Real>(p: &Problem, dt: f64, threads: usize, seconds: f64) -> Result<[f64; 4]> {
-        let mut m = Model::<T>::new(p, dt);
-        m.set_threads(threads)?;
-        for _ in 0..20 {
-            m.advance()?;
-        }
-        let contact_s = |m: &Model<T>| m.contact.as_ref().map_or(0.0, |c| c.evaluate_s);
-        let c0 = contact_s(&m);
-        let t = Instant::now();
-        let (mut steps, mut touching) = (0u64, 0u64);
-        loop {
-            m.advance()?;
-            steps += 1;
-            touching += u64::from(m.contact.as_ref().is_some_and(|c| c.stats.active > 0));
-            let s = t.elapsed().as_secs_f64();
-            if s >= seconds && steps.is_multiple_of(16) {
-                return Ok([steps as f64, s, contact_s(&m) - c0, touching as f64]);
-            }
-        }
-    }
-    let mut ns = Vec::new();
-    let mut contact_us = Vec::new();
-    let mut last = [0.0; 4];
-    for _ in 0..runs.max(1) {
-        last = if p.solver.precision == Precision::F32 {
-            one::<f32>(&p, dt, threads, seconds)?
-        } else {
-            one::<f64>(&p, dt, threads, seconds)?
-        };
-        let [steps, secs, contact, _] = last;
-        ns.push(secs * 1e9 / (p.mesh.cells.len() as f64 * steps));
-        contact_us.push(contact * 1e6 / steps);
-    }
+    let timed = timed_runs(&p, threads, seconds, runs)?;
+    let ns = timed.iter().map(|r| r.ns_per_element_step(&p)).collect();
+    let mut contact_us: Vec<f64> = timed
+        .iter()
+        .map(|r| r.contact_s * 1e6 / r.steps as f64)
+        .collect();
+    let (steps_per_run, touching) = timed.last().map_or((0, 0), |r| (r.steps, r.touching));
     contact_us.sort_by(f64::total_cmp);
     Ok(AnatomyTiming {
-        steps: Timing::of(&p, threads, last[0] as u64, ns),
+        steps: Timing::of(&p, threads, steps_per_run, ns),
         contact_us_per_step: contact_us[contact_us.len() / 2],
-        steps_in_contact: last[3] as u64,
+        steps_in_contact: touching,
     })
 }
 
