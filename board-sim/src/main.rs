@@ -17,6 +17,10 @@ use clap::{Parser, Subcommand};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// On an error, also print where in the code it arose (for reporting a bug; a bad
+    /// input's message names what to fix without it).
+    #[arg(long, global = true)]
+    backtrace: bool,
 }
 
 #[derive(Subcommand)]
@@ -112,11 +116,18 @@ enum Command {
     },
 }
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
     host_tools::output::exit_quietly_when_stdout_closes();
+    let cli = Cli::parse();
+    if cli.backtrace {
+        host_tools::output::capture_backtraces();
+    }
+    host_tools::output::finish(run(cli.command), cli.backtrace)
+}
+
+fn run(command: Command) -> Result<()> {
     // A bad PE_ISA is refused before any work.
     host_tools::problem::batched::Isa::cap_from_env().map_err(anyhow::Error::msg)?;
-    let Cli { command } = Cli::parse();
     match command {
         Command::Run { dir, args } => execute(&dir, args).map(|_| ()),
         Command::Live { dir, args } => live(&dir, &args),

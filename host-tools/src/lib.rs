@@ -5,6 +5,7 @@
 // Index loops mirror the tensor formulas in the doc comments.
 #![allow(clippy::needless_range_loop)]
 pub mod analysis;
+pub mod compare;
 pub mod compile;
 pub mod firmware;
 pub mod flash;

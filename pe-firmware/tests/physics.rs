@@ -3,6 +3,7 @@
 
 use pe_firmware::physics::element::hex::{natural_gradients, NODE_XI};
 use pe_firmware::physics::material::cauchy_stress;
+use pe_firmware::physics::real::nan_max;
 use pe_firmware::physics::tensor::{self, Mat3};
 use pe_firmware::physics::{HexElement, LameParameters, MaterialLaw, ReferenceHex, Volumetric};
 
@@ -106,7 +107,7 @@ fn max_abs_diff(a: &Mat3<f64>, b: &Mat3<f64>) -> f64 {
     let mut m: f64 = 0.0;
     for i in 0..3 {
         for k in 0..3 {
-            m = m.max((a[i][k] - b[i][k]).abs());
+            m = nan_max(m, (a[i][k] - b[i][k]).abs());
         }
     }
     m

@@ -79,12 +79,12 @@ pub fn compile(problem: &Problem, source: &str, machine: &str, name: &str) -> Te
     dir
 }
 
-pub use host_tools::firmware::{max_abs, max_rel_diff};
+pub use host_tools::compare::{max_abs, max_rel_diff};
 
 /// Asserts that `a` and `b` are bit-identical and of the same length (the one home of that
-/// check for the system tests: `host_tools::firmware::bit_identical`).
+/// check for the system tests: `host_tools::compare::bit_identical`).
 pub fn assert_bit_identical(a: &[[f64; 3]], b: &[[f64; 3]], what: &str) {
-    if let Err(e) = host_tools::firmware::bit_identical(a, b) {
+    if let Err(e) = host_tools::compare::bit_identical(a, b) {
         panic!("{what}: {e}");
     }
 }

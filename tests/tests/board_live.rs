@@ -4,6 +4,7 @@
 //! `board-sim run --replay` (the poses sent to the boards as ToolPose packets) gives the
 //! same tool forces bit for bit.
 
+use host_tools::compare::nan_max;
 use std::sync::atomic::AtomicBool;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
@@ -185,7 +186,7 @@ fn board_sim_live_presses_the_tube_and_its_record_replays_bit_for_bit() {
         ..SimOptions::default()
     };
     let replay = run(&dir, &opts, &mut |_, _| {}).expect("board-sim replay");
-    let f_max_step = forces.iter().map(|f| norm(*f)).fold(0.0, f64::max);
+    let f_max_step = forces.iter().map(|f| norm(*f)).fold(0.0, nan_max);
     let touched = forces.iter().filter(|f| norm(**f) > 0.0).count();
     println!("live: probe force at most {f_max_step:.4e} N a step, {touched} of {STEPS} steps in contact");
     assert_eq!(forces.len(), STEPS as usize);

@@ -1,5 +1,6 @@
 //! board-sim against the serial solver, determinism and fault injection.
 
+use host_tools::compare::nan_max;
 use std::time::Duration;
 
 use board_sim::faults::FaultSpec;
@@ -153,11 +154,7 @@ fn f32_machines_equal_the_f32_serial_run_with_contact() {
         "contact nodes crossed the global network: {vectors} in {} steps",
         out.steps
     );
-    let probe = out
-        .tool_force
-        .iter()
-        .map(|f| f[2].abs())
-        .fold(0.0, f64::max);
+    let probe = out.tool_force.iter().map(|f| f[2].abs()).fold(0.0, nan_max);
     assert!(probe > 0.0, "the probe touched the tube");
 }
 
@@ -488,7 +485,7 @@ fn recovery_gives_the_clean_bits_under_loss_and_corruption() {
         ..Default::default()
     };
     let clean = sim(&dir, &opts(None));
-    let u_max = host_tools::firmware::max_abs(&clean.displacements);
+    let u_max = host_tools::compare::max_abs(&clean.displacements);
     assert!(
         u_max > 1e-4,
         "the probe has moved the tube: max |u| {u_max} m"

@@ -3,6 +3,7 @@
 //! bound behind the bounding-box interval.
 
 use board_sim::{run, SimFault, SimOptions};
+use host_tools::compare::nan_max;
 use host_tools::solver;
 use pe_firmware::physics::PhysicsError;
 use pe_firmware::runtime::FaultKind;
@@ -239,7 +240,7 @@ fn builtin_scene_probe_tube_and_ovary_on_64_boards_equal_serial() {
             let u = serial.displacements[n as usize];
             (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()
         })
-        .fold(0.0, f64::max);
+        .fold(0.0, nan_max);
     let fs = c.tool_force_final_n[0];
     println!(
         "ovary pressed {moved:.3e} m; probe force {fs:?} N; pair sum {:.1e}",

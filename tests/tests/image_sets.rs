@@ -203,7 +203,7 @@ fn a_mixed_set_is_refused_by_the_host_and_by_the_boards() {
     let out = run(&a, &clean, &mut |_, _| {}).expect("a clean set runs");
     assert_eq!(out.steps, 1000);
     assert_eq!(out.displacements.len(), coarse(1, 1.0).mesh.nodes.len());
-    let u_max = host_tools::firmware::max_abs(&out.displacements);
+    let u_max = host_tools::compare::max_abs(&out.displacements);
     assert!(
         u_max > 1e-4,
         "the probe has moved the tube: max |u| {u_max} m"

@@ -2,6 +2,7 @@
 //! board-sim (the host sends each pose as a ToolPose packet to the boards holding the tool,
 //! `POSE_DELAY_STEPS` ahead) equals the host solver's replay (`pe solve --replay`).
 
+use host_tools::compare::nan_max;
 use std::path::Path;
 
 use board_sim::{run, SimOptions};
@@ -108,7 +109,7 @@ fn board_sim_replay_equals_pe_solve_replay() {
             .displacements
             .iter()
             .map(|u| norm(*u))
-            .fold(0.0, f64::max);
+            .fold(0.0, nan_max);
         let touched = fh.iter().filter(|f| norm(**f) > 0.0).count();
         println!("{machine}: probe force at the end {f_end:.4e} N (scripted path {f_scripted:.4e} N), {touched} steps in contact; max |u| {u_max:.4e} m");
         assert!(f_end > 1e-3, "the probe presses: {f_end} N");
@@ -129,7 +130,7 @@ fn board_sim_replay_equals_pe_solve_replay() {
         }
         let f_diff = (fh.iter().zip(fb))
             .map(|(a, b)| norm(core::array::from_fn(|i| a[i] - b[i])))
-            .fold(0.0, f64::max);
+            .fold(0.0, nan_max);
         let u_diff = max_rel_diff(&host.displacements, &boards.displacements);
         println!("{machine}: tool force within {:.1e} of the final force, displacements {u_diff:.1e} relative", f_diff / f_end);
         assert!(f_diff < 1e-12 * f_end, "{f_diff:e} N");

@@ -1,6 +1,7 @@
 //! The partitioner: its exchange count against an independent count from the element ->
 //! board map alone, its load balance, and the seed's reference case.
 
+use host_tools::compare::nan_max;
 use host_tools::compile::partition::{slabs, Machine, BALANCE_MAX};
 use host_tools::compile::{compile_images, plan, report};
 use host_tools::problem::{NodeKind, Problem};
@@ -300,7 +301,7 @@ fn balancing_cost_keeps_every_boards_cost_within_the_bound() {
                 l[b as usize] += x;
             }
             let mean = l.iter().sum::<f64>() / l.len() as f64;
-            l.iter().copied().fold(0.0, f64::max) / mean
+            l.iter().copied().fold(0.0, nan_max) / mean
         };
         let by_cost = plan_balanced(&p, machine, Balance::Cost).expect("plans");
         let by_elements = plan_balanced(&p, machine, Balance::Elements).expect("plans");

@@ -4,6 +4,7 @@
 //! contact surface, a load or a prescribed motion touches; the written scene runs unchanged
 //! through the solver, the compiler and board-sim.
 
+use host_tools::compare::nan_max;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -188,7 +189,7 @@ fn check_plan(
     let u_ref = touched
         .iter()
         .map(|&n| norm(a.displacements[n]))
-        .fold(0.0, f64::max);
+        .fold(0.0, nan_max);
     assert!(u_ref > 1e-4, "the touched nodes moved: {u_ref:e} m");
     let mut e = 0.0f64;
     for &n in &touched {
@@ -226,7 +227,7 @@ fn check_plan(
                         assert_eq!(x.len(), windows);
                         // (f64::max below would drop a NaN.)
                         assert!(x.iter().chain(y).all(|v| v.is_finite()), "finite means");
-                        let peak = x.iter().copied().fold(0.0, f64::max);
+                        let peak = x.iter().copied().fold(0.0, nan_max);
                         assert!(
                             peak > 1e-4,
                             "the tool pressed: peak window force {peak:e} N"
@@ -234,12 +235,12 @@ fn check_plan(
                         x.iter()
                             .zip(y)
                             .map(|(p, q)| (p - q).abs())
-                            .fold(0.0, f64::max)
+                            .fold(0.0, nan_max)
                             / peak
                     })
-                    .fold(0.0, f64::max)
+                    .fold(0.0, nan_max)
             })
-            .fold(0.0, f64::max)
+            .fold(0.0, nan_max)
     });
     (planned, e / u_ref, force)
 }
@@ -464,12 +465,12 @@ fn a_voxel_mesh_is_coarsened_when_its_budget_allows() {
         pairs.len(),
         b.mesh.nodes.len()
     );
-    let u_ref = pairs.iter().map(|&(n, _)| norm(ua[n])).fold(0.0, f64::max);
+    let u_ref = pairs.iter().map(|&(n, _)| norm(ua[n])).fold(0.0, nan_max);
     assert!(u_ref > 1e-3, "the liver sagged: {u_ref:e} m");
     let e = pairs
         .iter()
         .map(|&(n, k)| norm(core::array::from_fn(|i| ua[n][i] - ub[k][i])))
-        .fold(0.0, f64::max)
+        .fold(0.0, nan_max)
         / u_ref;
     println!(
         "liver: {} of {} elements, planner's error {:.4}, this test's {e:.4}",
@@ -653,7 +654,7 @@ fn a_contact_pair_that_never_touches_is_dropped() {
     let a = solver::run(&with, "with", &mut ()).expect("run");
     let b = solver::run(&without, "without", &mut ()).expect("run");
     assert_eq!(a.tool_force.len(), b.tool_force.len());
-    let peak = b.tool_force.iter().map(|f| norm(*f)).fold(0.0, f64::max);
+    let peak = b.tool_force.iter().map(|f| norm(*f)).fold(0.0, nan_max);
     assert!(peak > 1e-3, "the probe pressed: {peak:e} N");
     assert_eq!(a.tool_force, b.tool_force, "the extra pair never acts");
 

@@ -2,6 +2,7 @@
 //! step, every link direction's exchange within the step, and with contact every global
 //! port's contact traffic at rest within the step.
 
+use host_tools::compare::nan_max;
 use host_tools::compile::partition::Machine;
 use host_tools::compile::{compile_images, plan, report, summary, CompileReport};
 use host_tools::problem::Problem;
@@ -271,7 +272,7 @@ fn verdict_matches_an_independent_computation() {
         }
         assert!(!times.is_empty(), "{name}: links send");
         let over = times.iter().filter(|&&t| t > dt).count();
-        let busiest = times.iter().copied().fold(0.0, f64::max);
+        let busiest = times.iter().copied().fold(0.0, nan_max);
         let cost = measured_cost(p.solver.precision, p.solver.integration);
         let compute = plan
             .boards
@@ -312,7 +313,7 @@ fn verdict_matches_an_independent_computation() {
                     + contact as f64 * cost.per_contact_node as f64)
                     / profile.clock_hz as f64
             })
-            .fold(0.0, f64::max);
+            .fold(0.0, nan_max);
         assert!(compute > 0.0 && busiest > 0.0);
         let keeps = compute <= dt / 2.0 && over == 0;
         let v = &r.real_time;
@@ -380,7 +381,7 @@ fn contact_traffic_on_the_global_ports_is_in_the_verdict() {
     let grown = |pts: &[[f64; 3]]| -> ([f64; 3], [f64; 3]) {
         let lo = core::array::from_fn(|k| pts.iter().map(|q| q[k]).fold(f64::INFINITY, f64::min));
         let hi =
-            core::array::from_fn(|k| pts.iter().map(|q| q[k]).fold(f64::NEG_INFINITY, f64::max));
+            core::array::from_fn(|k| pts.iter().map(|q| q[k]).fold(f64::NEG_INFINITY, nan_max));
         (lo.map(|v: f64| v - margin), hi.map(|v: f64| v + margin))
     };
     let inside =
@@ -799,13 +800,13 @@ fn the_link_model_replays_a_check_step() {
         }
         (0..count)
             .map(|b| now[b] + update[b] + extra[b])
-            .fold(0.0, f64::max)
+            .fold(0.0, nan_max)
     };
     let steady_max = replay(&vec![0.0; machine.count()]);
     let check_max = replay(&search);
     let compute_max = (0..machine.count())
         .map(|b| batches[b].iter().sum::<f64>() + update[b])
-        .fold(0.0, f64::max);
+        .fold(0.0, nan_max);
     assert!(
         steady_max >= compute_max && compute_max > 0.0,
         "{steady_max} vs {compute_max}"

@@ -1,5 +1,6 @@
 //! The schedule compiler: partition, replicas, exchange lists, images, fit check.
 
+use host_tools::compare::nan_max;
 use std::collections::BTreeSet;
 
 use host_tools::compile::partition::{partition, Machine, BALANCE_MAX};
@@ -428,7 +429,7 @@ fn each_cell_gets_the_kernel_its_shape_allows() {
             .iter()
             .map(|&(j, k)| norm(vector(&|a| xi[a][j] * xi[a][k])))
             .chain([norm(vector(&|a| xi[a][0] * xi[a][1] * xi[a][2]))])
-            .fold(0.0, f64::max);
+            .fold(0.0, nan_max);
         let aligned = (0..3).all(|j| (0..3).all(|i| i == j || edges[j][i].abs() <= 1e-13 * size));
         (bent <= 1e-13 * size, aligned)
     };

@@ -40,7 +40,7 @@ pub fn campaign(
     }
     let base = base_options(steps, recovery);
     let clean = run(dir, &base, &mut |_, _| {})?;
-    let u_max = host_tools::firmware::max_abs(&clean.displacements);
+    let u_max = host_tools::compare::max_abs(&clean.displacements);
     if u_max <= 0.0 || clean.steps != steps {
         bail!("the clean run is trivial (max |u| {u_max} m after {} steps): choose a scene or more steps that move", clean.steps);
     }

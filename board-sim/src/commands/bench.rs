@@ -50,7 +50,7 @@ pub fn bench(level: &str, boards: &str, steps: u64) -> Result<()> {
             ..Default::default()
         };
         let out = run(&dir, &opts, &mut |_, _| {})?;
-        let d = host_tools::firmware::max_rel_diff(&serial.displacements, &out.displacements);
+        let d = host_tools::compare::max_rel_diff(&serial.displacements, &out.displacements);
         let kernel = if batched { "batched" } else { "scalar" };
         println!(
             "  board-sim, {workers} worker threads, {kernel} element kernel: {:.1} steps/s = {:.2}x the serial run's time (max relative difference {d:.1e})",

@@ -118,7 +118,7 @@ pub fn qemu_array(dir: &Path, args: QemuArgs) -> Result<()> {
             return Err(e);
         }
     };
-    let max_u = host_tools::firmware::max_abs(&out.displacements);
+    let max_u = host_tools::compare::max_abs(&out.displacements);
     let per_step = out.wall_s / out.steps.max(1) as f64;
     println!(
         "{} steps on {} emulated boards in {:.2} s wall: {:.3} ms per step (QEMU start included); max |u| component {:.4e} m; {} global packets between boards, {} to the host and graphics ({} surface frames)",

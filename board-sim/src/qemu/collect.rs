@@ -172,7 +172,7 @@ fn timed_out_neighbour(text: &str) -> Option<[usize; 3]> {
 pub(crate) fn merged_state(boards: &[Emulated]) -> Result<Vec<[f64; 3]>> {
     let mut merged: Vec<Option<[f64; 3]>> = Vec::new();
     for e in boards {
-        let own = host_tools::firmware::parse_displacements(
+        let own = host_tools::compare::parse_displacements(
             &e.console(),
             &format!("board {}", name(e.board)),
         )?;

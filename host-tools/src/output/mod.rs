@@ -35,6 +35,30 @@ pub fn exit_quietly_when_stdout_closes() {
     }
 }
 
+/// Asks errors to capture where they arose (for [`finish`] with `backtrace` set): called by
+/// `pe` and board-sim after parsing `--backtrace`, before any work or thread.
+pub fn capture_backtraces() {
+    std::env::set_var("RUST_LIB_BACKTRACE", "1");
+}
+
+/// How `pe` and board-sim end: `Ok` exits 0; an error prints `error: MESSAGE` and then each
+/// cause of its chain on a `  caused by:` line, and exits 1. A backtrace is printed only when
+/// `backtrace` is set (the `--backtrace` flag), never because `RUST_BACKTRACE` is set in the
+/// user's shell: a bad input is the user's to fix, not a crash.
+pub fn finish(result: Result<()>, backtrace: bool) -> std::process::ExitCode {
+    let Err(e) = result else {
+        return std::process::ExitCode::SUCCESS;
+    };
+    eprintln!("error: {e}");
+    for cause in e.chain().skip(1) {
+        eprintln!("  caused by: {cause}");
+    }
+    if backtrace {
+        eprintln!("backtrace:\n{}", e.backtrace());
+    }
+    std::process::ExitCode::FAILURE
+}
+
 /// The nodes CSV's header: the node tag, the initial position and the displacement, with
 /// their units (m).
 pub const NODES_CSV_HEADER: [&str; 7] = ["node", "x_m", "y_m", "z_m", "ux_m", "uy_m", "uz_m"];

@@ -163,6 +163,17 @@ pub const LN_SERIES_TERMS_F64: usize = 6;
 /// `s⁶/7 ≤ 1.3e-8`, a fifth of the last bit).
 pub const LN_SERIES_TERMS_F32: usize = 3;
 
+/// The larger of `a` and `b`, and NaN when either is NaN, unlike `f64::max`, which returns
+/// the other operand (`NAN.max(1.0) == 1.0`): the maximum every check that folds
+/// differences goes through, so a NaN result is never read as "no difference".
+pub fn nan_max(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
+    }
+}
+
 /// `ln x = 2 artanh s = s (2 + 2s²/3 + 2s⁴/5 + … + 2s²ⁿ/(2n + 1))` with
 /// `s = (x − 1)/(x + 1)`, `n = terms`, in Horner form, for `|x − 1| ≤`
 /// [`LN_SERIES_RADIUS`] (`d = x − 1` given, exact there), where it needs no range reduction

@@ -18,6 +18,10 @@ pub use host_tools::scene::SceneArgs;
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
+    /// On an error, also print where in the code it arose (for reporting a bug; a bad
+    /// input's message names what to fix without it).
+    #[arg(long, global = true)]
+    pub backtrace: bool,
 }
 
 #[derive(Subcommand)]

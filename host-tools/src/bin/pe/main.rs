@@ -18,11 +18,19 @@ use cli::{
     SceneArgs, SolveArgs, StabilityArgs, TradeoffArgs,
 };
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
     host_tools::output::exit_quietly_when_stdout_closes();
+    let cli = Cli::parse();
+    if cli.backtrace {
+        host_tools::output::capture_backtraces();
+    }
+    output::finish(run(cli.command), cli.backtrace)
+}
+
+fn run(command: Command) -> Result<()> {
     // A bad PE_ISA is refused before any work.
     host_tools::problem::batched::Isa::cap_from_env().map_err(anyhow::Error::msg)?;
-    match Cli::parse().command {
+    match command {
         Command::Solve(a) => solve(a),
         Command::Scene(a) => scene(&a),
         Command::Compile(a) => compile(&a),
@@ -328,7 +336,19 @@ fn compare(
     tolerance: Option<f64>,
     min_displacement: Option<f64>,
 ) -> Result<()> {
-    let c = host_tools::firmware::compare(reference, other)?;
+    let c = host_tools::compare::compare(reference, other)?;
+    if let Some((node, i, which)) = &c.first_non_finite {
+        let file = if *which == "reference" {
+            reference
+        } else {
+            other
+        };
+        anyhow::bail!(
+            "NOT A RESULT: {} components are not finite (first: {node} component {i} in {}); nothing is compared",
+            c.non_finite,
+            file.display()
+        );
+    }
     if let Some(min) = min_displacement {
         if c.max_abs_reference.is_nan() || c.max_abs_reference < min {
             anyhow::bail!(
@@ -346,7 +366,7 @@ fn compare(
     if fails {
         for (n, i, a, b) in &c.first {
             eprintln!(
-                "  node {n} component {i}: reference {a:e} ({:016x}), other {b:e} ({:016x})",
+                "  {n} component {i}: reference {a:e} ({:016x}), other {b:e} ({:016x})",
                 a.to_bits(),
                 b.to_bits()
             );
