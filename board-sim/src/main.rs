@@ -55,7 +55,7 @@ enum Command {
         level: String,
         #[arg(long, default_value = "4x4x4")]
         boards: String,
-        #[arg(long, default_value_t = 1000)]
+        #[arg(long, default_value_t = 1000, value_parser = host_tools::domain::steps)]
         steps: u64,
     },
     /// A seeded fault campaign on the machine in DIR: RUNS short runs, each with faults
@@ -67,11 +67,11 @@ enum Command {
     )]
     Campaign {
         dir: PathBuf,
-        #[arg(long, default_value_t = 1000)]
+        #[arg(long, default_value_t = 1000, value_parser = host_tools::domain::steps)]
         runs: u64,
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        #[arg(long, default_value_t = 100)]
+        #[arg(long, default_value_t = 100, value_parser = host_tools::domain::steps)]
         steps: u64,
         /// Without link recovery (every fault must stop the run, naming its cause).
         #[arg(long)]
@@ -109,7 +109,7 @@ enum Command {
         #[arg(long, default_value = "out/builtin")]
         out: PathBuf,
         /// Stop after N steps.
-        #[arg(long)]
+        #[arg(long, value_parser = host_tools::domain::steps)]
         steps: Option<u64>,
         #[arg(long)]
         quiet: bool,

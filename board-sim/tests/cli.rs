@@ -160,3 +160,46 @@ fn builtin_frame_counts_agree_and_frames_follow_the_conventions() {
     assert_eq!(lines.count(), 580, "one row per step for the one tool");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// Link-model and run options are checked as they are parsed, naming the option
+/// (`--link-bandwidth 0` printed NaN/inf step times with exit 0; `--steps 0` was reported as
+/// lost packets; `--steps` with `--duration` let one win silently). The directory need not
+/// exist: nothing is read before the options are checked.
+#[test]
+fn run_options_are_checked_before_work() {
+    for (args, needle) in [
+        (
+            &["run", "nowhere", "--link-bandwidth", "0"][..],
+            "--link-bandwidth",
+        ),
+        (
+            &["run", "nowhere", "--link-bandwidth=-1e6"],
+            "--link-bandwidth",
+        ),
+        (
+            &["run", "nowhere", "--link-latency-s", "NaN"],
+            "--link-latency-s",
+        ),
+        (&["run", "nowhere", "--steps", "0"], "--steps"),
+        (&["run", "nowhere", "--duration", "0"], "--duration"),
+        (&["run", "nowhere", "--workers", "0"], "--workers"),
+        (
+            &["run", "nowhere", "--steps", "5", "--duration", "0.1"],
+            "cannot be used with",
+        ),
+        (&["campaign", "nowhere", "--runs", "0"], "--runs"),
+    ] {
+        let out = Command::new(SIM)
+            .args(args)
+            .env("RUST_BACKTRACE", "1")
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "board-sim {args:?} was accepted");
+        assert!(
+            err.contains(needle),
+            "board-sim {args:?}: {needle:?} not in {err}"
+        );
+        assert!(!err.contains("acktrace"), "board-sim {args:?}: {err}");
+    }
+}

@@ -7,6 +7,7 @@
 pub mod analysis;
 pub mod compare;
 pub mod compile;
+pub mod domain;
 pub mod firmware;
 pub mod flash;
 pub mod geom;

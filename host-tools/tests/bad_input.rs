@@ -74,3 +74,76 @@ fn compare_refuses_nan_in_either_file() {
     );
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// Every option's domain is checked as it is parsed, naming the option: 0, negatives, NaN
+/// and infinities never reach a run (each of these was accepted silently, or ran into
+/// NaN/inf figures, before `host_tools::domain`).
+#[test]
+fn option_domains_are_checked_before_work() {
+    for (args, option) in [
+        (&["solve", "--builtin", "--threads", "0"][..], "--threads"),
+        (&["solve", "--builtin", "--steps", "0"], "--steps"),
+        (&["bench", "--runs", "0"], "--runs"),
+        (&["bench", "--seconds", "NaN"], "--seconds"),
+        (&["bench", "--elements=-5"], "--elements"),
+        (
+            &["compare", "a.csv", "b.csv", "--tolerance=-1e-3"],
+            "--tolerance",
+        ),
+        (
+            &["compare", "a.csv", "b.csv", "--min-displacement", "inf"],
+            "--min-displacement",
+        ),
+        (
+            &["live", "--builtin", "--graphics-hz", "0"],
+            "--graphics-hz",
+        ),
+        (&["live", "--builtin", "--threads", "0"], "--threads"),
+    ] {
+        refused(args, &[option, "invalid value"]);
+    }
+    refused(
+        &["plan", "--builtin", "--budget", "2", "-o", "/tmp/pe-never"],
+        &["--budget", "200%", "write 2%"],
+    );
+}
+
+/// A scene's `[solver]` keys: both `steps` and `duration`, a zero `output_interval` and a
+/// negative `damping` are refused naming the key (the last said "hourglass and damping >=
+/// 0" without saying which). The control scene, with none of them, is accepted.
+#[test]
+fn scene_solver_keys_are_named() {
+    let d = temp_dir("keys");
+    let scene = |solver: &str| {
+        format!(
+            "[mesh]\ngenerate = {{ kind = \"box\", size = [0.02, 0.01, 0.01], cells = [2, 1, 1] }}\n\
+             [material]\nlaw = \"neo-hookean\"\nyoungs_modulus = 3.0e3\npoisson_ratio = 0.45\ndensity = 1000.0\n\
+             [[fixed]]\nbox = [[-1.0, -1.0, -1.0], [1e-9, 1.0, 1.0]]\n\
+             [gravity]\nacceleration = [0.0, 0.0, -9.81]\n\
+             [solver]\n{solver}"
+        )
+    };
+    let p = d.join("scene.toml");
+    std::fs::write(&p, scene("steps = 10\n")).unwrap();
+    let ok = run(&["solve", p.to_str().unwrap()]);
+    assert!(
+        ok.status.success(),
+        "control: {}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    for (solver, needles) in [
+        (
+            "steps = 10\nduration = 0.5\n",
+            &["steps = 10", "duration = 0.5", "give one"][..],
+        ),
+        (
+            "steps = 10\noutput_interval = 0.0\n",
+            &["output_interval must be > 0"],
+        ),
+        ("steps = 10\ndamping = -1.0\n", &["damping must be >= 0"]),
+    ] {
+        std::fs::write(&p, scene(solver)).unwrap();
+        refused(&["solve", p.to_str().unwrap()], needles);
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -16,7 +16,7 @@ pub struct LiveArgs {
     #[command(flatten)]
     pub session: SessionArgs,
     /// Host threads to multiplex the boards over (default: the machine's cores).
-    #[arg(long)]
+    #[arg(long, value_parser = host_tools::domain::count)]
     pub workers: Option<usize>,
     /// Run the boards' element batches on the firmware's scalar loop (default: the host's
     /// SIMD lanes, the same bits).

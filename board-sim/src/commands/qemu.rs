@@ -34,7 +34,7 @@ pub struct QemuArgs {
     #[arg(long, allow_hyphen_values = true)]
     pub cross: Option<String>,
     /// The whole run's bound (s).
-    #[arg(long, default_value_t = 1800.0)]
+    #[arg(long, default_value_t = 1800.0, value_parser = host_tools::domain::positive)]
     pub timeout_s: f64,
     /// The emulator.
     #[arg(long, default_value = "qemu-system-arm")]

@@ -25,10 +25,10 @@ pub struct RunArgs {
     #[command(flatten)]
     pub outputs: OutputArgs,
     /// Stop after N steps.
-    #[arg(long)]
+    #[arg(long, value_parser = host_tools::domain::steps, conflicts_with = "duration")]
     pub steps: Option<u64>,
     /// Stop after this much simulated time (s).
-    #[arg(long)]
+    #[arg(long, value_parser = host_tools::domain::positive)]
     pub duration: Option<f64>,
     /// Inject faults: seed=S,drop=P,corrupt=P,delay=MS,stall=X.Y.Z@STEP[,on=all|links|global].
     /// drop and corrupt apply to each point-to-point frame and each global packet a board
@@ -47,17 +47,17 @@ pub struct RunArgs {
     #[arg(long)]
     pub scalar_kernel: bool,
     /// A link silent this long is a fault (s).
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = host_tools::domain::positive)]
     pub link_timeout_s: f64,
     /// Link bandwidth for the timing model (bytes/s; default from the board profile).
-    #[arg(long)]
+    #[arg(long, value_parser = host_tools::domain::positive)]
     pub link_bandwidth: Option<f64>,
     /// Link latency for the timing model (s).
-    #[arg(long)]
+    #[arg(long, value_parser = host_tools::domain::non_negative)]
     pub link_latency_s: Option<f64>,
     /// Host threads to multiplex the boards over (default: the machine's cores; as many as
     /// boards runs one thread per board).
-    #[arg(long)]
+    #[arg(long, value_parser = host_tools::domain::count)]
     pub workers: Option<usize>,
     /// Storage per board: `exact` (what each image needs) or `board` (what the firmware of
     /// the manifest's profile holds: an image the board would refuse is refused here).

@@ -22,7 +22,7 @@ pub struct LiveArgs {
     #[command(flatten)]
     pub scene: SceneArgs,
     /// Solver threads (default: all cores); the same bits whatever the count.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::domain::count)]
     pub threads: Option<usize>,
     #[command(flatten)]
     pub model: ModelArgs,
@@ -44,13 +44,13 @@ pub struct SessionArgs {
     #[arg(long)]
     pub record: Option<PathBuf>,
     /// End after S seconds of wall time (default: at Ctrl-C or when standard input closes).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::domain::positive)]
     pub duration: Option<f64>,
     /// Surface frames per second of wall time (at least 25).
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = 30.0, value_parser = crate::domain::positive)]
     pub graphics_hz: f64,
     /// Lag (s) past which the session's clock slips.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.1, value_parser = crate::domain::positive)]
     pub max_lag: f64,
     /// Run as fast as possible, not paced to the wall clock (tests, benchmarks).
     #[arg(long)]

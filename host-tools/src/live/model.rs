@@ -41,7 +41,7 @@ pub struct ModelArgs {
     #[arg(long, default_value = "2%")]
     pub plan_budget: String,
     /// The real-time factor the full model must reach in the probe to be served.
-    #[arg(long, default_value_t = 1.2)]
+    #[arg(long, default_value_t = 1.2, value_parser = crate::domain::positive)]
     pub min_rtf: f64,
 }
 

@@ -390,8 +390,21 @@ fn check_solver(s: &SolverSpec, has_contact: bool) -> Result<()> {
     if !(s.mass_scaling >= 1.0) {
         bail!("[solver] mass_scaling must be >= 1, got {}", s.mass_scaling);
     }
-    if !(s.dt_safety > 0.0) || !(s.hourglass >= 0.0) || !(s.damping >= 0.0) {
-        bail!("[solver] dt_safety must be > 0, hourglass and damping >= 0");
+    for (key, value, least, strict) in [
+        ("dt_safety", s.dt_safety, 0.0, true),
+        ("hourglass", s.hourglass, 0.0, false),
+        ("damping", s.damping, 0.0, false),
+        ("output_interval", s.output_interval, 0.0, true),
+    ] {
+        let ok = if strict {
+            value > least
+        } else {
+            value >= least
+        };
+        if !ok {
+            let bound = if strict { ">" } else { ">=" };
+            bail!("[solver] {key} must be {bound} {least}, got {value}");
+        }
     }
     if has_contact && s.adapt_dt == Some(true) {
         bail!("[solver] adapt_dt with contact is not supported: the contact penalty and search interval follow from the step (lower dt_safety instead)");

@@ -420,6 +420,11 @@ impl Scene {
                 _ => first_non_finite(value, "", key)?,
             }
         }
+        if let (Some(n), Some(d)) = (scene.solver.steps, scene.solver.duration) {
+            anyhow::bail!(
+                "[solver] steps = {n} and duration = {d} both given: give one (steps counts time steps, duration simulated seconds)"
+            );
+        }
         Ok(scene)
     }
 

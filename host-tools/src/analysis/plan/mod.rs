@@ -99,6 +99,10 @@ pub fn parse_budget(s: &str) -> Result<f64> {
         None => (s.trim(), 1.0),
     };
     match num.trim().parse::<f64>() {
+        Ok(v) if scale == 1.0 && v >= 1.0 && v.is_finite() => bail!(
+            "--budget {s:?}: a fraction of {v} is {}%: write {v}% for {v} percent (or a fraction below 1 such as 0.02)",
+            v * 100.0
+        ),
         Ok(v) if v >= 0.0 && v.is_finite() => Ok(v * scale),
         _ => bail!("--budget {s:?}: expected a percentage such as 2% (or a fraction such as 0.02), at least 0"),
     }
@@ -381,6 +385,10 @@ mod tests {
             let e = parse_budget(bad).expect_err(bad).to_string();
             assert!(e.contains("--budget"), "{bad}: {e}");
         }
+        // A bare number of 1 or more is a budget of 100% or more: surely a percentage
+        // without its sign.
+        let e = parse_budget("2").expect_err("2").to_string();
+        assert!(e.contains("200%") && e.contains("write 2%"), "{e}");
     }
 
     #[test]

@@ -102,12 +102,12 @@ pub struct SolveArgs {
     pub scene: SceneArgs,
     /// Solver threads (default: all cores). The result is the same, bit for bit,
     /// whatever the count.
-    #[arg(long)]
+    #[arg(long, value_parser = host_tools::domain::count)]
     pub threads: Option<usize>,
     #[command(flatten)]
     pub outputs: OutputArgs,
     /// Override the scene's step count.
-    #[arg(long)]
+    #[arg(long, value_parser = host_tools::domain::steps)]
     pub steps: Option<u64>,
     /// Override the scene's precision (f32 | f64).
     #[arg(long)]
@@ -149,7 +149,7 @@ pub struct CompileArgs {
     #[arg(long)]
     pub precision: Option<PrecisionArg>,
     /// Override the scene's step count.
-    #[arg(long)]
+    #[arg(long, value_parser = host_tools::domain::steps)]
     pub steps: Option<u64>,
     /// Override the scene's integration (reduced | full).
     #[arg(long)]
@@ -194,11 +194,11 @@ pub struct CompareArgs {
     pub other: PathBuf,
     /// Accept differences up to this fraction of the reference's largest |component|
     /// (default: none, bit for bit).
-    #[arg(long)]
+    #[arg(long, value_parser = host_tools::domain::non_negative)]
     pub tolerance: Option<f64>,
     /// Refuse the comparison when the reference's largest |component| is below this (m):
     /// fields at rest agree whatever the code does.
-    #[arg(long)]
+    #[arg(long, value_parser = host_tools::domain::positive)]
     pub min_displacement: Option<f64>,
 }
 
@@ -216,13 +216,13 @@ pub struct InspectArgs {
 #[derive(clap::Args)]
 pub struct BenchArgs {
     /// Elements of the benchmark mesh (a box).
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = 2000, value_parser = host_tools::domain::count)]
     pub elements: usize,
     /// Seconds each timed run lasts at least.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = host_tools::domain::positive)]
     pub seconds: f64,
     /// Timed runs per configuration (the median is reported).
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = 3, value_parser = host_tools::domain::count)]
     pub runs: usize,
     /// Only this precision (default: both).
     #[arg(long, value_enum)]
@@ -231,7 +231,7 @@ pub struct BenchArgs {
     #[arg(long, value_enum)]
     pub integration: Option<IntegrationArg>,
     /// Only this many threads (default: one and all cores).
-    #[arg(long)]
+    #[arg(long, value_parser = host_tools::domain::count)]
     pub threads: Option<usize>,
 }
 
