@@ -191,6 +191,10 @@ pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<Imag
     let elf = std::fs::read(&elf_path)
         .with_context(|| format!("reading the firmware {}", elf_path.display()))?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    // A directory reused from a larger machine: its other boards' files go.
+    crate::output::file::remove_owned(out, |n| {
+        n.starts_with("board-") && (n.ends_with(".elf") || n.ends_with(".sched"))
+    })?;
     let mut boards = Vec::new();
     for f in &files {
         let (c, image) = (f.board, &f.bytes);
@@ -199,11 +203,9 @@ pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<Imag
         let stem = stem.trim_end_matches(".bin");
         let elf_name = format!("{stem}.elf");
         let sched_name = format!("{stem}.sched");
-        std::fs::write(out.join(&elf_name), patch_identity(&elf, pos)?)
-            .with_context(|| format!("writing {}", out.join(&elf_name).display()))?;
+        crate::output::file::write_atomic(&out.join(&elf_name), patch_identity(&elf, pos)?)?;
         let blob = schedule_blob(image);
-        std::fs::write(out.join(&sched_name), &blob)
-            .with_context(|| format!("writing {}", out.join(&sched_name).display()))?;
+        crate::output::file::write_atomic(&out.join(&sched_name), &blob)?;
         let addr = format!("{:#010x}", profile.image_origin);
         let flash = if profile.probe_chip.is_empty() {
             vec![format!(
@@ -241,8 +243,7 @@ pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<Imag
         boards,
     };
     let p = out.join("manifest.json");
-    std::fs::write(&p, serde_json::to_string_pretty(&manifest)?)
-        .with_context(|| format!("writing {}", p.display()))?;
+    crate::output::file::write_atomic(&p, serde_json::to_string_pretty(&manifest)?)?;
     Ok(manifest)
 }
 

@@ -147,3 +147,193 @@ fn scene_solver_keys_are_named() {
     }
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// A box of `cells` scene that runs `steps` steps.
+fn box_scene(dir: &std::path::Path, cells: [usize; 3], steps: u64) -> PathBuf {
+    let p = dir.join("box.toml");
+    let [x, y, z] = cells;
+    std::fs::write(
+        &p,
+        format!(
+            "[mesh]\ngenerate = {{ kind = \"box\", size = [{sx}, {sy}, {sz}], cells = [{x}, {y}, {z}] }}\n\
+             [material]\nlaw = \"neo-hookean\"\nyoungs_modulus = 3.0e3\npoisson_ratio = 0.45\ndensity = 1000.0\n\
+             [[fixed]]\nbox = [[-1.0, -1.0, -1.0], [1e-9, 1.0, 1.0]]\n\
+             [gravity]\nacceleration = [0.0, 0.0, -9.81]\n\
+             [solver]\nsteps = {steps}\noutput_interval = 1e-4\n",
+            sx = 0.01 * x as f64,
+            sy = 0.01 * y as f64,
+            sz = 0.01 * z as f64
+        ),
+    )
+    .unwrap();
+    p
+}
+
+/// An output path in a directory that does not exist is named before the run starts (the
+/// run's first line, its element count, is never printed); nothing is written.
+#[test]
+fn output_paths_are_checked_before_the_run() {
+    let d = temp_dir("paths");
+    let scene = box_scene(&d, [4, 1, 1], 10);
+    let s = scene.to_str().unwrap();
+    for flag in ["--output-nodes", "--report", "--tool-force"] {
+        let typo = d.join("no-such-dir/out.csv");
+        let err = refused(
+            &["solve", s, flag, typo.to_str().unwrap()],
+            &[flag, "does not exist"],
+        );
+        assert!(!err.contains("elements,"), "{flag}: the run started: {err}");
+    }
+    let file = d.join("a-file");
+    std::fs::write(&file, "").unwrap();
+    refused(
+        &["solve", s, "--vtk", file.to_str().unwrap()],
+        &["--vtk", "is a file"],
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// Two `pe solve` runs writing the same nodes CSV at once (one of 5 steps, one of 6, so the
+/// files differ) leave exactly one of the two files, and no temporary file behind. Before
+/// writes went through a temporary file and a rename, this test failed (the file held
+/// neither: one truncated it while the other wrote).
+#[test]
+fn concurrent_runs_leave_a_whole_file() {
+    let d = temp_dir("race");
+    // 4961 nodes: a CSV of about 600 kB, written in many pieces.
+    let scenes = [5, 6].map(|steps| {
+        let p = box_scene(&d, [40, 10, 10], steps);
+        let q = d.join(format!("box-{steps}.toml"));
+        std::fs::rename(&p, &q).unwrap();
+        q
+    });
+    let solve = |scene: &PathBuf, out: &PathBuf| {
+        Command::new(PE)
+            .args([
+                "solve",
+                scene.to_str().unwrap(),
+                "--quiet",
+                "--output-nodes",
+            ])
+            .arg(out)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap()
+    };
+    let alone: Vec<Vec<u8>> = scenes
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            let out = d.join(format!("alone-{k}.csv"));
+            assert!(solve(s, &out).wait().unwrap().success());
+            std::fs::read(&out).unwrap()
+        })
+        .collect();
+    assert!(
+        alone[0].len() > 500_000 && alone[0] != alone[1],
+        "two different, long files"
+    );
+    let out = d.join("nodes.csv");
+    for trial in 0..10 {
+        let runs = [solve(&scenes[0], &out), solve(&scenes[1], &out)];
+        for mut r in runs {
+            assert!(r.wait().unwrap().success(), "trial {trial}");
+        }
+        let got = std::fs::read(&out).unwrap();
+        assert!(
+            got == alone[0] || got == alone[1],
+            "trial {trial}: the file ({} bytes) is neither run's ({} or {} bytes)",
+            got.len(),
+            alone[0].len(),
+            alone[1].len()
+        );
+    }
+    let names: Vec<String> = std::fs::read_dir(&d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(
+        names.iter().all(|n| !n.ends_with(".tmp")),
+        "temporaries left: {names:?}"
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// A `--vtk` directory reused by a shorter run holds the shorter run's frames only: the
+/// earlier run's later frames are removed, and other files are left alone.
+#[test]
+fn a_reused_frame_directory_holds_this_runs_frames_only() {
+    let d = temp_dir("frames");
+    let frames = d.join("frames");
+    let count = |steps: u64| {
+        let scene = box_scene(&d, [4, 1, 1], steps);
+        let out = run(&[
+            "solve",
+            scene.to_str().unwrap(),
+            "--quiet",
+            "--vtk",
+            frames.to_str().unwrap(),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        std::fs::read_dir(&frames)
+            .unwrap()
+            .filter(|e| {
+                e.as_ref()
+                    .unwrap()
+                    .file_name()
+                    .to_string_lossy()
+                    .starts_with("frame_")
+            })
+            .count()
+    };
+    let long = count(60);
+    std::fs::write(frames.join("notes.txt"), "mine").unwrap();
+    let short = count(10);
+    assert!(long > short && short >= 2, "frames: {long} then {short}");
+    let pvd = std::fs::read_to_string(frames.join("series.pvd")).unwrap();
+    assert_eq!(
+        pvd.matches("<DataSet").count(),
+        short,
+        "series.pvd lists what is there"
+    );
+    assert!(
+        frames.join("notes.txt").exists(),
+        "a file the series does not own stays"
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// A recompile into an old directory for a smaller machine leaves only the new machine's
+/// images (the old one's extra images stayed, and `pe inspect` showed them without a word).
+#[test]
+fn a_recompile_leaves_no_stale_images() {
+    let d = temp_dir("recompile");
+    let scene = box_scene(&d, [8, 2, 2], 10);
+    let out = d.join("compiled");
+    let images = |boards: &str| {
+        let o = run(&[
+            "compile",
+            scene.to_str().unwrap(),
+            "--boards",
+            boards,
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let mut names: Vec<String> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with("board-") && n.ends_with(".bin"))
+            .collect();
+        names.sort();
+        names
+    };
+    assert_eq!(images("2x1x1"), ["board-0-0-0.bin", "board-1-0-0.bin"]);
+    assert_eq!(images("1x1x1"), ["board-0-0-0.bin"]);
+    let _ = std::fs::remove_dir_all(&d);
+}

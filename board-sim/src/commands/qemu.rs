@@ -95,6 +95,10 @@ fn parse_cross(s: &str) -> Result<[Connector; 2]> {
 pub fn qemu_array(dir: &Path, args: QemuArgs) -> Result<()> {
     let result = args.result.clone();
     let (replay, tool_force) = (args.replay.clone(), args.tool_force.clone());
+    result.check()?;
+    if let Some(p) = &tool_force {
+        host_tools::output::file::check_file(p, "--tool-force")?;
+    }
     let mut opts = args.options()?;
     let manifest = read_manifest(dir)?;
     if let Some(r) = &replay {

@@ -83,6 +83,7 @@ pub enum Storage {
 /// Runs a compiled machine and writes the requested outputs; returns the run. Reads the
 /// compiled directory only: its manifest, images, report and mesh (`DIR/mesh.json`).
 pub fn execute(dir: &Path, a: RunArgs) -> Result<SimOutput> {
+    a.outputs.check()?;
     let manifest = read_manifest(dir)?;
     let mut opts = sim_options(&a, &manifest)?;
     let total = opts.steps.unwrap_or(manifest.steps).min(manifest.steps);

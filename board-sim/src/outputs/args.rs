@@ -16,3 +16,15 @@ pub struct OutputArgs {
     #[arg(long)]
     pub png: Option<PathBuf>,
 }
+
+impl OutputArgs {
+    /// Checks every asked-for output path before the run ([`host_tools::output::OutputArgs::check`]
+    /// and `--png`).
+    pub fn check(&self) -> anyhow::Result<()> {
+        self.run.check()?;
+        if let Some(p) = &self.png {
+            host_tools::output::file::check_file(p, "--png")?;
+        }
+        Ok(())
+    }
+}

@@ -83,7 +83,7 @@ pub(crate) fn gated_elfs(boards: &mut [ImageBoard], images: &Path) -> Result<()>
             .with_context(|| format!("{}", from.display()))?;
         let name = format!("{}.gated.elf", b.elf.trim_end_matches(".elf"));
         let to = images.join(&name);
-        std::fs::write(&to, gated).with_context(|| format!("writing {}", to.display()))?;
+        host_tools::output::file::write_atomic(&to, gated)?;
         b.elf = name;
     }
     Ok(())

@@ -2,10 +2,9 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 
 /// Writes `value` as pretty JSON to `p`.
 pub(crate) fn write_json(p: &Path, value: &serde_json::Value) -> Result<()> {
-    std::fs::write(p, serde_json::to_string_pretty(value)?)
-        .with_context(|| format!("writing {}", p.display()))
+    host_tools::output::file::write_atomic(p, serde_json::to_string_pretty(value)?)
 }

@@ -488,12 +488,14 @@ fn compile_unstamped(problem: &Problem, plan: &Plan) -> Result<Vec<BoardImage>> 
         .collect()
 }
 
-/// Writes `DIR/board-X-Y-Z.bin`.
+/// Writes `DIR/board-X-Y-Z.bin`, after removing every earlier `board-*.bin` of `DIR`.
 pub fn write_images(dir: &Path, images: &[BoardImage]) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    // A recompile into an old directory: the images of boards this machine lacks go.
+    crate::output::file::remove_owned(dir, |n| n.starts_with("board-") && n.ends_with(".bin"))?;
     for im in images {
         let p = dir.join(image_file_name(im.coords));
-        std::fs::write(&p, &im.bytes).with_context(|| format!("writing {}", p.display()))?;
+        crate::output::file::write_atomic(&p, &im.bytes)?;
     }
     Ok(())
 }

@@ -91,13 +91,11 @@ pub fn compile_to_dir(
             .collect(),
     };
     let p = dir.join("manifest.json");
-    std::fs::write(&p, serde_json::to_string_pretty(&manifest)?)
-        .with_context(|| format!("writing {}", p.display()))?;
+    crate::output::file::write_atomic(&p, serde_json::to_string_pretty(&manifest)?)?;
     let mut rep = report(scene, problem, &plan, &images, profile)?;
     rep.balance_other = balance_other;
     let p = dir.join("report.json");
-    std::fs::write(&p, serde_json::to_string_pretty(&rep)?)
-        .with_context(|| format!("writing {}", p.display()))?;
+    crate::output::file::write_atomic(&p, serde_json::to_string_pretty(&rep)?)?;
     super::OutputMesh::of(problem).write(dir)?;
     Ok(rep)
 }

@@ -97,8 +97,7 @@ impl OutputMesh {
     /// Writes `DIR/mesh.json`.
     pub fn write(&self, dir: &Path) -> Result<()> {
         let p = dir.join(OUTPUT_MESH_FILE);
-        std::fs::write(&p, serde_json::to_string(self)?)
-            .with_context(|| format!("writing {}", p.display()))
+        crate::output::file::write_atomic(&p, serde_json::to_string(self)?)
     }
 
     /// Reads `DIR/mesh.json`, as the type that wrote it, and checks it ([`Self::check`]).

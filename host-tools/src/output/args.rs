@@ -5,7 +5,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use serde::Serialize;
 
 use crate::mesh::Mesh;
@@ -55,6 +55,18 @@ pub struct OutputArgs {
 }
 
 impl ResultArgs {
+    /// Checks, before the run, that every asked-for file can be written (its directory
+    /// exists and takes files): a typo is named now, not after a long run.
+    pub fn check(&self) -> Result<()> {
+        if let Some(p) = &self.output_nodes {
+            super::file::check_file(p, "--output-nodes")?;
+        }
+        if let Some(p) = &self.report {
+            super::file::check_file(p, "--report")?;
+        }
+        Ok(())
+    }
+
     /// Writes the nodes CSV of displacements `u` on `mesh` when `--output-nodes` asks for it.
     pub fn write_nodes(&self, mesh: &Mesh, u: &[[f64; 3]]) -> Result<()> {
         match &self.output_nodes {
@@ -66,9 +78,23 @@ impl ResultArgs {
     /// Writes `report` as pretty-printed JSON when `--report` asks for it.
     pub fn write_report<R: Serialize>(&self, report: &R) -> Result<()> {
         match &self.report {
-            Some(p) => std::fs::write(p, serde_json::to_string_pretty(report)?)
-                .with_context(|| format!("writing {}", p.display())),
+            Some(p) => super::file::write_atomic(p, serde_json::to_string_pretty(report)?),
             None => Ok(()),
         }
+    }
+}
+
+impl OutputArgs {
+    /// [`ResultArgs::check`], and the `--tool-force` file and the `--vtk` directory (made
+    /// if missing).
+    pub fn check(&self) -> Result<()> {
+        self.result.check()?;
+        if let Some(p) = &self.tool_force {
+            super::file::check_file(p, "--tool-force")?;
+        }
+        if let Some(d) = &self.vtk {
+            super::file::check_dir(d, "--vtk")?;
+        }
+        Ok(())
     }
 }

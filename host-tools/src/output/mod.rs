@@ -6,6 +6,7 @@
 //! frames name their arrays the same way (see [`vtk`]).
 
 mod args;
+pub mod file;
 pub mod font;
 pub mod render;
 pub mod tool_force;
@@ -85,10 +86,9 @@ where
     R::Item: IntoIterator<Item = F>,
     F: AsRef<[u8]>,
 {
-    let file =
-        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    csv_records(file, header, rows).with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    let mut file = file::AtomicFile::create(path)?;
+    csv_records(&mut file, header, rows).with_context(|| format!("writing {}", path.display()))?;
+    file.commit()
 }
 
 /// The CSV text of `header` and `rows` (see [`write_csv`]).

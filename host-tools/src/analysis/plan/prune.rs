@@ -451,11 +451,12 @@ impl Reduced {
         use anyhow::Context;
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         let m = dir.join(MESH_FILE);
-        std::fs::write(&m, crate::mesh::io::to_msh22(&self.mesh, &self.node_sets))
-            .with_context(|| format!("writing {}", m.display()))?;
+        crate::output::file::write_atomic(
+            &m,
+            crate::mesh::io::to_msh22(&self.mesh, &self.node_sets),
+        )?;
         let s = dir.join("scene.toml");
-        std::fs::write(&s, format!("{header}{}", self.scene.to_toml()?))
-            .with_context(|| format!("writing {}", s.display()))?;
+        crate::output::file::write_atomic(&s, format!("{header}{}", self.scene.to_toml()?))?;
         Ok(())
     }
 }

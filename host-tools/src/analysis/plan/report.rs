@@ -220,10 +220,9 @@ pub(super) fn write(
     let png = out.join("plan.png");
     picture(held, reduced, &png, &r.scene)?;
     let md = out.join("plan.md");
-    std::fs::write(&md, to_markdown(&r)).with_context(|| format!("writing {}", md.display()))?;
+    crate::output::file::write_atomic(&md, to_markdown(&r))?;
     let js = out.join("plan.json");
-    std::fs::write(&js, serde_json::to_string_pretty(&r)?)
-        .with_context(|| format!("writing {}", js.display()))?;
+    crate::output::file::write_atomic(&js, serde_json::to_string_pretty(&r)?)?;
     Ok(r)
 }
 

@@ -331,7 +331,7 @@ pub fn run_cli(out: Option<&Path>, long: bool, only: Option<&str>) -> Result<()>
         if let Some(d) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
         }
-        std::fs::write(p, &report).with_context(|| format!("writing {}", p.display()))?;
+        crate::output::file::write_atomic(p, &report)?;
         println!("report: {}", p.display());
     } else {
         println!("{body}");

@@ -477,10 +477,10 @@ pub fn run_cli(scene: &Scene, dir: &Path, name: &str, opts: &Options, out: &Path
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let rows = run(scene, dir, name, opts, &mut |s| eprintln!("{s}"))?;
     let csv = out.join("tradeoff.csv");
-    std::fs::write(&csv, to_csv(&rows)?).with_context(|| format!("writing {}", csv.display()))?;
+    crate::output::file::write_atomic(&csv, to_csv(&rows)?)?;
     let md = to_markdown(&rows, name, opts.profile);
     let mdp = out.join("tradeoff.md");
-    std::fs::write(&mdp, &md).with_context(|| format!("writing {}", mdp.display()))?;
+    crate::output::file::write_atomic(&mdp, &md)?;
     let png = out.join("tradeoff.png");
     plot(&rows, &png, &format!("error against cost: {name}"))?;
     println!("{md}");

@@ -96,6 +96,7 @@ fn all_cores() -> usize {
 
 /// `pe solve`: the serial reference run, with its summary and the asked-for outputs.
 fn solve(a: SolveArgs) -> Result<()> {
+    a.outputs.check()?;
     let (mut sc, dir, name) = a.scene.load()?;
     Overrides {
         steps: a.steps,
@@ -298,9 +299,7 @@ fn hourglass_study(a: HourglassStudyArgs) -> Result<()> {
     };
     let tables = host_tools::analysis::hourglass::study(&c)?;
     match a.output {
-        Some(path) => {
-            std::fs::write(&path, tables).with_context(|| format!("writing {}", path.display()))?
-        }
+        Some(path) => host_tools::output::file::write_atomic(&path, tables)?,
         None => print!("{tables}"),
     }
     Ok(())

@@ -134,7 +134,7 @@ impl FrameSeries {
             },
             extra,
         );
-        fs::write(&path, s).map_err(io_err(&path))?;
+        crate::output::file::write_bytes(&path, s.as_bytes()).map_err(io_err(&path))?;
         self.frames.push((time_s, name));
         Ok(path)
     }
@@ -152,12 +152,29 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> MeshError + '_ {
     }
 }
 
+/// Removes the files an earlier series left in `dir` (`PREFIX_NNNNN.vtu` and `series.pvd`),
+/// so a reused directory holds this run's frames only (not this run's frames and, after
+/// them, an earlier and longer run's).
+fn remove_earlier_series(dir: &Path, prefix: &str) -> Result<(), MeshError> {
+    let owned = |name: &str| {
+        name == "series.pvd"
+            || name
+                .strip_prefix(prefix)
+                .and_then(|n| n.strip_suffix(".vtu"))
+                .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+    };
+    crate::output::file::remove_owned(dir, owned)
+        .map(|_| ())
+        .map_err(|e| io_err(dir)(std::io::Error::other(format!("{e:#}"))))
+}
+
 impl VtkSeriesWriter {
     /// Create `dir` (and parents) if needed and prepare to write frames of `mesh`.
     /// The mesh must pass [`Mesh::validate`].
     pub fn new(dir: &Path, mesh: &Mesh) -> Result<Self, MeshError> {
         mesh.validate()?;
         fs::create_dir_all(dir).map_err(io_err(dir))?;
+        remove_earlier_series(dir, "frame_")?;
         let c = cells_xml(
             mesh.cells.iter().map(|c| &c[..]),
             mesh.cell_regions.iter().map(|r| r.to_string()),
@@ -270,6 +287,7 @@ impl SurfaceSeriesWriter {
             }
         }
         fs::create_dir_all(dir).map_err(io_err(dir))?;
+        remove_earlier_series(dir, "surface_")?;
         let c = cells_xml(
             quads.iter().map(|q| &q[..]),
             quad_regions.iter().map(|g| g.to_string()),

@@ -3,7 +3,6 @@
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::fs;
 use std::path::{Path, PathBuf};
 
 use super::{io_err, PointField, DISPLACEMENT, REGION, REGION_ID, REGION_NAME};
@@ -242,7 +241,7 @@ pub(super) fn write_pvd_file(dir: &Path, frames: &[(f64, String)]) -> Result<Pat
         let _ = writeln!(s, "\" group=\"\" part=\"0\" file=\"{}\"/>", xml_attr(file));
     }
     s.push_str("  </Collection>\n</VTKFile>\n");
-    fs::write(&path, s).map_err(io_err(&path))?;
+    crate::output::file::write_bytes(&path, s.as_bytes()).map_err(io_err(&path))?;
     Ok(path)
 }
 
