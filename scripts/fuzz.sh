@@ -5,8 +5,8 @@
 #   scripts/fuzz.sh [--seconds N]              stable Rust (CI): replays fuzz/seeds and
 #                                              fuzz/regressions through every target's
 #                                              check, then N s of seeded random mutations
-#                                              per target (default 20; the seed is printed,
-#                                              PE_FUZZ_SEED=<n> replays it). The main
+#                                              per target (default 20; the seed is fixed and printed;
+#                                              PE_FUZZ_SEED=<n> picks another). The main
 #                                              workspace's release build (the test
 #                                              command's): no debug assertions or
 #                                              overflow checks, see fuzz/FUZZ_NOTES.md

@@ -11,5 +11,7 @@ libfuzzer_sys::fuzz_target!(
     init: {
         let _ = std::panic::take_hook();
     },
-    |data: &[u8]| pe_fuzz_checks::vtk_parse(data)
+    |data: &[u8]| {
+        let _accepted = pe_fuzz_checks::vtk_parse(data);
+    }
 );

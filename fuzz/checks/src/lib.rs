@@ -9,6 +9,10 @@
 //! The libFuzzer targets (`fuzz/fuzz_targets/*.rs`, `cargo fuzz run`) and the stable replay
 //! test (`fuzz/checks/tests/replay.rs`, `cargo test`) call these same functions through
 //! [`TARGETS`].
+//!
+//! Each check returns how many of its parsers accepted the input (and so had their
+//! property checked): a target whose parsers refuse everything passes every "no panic"
+//! check while proving nothing, so the replay test fails a target that accepts nothing.
 
 use std::path::Path;
 
@@ -22,8 +26,9 @@ use link_proto::{
 };
 use pe_firmware::image::{ImageReader, MAGIC};
 
-/// A target's check: panics when the input breaks the target's property.
-pub type Check = fn(&[u8]);
+/// A target's check: panics when the input breaks the target's property; returns how many
+/// of the target's parsers accepted the input.
+pub type Check = fn(&[u8]) -> u32;
 
 /// Every target: its name (the directory of its seeds and regressions) and its check.
 pub const TARGETS: &[(&str, Check)] = &[
@@ -48,7 +53,8 @@ pub fn with_crc(data: &[u8]) -> Option<Vec<u8>> {
     Some(fixed)
 }
 
-fn frame_once(data: &[u8]) {
+fn frame_once(data: &[u8]) -> u32 {
+    let mut accepted = 0;
     if let Ok(frame) = Frame::new_checked(data) {
         // Accessors are safe after new_checked, whatever the CRC.
         let _ = (frame.kind(), frame.step(), frame.value_count(), frame.crc());
@@ -65,21 +71,25 @@ fn frame_once(data: &[u8]) {
         for i in 0..repr.payload.len() {
             assert!(repr.payload.get(i).is_some());
         }
+        accepted += 1;
     }
+    accepted
 }
 
 /// Link frames: `Frame::new_checked`, its accessors and `FrameRepr::parse_bytes` never
 /// panic; an accepted frame re-emits to the identical bytes. The input is also tried with a
 /// correct CRC in its last four bytes, and must then never be refused for its CRC.
-pub fn frame_parse(data: &[u8]) {
-    frame_once(data);
+pub fn frame_parse(data: &[u8]) -> u32 {
+    let mut accepted = frame_once(data);
     if let Some(fixed) = with_crc(data) {
-        frame_once(&fixed);
+        accepted += frame_once(&fixed);
         assert!(FrameRepr::parse_bytes(&fixed) != Err(link_proto::Error::BadCrc));
     }
+    accepted
 }
 
-fn packet_once(data: &[u8]) {
+fn packet_once(data: &[u8]) -> u32 {
+    let mut accepted = 0;
     if let Ok(p) = Packet::new_checked(data) {
         let _ = (
             p.dst(),
@@ -96,25 +106,29 @@ fn packet_once(data: &[u8]) {
         let mut out = [0u8; PACKET_LEN_MAX];
         let n = repr.emit(&mut out).expect("a parsed packet re-emits");
         assert_eq!(&out[..n], data, "a parsed packet re-emits to its own bytes");
+        accepted += 1;
     }
+    accepted
 }
 
 /// Global packets: as [`frame_parse`], for `Packet` / `PacketRepr`.
-pub fn packet_parse(data: &[u8]) {
-    packet_once(data);
+pub fn packet_parse(data: &[u8]) -> u32 {
+    let mut accepted = packet_once(data);
     if let Some(fixed) = with_crc(data) {
-        packet_once(&fixed);
+        accepted += packet_once(&fixed);
         assert!(PacketRepr::parse_bytes(&fixed) != Err(link_proto::Error::BadCrc));
     }
+    accepted
 }
 
 /// The COBS stream decoder never panics on any byte stream, pushed in chunks whose size the
 /// first input byte sets, and fed byte by byte to a 16-byte decoder; every frame it yields
 /// fits its buffer and re-encodes to a run that decodes back to the same frame.
-pub fn stream_decoder(data: &[u8]) {
+pub fn stream_decoder(data: &[u8]) -> u32 {
     let Some((&chunk, data)) = data.split_first() else {
-        return;
+        return 0;
     };
+    let mut accepted = 0;
     let chunk = usize::from(chunk).max(1);
     let mut dec: Box<StreamDecoder<FRAME_COBS_LEN_MAX>> = Box::default();
     let mut small: StreamDecoder<16> = StreamDecoder::new();
@@ -140,6 +154,7 @@ pub fn stream_decoder(data: &[u8]) {
                     Some(Ok(&frame[..])),
                     "re-encoded frame decodes to itself"
                 );
+                accepted += 1;
             }
         }
         for &b in piece {
@@ -148,14 +163,16 @@ pub fn stream_decoder(data: &[u8]) {
             }
         }
     }
+    accepted
 }
 
 /// Global-network payloads (link-proto's `payload`, what the runtime reads from collision,
 /// bounding-box, tool-force and surface packets): every parser never panics on any bytes;
 /// an accepted fixed-size payload re-emits to the same bytes; after a node or surface
 /// header is accepted, every one of its `count` entries reads, and entry `count` does not.
-pub fn payload_parse(data: &[u8]) {
+pub fn payload_parse(data: &[u8]) -> u32 {
     let mut out = vec![0u8; data.len().max(64)];
+    let mut accepted = 0;
     if let Ok(b) = BoxPayload::parse(data) {
         let n = b.emit(&mut out).expect("a parsed box re-emits");
         assert_eq!(
@@ -163,15 +180,18 @@ pub fn payload_parse(data: &[u8]) {
             data,
             "a parsed box payload re-emits to its bytes"
         );
+        accepted += 1;
     }
     if let Ok(t) = ToolForcePayload::parse(data) {
         let n = t.emit(&mut out).expect("a parsed tool force re-emits");
         assert_eq!(&out[..n], data, "a parsed tool force re-emits to its bytes");
+        accepted += 1;
     }
     if let Ok(p) = link_proto::tool_pose::ToolPoseRepr::parse_bytes(data) {
         let n = p.emit(&mut out).expect("a parsed tool pose re-emits");
         assert_eq!(&out[..n], data, "a parsed tool pose re-emits to its bytes");
         assert!(p.q.iter().chain(&p.p_m).all(|v| v.is_finite()));
+        accepted += 1;
     }
     if let Ok(h) = NodesHeader::parse(data) {
         let count = usize::from(h.count);
@@ -188,6 +208,7 @@ pub fn payload_parse(data: &[u8]) {
         let n = h.emit(&mut out).expect("a parsed node header re-emits");
         assert_eq!(n, data.len());
         assert_eq!(&out[..8], &data[..8]);
+        accepted += 1;
     }
     if let Ok(h) = SurfaceHeader::parse(data) {
         let count = usize::from(h.count);
@@ -204,6 +225,7 @@ pub fn payload_parse(data: &[u8]) {
         let n = h.emit(&mut out).expect("a parsed surface header re-emits");
         assert_eq!(n, data.len());
         assert_eq!(&out[..12], &data[..12]);
+        accepted += 1;
     }
     // Entries at any index of any bytes: an error, never a panic (the runtime reads them
     // only after the header parsed, but the functions are public).
@@ -212,11 +234,12 @@ pub fn payload_parse(data: &[u8]) {
         let _ = node_entry(data, link_proto::Precision::F64, k);
         let _ = surface_entry(data, k);
     }
+    accepted
 }
 
-fn image_once(data: &[u8]) {
+fn image_once(data: &[u8]) -> u32 {
     let Ok(reader) = ImageReader::new(data, None) else {
-        return;
+        return 0;
     };
     let board = reader.header.board;
     // The host's decoder (`pe inspect`, board-sim's timing model): vectors sized from the
@@ -237,6 +260,7 @@ fn image_once(data: &[u8]) {
             "the runtime loaded an image the decoder refuses: {decoded:?}"
         );
     }
+    u32::from(decoded.is_ok()) + u32::from(board_load.is_ok()) + u32::from(exact_load.is_ok())
 }
 
 /// Schedule images: the header reader (`ImageReader`), the host decoder (`decode_image`)
@@ -245,51 +269,58 @@ fn image_once(data: &[u8]) {
 /// image can describe, on any bytes. Each input is tried as is, and with the image magic
 /// written over its first bytes and a correct CRC in its last four, so mutations reach
 /// the header and the records behind the CRC.
-pub fn image_load(data: &[u8]) {
-    image_once(data);
+pub fn image_load(data: &[u8]) -> u32 {
+    let mut accepted = image_once(data);
     if data.len() >= MAGIC.len() + 4 {
         let mut fixed = data.to_vec();
         fixed[..MAGIC.len()].copy_from_slice(&MAGIC);
         if let Some(fixed) = with_crc(&fixed) {
             // An input that already had the magic and its CRC was checked as it is.
             if fixed != data {
-                image_once(&fixed);
+                accepted += image_once(&fixed);
             }
         }
     }
+    accepted
 }
 
 /// Gmsh MSH (4.1 and 2.2, ASCII and binary): `parse_msh` never panics; a mesh it accepts
 /// passes `Mesh::validate` (what `load_mesh` promises).
-pub fn msh_parse(data: &[u8]) {
+pub fn msh_parse(data: &[u8]) -> u32 {
     if let Ok(mesh) = host_tools::mesh::io::parse_msh(Path::new("fuzz.msh"), data) {
         let v = mesh.validate();
         assert!(v.is_ok(), "an accepted MSH mesh fails validation: {v:?}");
+        return 1;
     }
+    0
 }
 
 /// VTK, legacy (`parse_vtk`) and XML (`parse_vtu`): never panic on any bytes; a mesh either
 /// accepts passes `Mesh::validate`.
-pub fn vtk_parse(data: &[u8]) {
+pub fn vtk_parse(data: &[u8]) -> u32 {
+    let mut accepted = 0;
     if let Ok(mesh) = host_tools::mesh::io::parse_vtk(Path::new("fuzz.vtk"), data) {
         let v = mesh.validate();
         assert!(v.is_ok(), "an accepted VTK mesh fails validation: {v:?}");
+        accepted += 1;
     }
     if let Ok(mesh) = host_tools::mesh::io::parse_vtu(Path::new("fuzz.vtu"), data) {
         let v = mesh.validate();
         assert!(v.is_ok(), "an accepted VTU mesh fails validation: {v:?}");
+        accepted += 1;
     }
+    accepted
 }
 
 /// Scene TOML: `Scene::from_toml` never panics on any text; an accepted scene writes back
 /// (`to_toml`) to TOML that parses again and writes the same text (nothing is lost or
 /// changed on the way).
-pub fn scene_toml(data: &[u8]) {
+pub fn scene_toml(data: &[u8]) -> u32 {
     let Ok(text) = std::str::from_utf8(data) else {
-        return;
+        return 0;
     };
     let Ok(scene) = host_tools::scene::Scene::from_toml(text) else {
-        return;
+        return 0;
     };
     let written = scene
         .to_toml()
@@ -298,4 +329,5 @@ pub fn scene_toml(data: &[u8]) {
         .unwrap_or_else(|e| panic!("a written scene parses again: {e}\n{written}"));
     let rewritten = again.to_toml().expect("the re-read scene writes back");
     assert_eq!(written, rewritten, "a scene survives write/read unchanged");
+    1
 }

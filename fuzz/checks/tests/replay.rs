@@ -1,7 +1,7 @@
 //! The stable-Rust path of the fuzz targets (no nightly, no libFuzzer): every file in
 //! `fuzz/seeds/<target>/` and `fuzz/regressions/<target>/` goes through the target's check,
-//! then a bounded run of random mutations of those files (a seeded PRNG: the seed is
-//! printed, `PE_FUZZ_SEED=<n>` replays it; `PE_FUZZ_MUTATIONS=<n>` sets the count per
+//! then a bounded run of random mutations of those files (a seeded PRNG: the seed, fixed
+//! unless `PE_FUZZ_SEED=<n>` gives another, is printed; `PE_FUZZ_MUTATIONS=<n>` sets the count per
 //! target, `PE_FUZZ_SECONDS=<s>` instead runs each target's mutations for `s` seconds). Schedule images are also compiled fresh from the built-in coarse scene, so the
 //! image check always starts from images of the current format.
 
@@ -140,19 +140,32 @@ fn fail(message: String) -> ! {
     panic!("{message}");
 }
 
-/// Runs the target's check on every input, then on mutations of them for the budget;
-/// returns the mutations run. A failure names the input, or the seed and mutation number
-/// that rebuild it (and saves it).
-fn run(target: &str, corpus: &[(PathBuf, Vec<u8>)], budget: Budget, seed: u64) -> u64 {
+/// What a target's run went through: mutations run, and the acceptances (parsers that
+/// accepted an input, so that its property was checked) among the corpus and the mutations.
+struct Tally {
+    mutations: u64,
+    corpus_accepted: u64,
+    mutations_accepted: u64,
+}
+
+/// Runs the target's check on every input, then on mutations of them for the budget. A
+/// failure names the input, or the seed and mutation number that rebuild it (and saves it).
+fn run(target: &str, corpus: &[(PathBuf, Vec<u8>)], budget: Budget, seed: u64) -> Tally {
+    let mut tally = Tally {
+        mutations: 0,
+        corpus_accepted: 0,
+        mutations_accepted: 0,
+    };
     quiet_panics();
     let check = check_named(target);
     for (path, bytes) in corpus {
-        if std::panic::catch_unwind(|| check(bytes)).is_err() {
-            fail(format!(
+        match std::panic::catch_unwind(|| check(bytes)) {
+            Ok(n) => tally.corpus_accepted += u64::from(n),
+            Err(_) => fail(format!(
                 "{target}: {} fails its check: {}",
                 path.display(),
                 last_panic()
-            ));
+            )),
         }
     }
     let mut rng = Rng(seed | 1);
@@ -165,7 +178,10 @@ fn run(target: &str, corpus: &[(PathBuf, Vec<u8>)], budget: Budget, seed: u64) -
         let base = &corpus[rng.below(corpus.len())].1;
         let other = &corpus[rng.below(corpus.len())].1;
         let input = mutate(&mut rng, base, other);
-        if std::panic::catch_unwind(|| check(&input)).is_err() {
+        let outcome = std::panic::catch_unwind(|| check(&input));
+        if let Ok(n) = outcome {
+            tally.mutations_accepted += u64::from(n);
+        } else {
             let out = std::env::temp_dir().join(format!("pe-fuzz-{target}-{seed}-{k}"));
             let _ = std::fs::write(&out, &input);
             fail(format!(
@@ -177,7 +193,8 @@ fn run(target: &str, corpus: &[(PathBuf, Vec<u8>)], budget: Budget, seed: u64) -
         }
         k += 1;
     }
-    k
+    tally.mutations = k;
+    tally
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -186,13 +203,10 @@ enum Budget {
     Seconds(f64),
 }
 
+/// The PRNG's seed: `PE_FUZZ_SEED`, else a fixed one (a test run is the same run every
+/// time; a longer or different exploration is asked for by seed).
 fn seed() -> u64 {
-    env_u64("PE_FUZZ_SEED").unwrap_or_else(|| {
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_nanos() as u64)
-            .unwrap_or(1)
-    })
+    env_u64("PE_FUZZ_SEED").unwrap_or(0x5EED_F022)
 }
 
 fn replay_and_mutate(target: &str) {
@@ -224,8 +238,22 @@ fn run_all(target: &str, corpus: Vec<(PathBuf, Vec<u8>)>) {
         "{target}: {} inputs, {budget:?}, PE_FUZZ_SEED={seed}",
         corpus.len()
     );
-    let done = run(target, &corpus, budget, seed);
-    println!("{target}: {done} mutations passed");
+    let t = run(target, &corpus, budget, seed);
+    println!(
+        "{target}: {} mutations passed; accepted: {} by the corpus, {} by the mutations",
+        t.mutations, t.corpus_accepted, t.mutations_accepted
+    );
+    // A target that accepts nothing checks nothing but "no panic": its parsers, or its
+    // seeds, are broken.
+    assert!(
+        t.corpus_accepted > 0,
+        "{target}: no corpus input was accepted by any parser"
+    );
+    assert!(
+        t.mutations == 0 || t.mutations_accepted > 0,
+        "{target}: none of {} mutations was accepted (PE_FUZZ_SEED={seed})",
+        t.mutations
+    );
 }
 
 /// Images of the built-in coarse scene on 1x1x1 and 2x1x1 machines, compiled now through
