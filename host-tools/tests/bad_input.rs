@@ -337,3 +337,81 @@ fn a_recompile_leaves_no_stale_images() {
     assert_eq!(images("1x1x1"), ["board-0-0-0.bin"]);
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// A generated box too large for this machine's memory is refused before any allocation,
+/// naming the key and the memory (250^3 cells passed the former cell-count check and
+/// aborted allocating 34 GB).
+#[test]
+fn a_box_larger_than_memory_is_refused_before_allocation() {
+    let d = temp_dir("huge");
+    let avail = host_tools::scene::mesh_source::available_memory_bytes();
+    // A box of twice the available memory (or of the fixed limit where memory is unknown).
+    let budget = avail.unwrap_or(
+        host_tools::scene::mesh_source::MAX_GENERATED_CELLS
+            * host_tools::scene::mesh_source::BYTES_PER_CELL,
+    );
+    let side = (2.0 * budget / host_tools::scene::mesh_source::BYTES_PER_CELL)
+        .cbrt()
+        .ceil() as usize;
+    let scene = box_scene(&d, [side; 3], 1);
+    refused(
+        &["solve", scene.to_str().unwrap()],
+        &["[mesh] generate", "GB of memory"],
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// `BYTES_PER_CELL`, the estimate the memory check relies on, bounds the peak resident
+/// memory of a `pe solve` run of 80 000 cells in the dearest configuration (full
+/// integration, f64) from above, and is not more than 4x the peak of the cheapest (reduced
+/// integration). The peak counts the process's fixed part too (binary, buffers).
+/// Re-measured at every test run: a change that makes cells dearer fails here.
+#[test]
+fn the_memory_estimate_bounds_a_runs_peak() {
+    let d = temp_dir("memory");
+    let cells = [50, 40, 40];
+    let n = (cells[0] * cells[1] * cells[2]) as f64;
+    let estimate = host_tools::scene::mesh_source::BYTES_PER_CELL;
+    let mut per_cell = Vec::new();
+    for integration in ["reduced", "full"] {
+        let scene = box_scene(&d, cells, 2);
+        let text = std::fs::read_to_string(&scene).unwrap();
+        std::fs::write(&scene, format!("{text}integration = \"{integration}\"\n")).unwrap();
+        // Waited for by wait4 below, which also returns the child's peak memory.
+        #[allow(clippy::zombie_processes)]
+        let child = Command::new(PE)
+            .args([
+                "solve",
+                scene.to_str().unwrap(),
+                "--quiet",
+                "--threads",
+                "1",
+            ])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let pid = child.id() as libc::pid_t;
+        let mut status = 0;
+        // SAFETY: rusage is plain data; wait4 fills it for this child, which nothing else
+        // waits on.
+        let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+        let got = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+        assert_eq!(got, pid, "waited for the run");
+        assert!(
+            libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0,
+            "the {integration} run failed: {status}"
+        );
+        let b = usage.ru_maxrss as f64 * 1024.0 / n;
+        println!(
+            "{integration}: peak {} kB, {b:.0} bytes per cell (estimate {estimate:.0})",
+            usage.ru_maxrss
+        );
+        per_cell.push(b);
+    }
+    assert!(
+        per_cell[1] <= estimate && per_cell[0] >= estimate / 4.0,
+        "{per_cell:.0?} bytes per cell measured (reduced, full), {estimate:.0} estimated"
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -552,6 +552,10 @@ impl Problem {
     pub fn from_scene(scene: &Scene, scene_dir: &Path) -> Result<Problem> {
         let (mesh, sets) = crate::scene::mesh_source::load(&scene.mesh, scene_dir)
             .context("loading the scene's mesh")?;
+        crate::scene::mesh_source::check_memory(
+            &format!("mesh {}", mesh.source),
+            mesh.cells.len() as f64,
+        )?;
         Problem::new(scene, mesh, sets)
     }
 
