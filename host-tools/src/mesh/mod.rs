@@ -6,6 +6,7 @@ pub mod coarsen;
 pub mod grid;
 pub mod io;
 pub mod ovary;
+pub mod seams;
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;

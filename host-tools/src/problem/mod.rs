@@ -455,6 +455,7 @@ impl Problem {
         if mesh.cells.is_empty() {
             bail!("mesh {} has no hexahedra", mesh.source);
         }
+        crate::mesh::seams::check_nodes(&mesh)?;
         let materials = assign_materials(scene, &mesh)?;
         let reference = reference_geometry(&mesh)?;
         let mass = lumped_mass(&mesh, &reference, &materials);
