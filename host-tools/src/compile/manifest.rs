@@ -102,8 +102,19 @@ pub fn compile_to_dir(
 
 impl Manifest {
     /// Reads `DIR/manifest.json`, as the type that wrote it.
+    /// Reads `DIR/manifest.json`, refusing one of another image format than this build's
+    /// (a directory compiled by an older `pe`).
     pub fn read(dir: &Path) -> Result<Manifest> {
-        read_json(&dir.join("manifest.json"))
+        let p = dir.join("manifest.json");
+        let m: Manifest = read_json(&p)?;
+        if m.format_version != FORMAT_VERSION {
+            bail!(
+                "{}: image format version {}, but this build reads version {FORMAT_VERSION}: compile the scene again with this pe",
+                p.display(),
+                m.format_version
+            );
+        }
+        Ok(m)
     }
 }
 
@@ -217,6 +228,17 @@ pub fn check_image_set(manifest: &Manifest, files: &[ImageFile]) -> Result<()> {
                 b.crc32
             );
         }
+        if (f.header.precision, f.header.integration) != (manifest.precision, manifest.integration)
+        {
+            bail!(
+                "{}: {:?} {:?}, but manifest.json says {:?} {:?}: the image is from another compilation",
+                named(f),
+                f.header.precision,
+                f.header.integration,
+                manifest.precision,
+                manifest.integration
+            );
+        }
         // The manifest repeats the step for its readers; the images are what runs.
         let params = f.header.params;
         if params.dt_s != manifest.dt_s || params.steps != manifest.steps {
@@ -285,6 +307,21 @@ mod tests {
             e.contains("manifest.json")
                 && e.contains("\"pe-bord\"")
                 && e.contains("known: pe-board, stm32h743-uart, qemu-mps2-an500"),
+            "{e}"
+        );
+        // A directory of an older image format is refused, naming both versions.
+        let old = text("manifest.json")
+            .replace("\"pe-bord\"", "\"pe-board\"")
+            .replace(
+                &format!("\"format_version\": {FORMAT_VERSION}"),
+                &format!("\"format_version\": {}", FORMAT_VERSION - 1),
+            );
+        assert!(old.contains(&format!("\"format_version\": {}", FORMAT_VERSION - 1)));
+        std::fs::write(dir.join("manifest.json"), old).expect("written");
+        let e = format!("{:#}", Manifest::read(&dir).unwrap_err());
+        assert!(
+            e.contains(&format!("version {}", FORMAT_VERSION - 1))
+                && e.contains(&format!("reads version {FORMAT_VERSION}")),
             "{e}"
         );
         let _ = std::fs::remove_dir_all(&dir);
