@@ -6,6 +6,8 @@ use link_proto::{
 };
 use proptest::prelude::*;
 
+mod common;
+
 /// Forces, f32, step 0x01020304, values [1.0, -2.5]. The CRC was computed
 /// independently (Python `zlib.crc32`, the same CRC-32/ISO-HDLC).
 const F32_FRAME: [u8; 20] = [
@@ -286,41 +288,18 @@ proptest! {
 /// did: none passes the CRC).
 #[test]
 fn garbage_with_its_crc_reaches_the_re_emit() {
-    let mut x = 0x9E37_79B9_7F4A_7C15u64;
-    let mut next = move || {
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        x
-    };
-    let (mut accepted, mut refused) = (0, 0);
-    for k in 0..3000 {
-        let base: &[u8] = [&F32_FRAME[..], &F64_FRAME[..], &EMPTY_FRAME[..]][k % 3];
-        let mut bytes = base.to_vec();
-        for _ in 0..1 + next() % 2 {
-            let i = (next() % bytes.len() as u64) as usize;
-            bytes[i] ^= 1 << (next() % 8);
-        }
-        if next() % 4 == 0 {
-            bytes.truncate(12 + (next() % (bytes.len() as u64 - 11)) as usize);
-        }
-        let body = bytes.len() - 4;
-        let crc = link_proto::frame::crc32(&bytes[..body]);
-        bytes[body..].copy_from_slice(&crc.to_le_bytes());
-        match FrameRepr::parse_bytes(&bytes) {
-            Ok(repr) => {
-                let mut buf = vec![0u8; FRAME_LEN_MAX];
-                let n = repr.emit(&mut buf).unwrap();
-                assert_eq!(&buf[..n], &bytes[..], "mutation {k} re-emits to its bytes");
-                accepted += 1;
-            }
-            Err(e) => {
-                assert_ne!(e, Error::BadCrc, "mutation {k}: the CRC is correct");
-                refused += 1;
-            }
-        }
-    }
-    println!("{accepted} accepted, {refused} refused");
+    let (accepted, refused) = common::mutations_with_crc(
+        &[&F32_FRAME, &F64_FRAME, &EMPTY_FRAME],
+        0x9E37_79B9_7F4A_7C15,
+        3000,
+        |bytes| {
+            let repr = FrameRepr::parse_bytes(bytes)?;
+            let mut buf = vec![0u8; FRAME_LEN_MAX];
+            let n = repr.emit(&mut buf)?;
+            buf.truncate(n);
+            Ok(buf)
+        },
+    );
     assert!(
         accepted > 100 && refused > 100,
         "{accepted} accepted, {refused} refused"

@@ -6,6 +6,8 @@ use link_proto::{
 };
 use proptest::prelude::*;
 
+mod common;
+
 /// Board 5 -> graphics engine (0x40), message 0x1234, graphics surface,
 /// payload [0xaa, 0x00, 0x55]. CRC computed independently with Python `zlib.crc32`.
 const SURFACE: [u8; 15] = [
@@ -229,41 +231,14 @@ proptest! {
 /// and both outcomes occur, so the re-emit check runs.
 #[test]
 fn garbage_with_its_crc_reaches_the_re_emit() {
-    let mut x = 0x2545_F491_4F6C_DD1Du64;
-    let mut next = move || {
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        x
-    };
-    let (mut accepted, mut refused) = (0, 0);
-    for k in 0..3000 {
-        let base: &[u8] = [&SURFACE[..], &START[..]][k % 2];
-        let mut bytes = base.to_vec();
-        for _ in 0..1 + next() % 2 {
-            let i = (next() % bytes.len() as u64) as usize;
-            bytes[i] ^= 1 << (next() % 8);
-        }
-        if next() % 4 == 0 {
-            bytes.truncate(12 + (next() % (bytes.len() as u64 - 11)) as usize);
-        }
-        let body = bytes.len() - 4;
-        let crc = link_proto::frame::crc32(&bytes[..body]);
-        bytes[body..].copy_from_slice(&crc.to_le_bytes());
-        match PacketRepr::parse_bytes(&bytes) {
-            Ok(r) => {
-                let mut buf = vec![0u8; PACKET_LEN_MAX];
-                let n = r.emit(&mut buf).unwrap();
-                assert_eq!(&buf[..n], &bytes[..], "mutation {k} re-emits to its bytes");
-                accepted += 1;
-            }
-            Err(e) => {
-                assert_ne!(e, Error::BadCrc, "mutation {k}: the CRC is correct");
-                refused += 1;
-            }
-        }
-    }
-    println!("{accepted} accepted, {refused} refused");
+    let (accepted, refused) =
+        common::mutations_with_crc(&[&SURFACE, &START], 0x2545_F491_4F6C_DD1D, 3000, |bytes| {
+            let repr = PacketRepr::parse_bytes(bytes)?;
+            let mut buf = vec![0u8; PACKET_LEN_MAX];
+            let n = repr.emit(&mut buf)?;
+            buf.truncate(n);
+            Ok(buf)
+        });
     assert!(
         accepted > 100 && refused > 100,
         "{accepted} accepted, {refused} refused"
