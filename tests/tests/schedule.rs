@@ -433,9 +433,24 @@ fn each_cell_gets_the_kernel_its_shape_allows() {
         let aligned = (0..3).all(|j| (0..3).all(|i| i == j || edges[j][i].abs() <= 1e-13 * size));
         (bent <= 1e-13 * size, aligned)
     };
+    // The seed box sheared (x += 0.3 z): every cell an affine parallelepiped that is not
+    // axis-aligned, so the box kernel's count is compared with something other than 0.
+    let sheared = {
+        let path =
+            std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenes/seed-box.toml");
+        let sc = Scene::from_file(&path).expect("scene parses");
+        let (mut mesh, sets) =
+            host_tools::scene::mesh_source::load(&sc.mesh, std::path::Path::new("."))
+                .expect("mesh");
+        for x in &mut mesh.nodes {
+            x[0] += 0.3 * x[2];
+        }
+        Problem::new(&sc, mesh, sets).expect("the sheared box resolves")
+    };
     let cases = [
         (builtin_problem("coarse", 10), "builtin"),
         (repo_scene("seed-box.toml"), "seed box"),
+        (sheared, "sheared box"),
     ];
     for (p, name) in &cases {
         let n = p.mesh.cells.len();
@@ -463,6 +478,11 @@ fn each_cell_gets_the_kernel_its_shape_allows() {
         }
         match *name {
             "builtin" => assert_eq!(boxes + cuboids, 0, "the anatomy's cells are all distorted"),
+            "sheared box" => assert_eq!(
+                (boxes as usize, expected_boxes),
+                (n, n),
+                "a sheared grid is all parallelepipeds"
+            ),
             _ => assert_eq!(cuboids as usize, n, "a generated grid is all cuboids"),
         }
     }

@@ -142,16 +142,55 @@ pub fn max_frequency_from<T: Real>(
 mod tests {
     use super::*;
     use crate::problem::batched::Isa;
+    use pe_firmware::physics::element::ElementKind;
 
     /// The batched kernel (and the two evaluations side by side) changes no bit of `ω_max`,
-    /// so of the critical step every command derives from it: the built-in coarse scene's
-    /// anatomy (distorted hexahedra, all three kernels), at rest and at a deformed state,
-    /// against the scalar loop, which evaluates the same terms one by one.
+    /// so of the critical step every command derives from it, against the scalar loop,
+    /// which evaluates the same terms one by one: at rest and at a deformed state, on the
+    /// built-in coarse scene's anatomy (distorted hexahedra: the general kernel only) and on
+    /// a box whose cells take all three kernels (cuboids, sheared parallelepipeds, and
+    /// general cells between them, counted below).
     #[test]
     fn batched_power_iteration_gives_the_scalar_bits() {
         let scene = crate::scene::builtin::builtin_scene("coarse").expect("built-in scene");
-        let problem = Problem::from_scene(&scene, std::path::Path::new(".")).expect("problem");
-        let elements = Elements::<f64>::build(&problem);
+        let anatomy = Problem::from_scene(&scene, std::path::Path::new(".")).expect("problem");
+        assert_same_bits(&anatomy);
+        // 6 x 3 x 3 cells of 1 cm: x' = x + s(x) z with s = 0 up to x = 2 cm (cuboids), 0.3
+        // from 4 cm (an affine shear: parallelepipeds), linear between (general cells).
+        let boxed = crate::scene::Scene::from_toml(
+            "[mesh]\ngenerate = { kind = \"box\", size = [0.06, 0.03, 0.03], cells = [6, 3, 3] }\n\
+             [material]\nlaw = \"neo-hookean\"\nyoungs_modulus = 3.0e5\npoisson_ratio = 0.45\n\
+             density = 1000.0\n[[fixed]]\nbox = [[-1.0, -1.0, -1.0], [1e-9, 1.0, 1.0]]\n",
+        )
+        .expect("the box scene");
+        let mut mesh = crate::mesh::grid::generate_box([0.06, 0.03, 0.03], [6, 3, 3]);
+        for x in &mut mesh.nodes {
+            let s = (0.3 * (x[0] - 0.02) / 0.02).clamp(0.0, 0.3);
+            x[0] += s * x[2];
+        }
+        let mixed = Problem::new(&boxed, mesh, Default::default()).expect("the sheared box");
+        let count = |k: ElementKind| {
+            (0..54)
+                .filter(|&e| crate::problem::elements::kind_of(&mixed, e) == k)
+                .count()
+        };
+        assert_eq!(
+            [
+                ElementKind::HexCuboid,
+                ElementKind::HexBox,
+                ElementKind::HexReduced
+            ]
+            .map(count),
+            [18, 18, 18],
+            "cuboids, parallelepipeds and general cells"
+        );
+        assert_same_bits(&mixed);
+    }
+
+    /// `ω_max` of `problem`, batched and scalar, at rest and at a smooth deformation: the
+    /// same bits.
+    fn assert_same_bits(problem: &Problem) {
+        let elements = Elements::<f64>::build(problem);
         let laws: Vec<MaterialLaw<f64>> = problem.laws.iter().map(|l| l.cast()).collect();
         let batched = Batched::build(&elements, &laws, Isa::detect()).expect("packs");
         let n = problem.mesh.nodes.len();
@@ -164,13 +203,13 @@ mod tests {
         for u in [&rest, &bent] {
             let omega = |b: Option<&Batched<f64>>| {
                 let state = Linearised {
-                    problem: &problem,
+                    problem,
                     elements: &elements,
                     laws: &laws,
                     u,
                     batched: b,
                 };
-                let mut v = start_vector(&problem);
+                let mut v = start_vector(problem);
                 max_frequency_from(&state, &mut v, 30).expect("power iteration")
             };
             let (scalar, fast) = (omega(None), omega(Some(&batched)));
