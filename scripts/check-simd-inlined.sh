@@ -29,8 +29,34 @@ if [ "$functions" -lt 2 ]; then
     echo "check-simd-inlined: FAIL: only $functions SIMD element loops found in $bin (renamed?)"
     exit 1
 fi
-bad=$(awk '/^[0-9a-f]+ <.*>:$/ { inside = ($0 ~ /run_packs_avx/) }
-    inside && /core::core_arch|\{\{closure\}\}>|try_map|try_from_fn/' "$dis")
+# The out-of-line calls inside the SIMD element loops of the disassembly on stdin. A target
+# that is a closure ends in `{{closure}}` in legacy-mangled names (stable's default), in
+# `{closure#N}` in v0-mangled ones (nightly's default, or -C symbol-mangling-version=v0), and
+# starts with `_RNC` where objdump cannot demangle v0. v0 names carry generic arguments: a
+# jump inside a loop whose closure parameter is `...{closure#0}` ends in `}>+0x...>`, not
+# a call, and is not flagged.
+out_of_line() {
+    awk '/^[0-9a-f]+ <.*>:$/ { inside = ($0 ~ /run_packs_avx/) }
+        inside && /core::core_arch|9core_arch|\{\{closure\}\}>$|\{closure#[0-9]+\}>$|<_RNC|try_map|try_from_fn/'
+}
+# The pattern itself is checked first, on a made-up disassembly: five calls it must flag
+# (both manglings), two lines it must not (a jump inside a loop whose v0 name ends in a
+# closure parameter, a call outside the SIMD loops).
+sample='0000000000001000 <host_tools::problem::batched::run_packs_avx>:
+    1000:\tcall   2000 <host_tools::problem::batched::run_packs_avx::{{closure}}>
+    1005:\tcall   2100 <host_tools::problem::batched::run_packs_avx::{closure#0}>
+    100a:\tcall   2200 <_RNCNvNtNtCs1a_10host_tools7problem7batched13run_packs_avx0B7_>
+    100f:\tcall   2300 <core::core_arch::x86::avx::_mm256_add_pd>
+    1014:\tcall   2400 <core::array::try_from_fn>
+    1019:\tjne    1100 <host_tools::problem::batched::run_packs_avx::<f64, plan::{closure#0}>+0x100>
+0000000000003000 <host_tools::problem::batched::run_packs_scalar>:
+    3000:\tcall   2000 <host_tools::other::{closure#1}>'
+flagged=$(printf '%b\n' "$sample" | out_of_line | wc -l)
+if [ "$flagged" -ne 5 ]; then
+    echo "check-simd-inlined: FAIL: the pattern flags $flagged lines of the sample, not its 5 out-of-line calls"
+    exit 1
+fi
+bad=$(out_of_line < "$dis")
 if [ -n "$bad" ]; then
     echo "check-simd-inlined: FAIL: out-of-line calls in the SIMD element loops of $bin:"
     echo "$bad" | sed -E "s/^[^<]*<//; s/>$//" | sort | uniq -c | sort -rn | head -20
