@@ -12,6 +12,11 @@ RUSTFLAGS="-C target-cpu=cortex-m7" cargo build --release --target thumbv7em-non
 # Host tests (optimised: the physics tests run 1e5-step simulations).
 cargo test --workspace --release
 
+# Which SIMD lanes those bit-identity tests ran on this CPU, and which they skipped and why
+# (the same build: nothing is compiled again).
+cargo test --workspace --release -q --test solver lanes_tested_and_skipped_are_named \
+    -- --nocapture 2>/dev/null | grep '^lanes tested'
+
 # The host's SIMD element loops keep their lanes in registers (no kernel closure, `map` or
 # intrinsic left out of line): a speed property the bit-identity tests cannot see.
 bash scripts/check-simd-inlined.sh

@@ -160,6 +160,51 @@ fn isas() -> Vec<Isa> {
     v
 }
 
+/// Which lanes the bit-identity tests of this file run here and which they skip, and why:
+/// printed (`scripts/test.sh` shows the line), so a machine that tests less says so. The
+/// lanes a CPU lacks cannot run on it (no emulator here runs AVX-512); the AVX lanes run on
+/// every x86-64 CPU with AVX, AVX-512 machines included, unless `PE_ISA` caps them.
+#[test]
+fn lanes_tested_and_skipped_are_named() {
+    let run = isas();
+    let cap = Isa::cap_from_env().expect("PE_ISA names an instruction set");
+    // Narrowest first, as `PE_ISA` caps them.
+    let all = [Isa::Portable, Isa::Avx, Isa::Avx512];
+    let rank = |i: Isa| all.iter().position(|&a| a == i);
+    let mut skipped = Vec::new();
+    for isa in all {
+        if run.contains(&isa) {
+            continue;
+        }
+        skipped.push(match cap {
+            Some(c) if rank(isa) > rank(c) => {
+                format!("{} (capped by PE_ISA={})", isa.name(), c.name())
+            }
+            _ => format!("{} (this CPU lacks it)", isa.name()),
+        });
+    }
+    if !cfg!(target_arch = "aarch64") {
+        skipped.push("neon (aarch64 only: the portable lanes' NEON clone)".into());
+    }
+    let names: Vec<&str> = run.iter().map(|i| i.name()).collect();
+    println!(
+        "lanes tested: {}; skipped: {}",
+        names.join(", "),
+        if skipped.is_empty() {
+            "none".into()
+        } else {
+            skipped.join(", ")
+        }
+    );
+    #[cfg(target_arch = "x86_64")]
+    if cap.is_none() && std::arch::is_x86_feature_detected!("avx") {
+        assert!(
+            run.contains(&Isa::Avx),
+            "an AVX CPU must test the AVX lanes: {names:?}"
+        );
+    }
+}
+
 /// Both loops from zero forces; returns (scalar, batched) results and forces.
 #[allow(clippy::type_complexity)]
 fn both<T: Real>(
