@@ -6,7 +6,7 @@
 # information (llvm-addr2line). Prints instructions per step: the top lines (the standard
 # library's among them), then the top call chains through this repository's code (innermost
 # first). The profile behind "what limits it" for the board's contact
-# cost (README, board cost); scripts/contact-cost.sh gives the stages' totals per board.
+# cost (docs/measurements/board-cost.md); scripts/contact-cost.sh gives the stages' totals per board.
 #
 #   scripts/firmware-profile.sh        Env: STAGE (positions, search, travel, tools, pairs
 #                                      or all: the whole evaluation; default all), STEPS

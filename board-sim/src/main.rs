@@ -51,10 +51,13 @@ enum Command {
         after_help = "Example:\n  board-sim bench --level coarse --boards 2x2x2 --steps 500"
     )]
     Bench {
+        /// Mesh level of the built-in scene: coarse | medium | fine.
         #[arg(long, default_value = "medium")]
         level: String,
+        /// Machine size.
         #[arg(long, default_value = "4x4x4")]
         boards: String,
+        /// Steps of each run.
         #[arg(long, default_value_t = 1000, value_parser = host_tools::domain::steps)]
         steps: u64,
     },
@@ -96,7 +99,8 @@ enum Command {
         args: QemuArgs,
     },
     /// The main job: compile the built-in scene (uterus, tubes, probe) for a board mesh and
-    /// run it, writing OUT/images, OUT/frames (ParaView), OUT/report.json and a summary.
+    /// run it, writing OUT/images, OUT/frames (ParaView), OUT/final.png, OUT/tool_force.csv,
+    /// OUT/nodes.csv, OUT/report.json and a summary.
     #[command(after_help = "Example:\n  board-sim builtin --level coarse --out out/builtin")]
     Builtin {
         /// Mesh level: coarse | medium | fine.
@@ -111,6 +115,7 @@ enum Command {
         /// Stop after N steps.
         #[arg(long, value_parser = host_tools::domain::steps)]
         steps: Option<u64>,
+        /// No progress bar (the summaries are still printed).
         #[arg(long)]
         quiet: bool,
     },

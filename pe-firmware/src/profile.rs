@@ -451,7 +451,7 @@ impl FirmwareCost {
     /// - a board that owns a contact node evaluates the contact problem of the whole
     ///   table: its positions and, at each check, the candidate groups that give one of
     ///   its nodes a force, which on a small contact surface are most of them (measured by
-    ///   `scripts/contact-cost.sh`: see the README's board-cost section);
+    ///   `scripts/contact-cost.sh`: see docs/measurements/board-cost.md);
     /// - a board that owns none has no contact tables and no contact operation in its step
     ///   (every result would be zero), and is charged nothing.
     pub fn charged_contact_nodes(table_nodes: usize, owned_contact_nodes: usize) -> usize {

@@ -48,6 +48,8 @@ pub struct QemuArgs {
     /// received it.
     #[arg(long)]
     pub tool_force: Option<PathBuf>,
+    /// Do not echo the boards' FAULT lines as they arrive (a fault still ends the run with an
+    /// error naming the board).
     #[arg(long)]
     pub quiet: bool,
 }

@@ -68,6 +68,7 @@ pub struct RunArgs {
     /// `pe solve --replay FILE` applies it.
     #[arg(long, value_name = "FILE")]
     pub replay: Option<std::path::PathBuf>,
+    /// No progress bar (the summary is still printed).
     #[arg(long)]
     pub quiet: bool,
 }

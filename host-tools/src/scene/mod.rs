@@ -1,5 +1,5 @@
 //! Scene files (TOML, SI units): mesh, materials, boundary conditions, loads and solver
-//! settings. Every key is documented in the README; unknown keys are errors.
+//! settings. Every key is documented in docs/scene.md; unknown keys are errors.
 
 pub mod args;
 pub mod builders;

@@ -13,10 +13,11 @@
 //!   shape functions of the reference cell holding the node, found by inverting the cell
 //!   map), and nodes farther than a quarter cell outside the reference mesh are left out
 //!   (`compared_nodes` says how many were compared);
-//! * the scene's quantity of interest: the force the prescribed nodes exert on the tissue
-//!   (the probe's push, `prescribed_reaction_n`) when the scene prescribes motion, otherwise
-//!   the mean displacement of the tip face (the nodes at the largest x): error is the norm of
-//!   the vector difference over the reference's norm;
+//! * the scene's quantity of interest: the force of the tissue on the first tool
+//!   (`tool_force_n`) when the scene has tools, otherwise the force the prescribed nodes
+//!   exert on the tissue (`prescribed_reaction_n`) when it prescribes motion, otherwise the
+//!   mean displacement of the tip face (the nodes at the largest x): error is the norm of the
+//!   vector difference over the reference's norm;
 //! * energy: stored plus kinetic energy at the end, relative to the reference's.
 
 use std::fmt::Write as _;
@@ -39,7 +40,6 @@ mod report;
 pub use interpolate::Interpolator;
 pub use report::*;
 
-/// Board instructions per element-step: not measured until the board firmware exists.
 /// Where the board column comes from, on a board of `profile`.
 pub fn board_note(profile: &BoardProfile) -> String {
     format!(
@@ -109,7 +109,8 @@ pub struct Row {
     pub wall_s: f64,
     pub host_ns_per_element_step: f64,
     pub real_time_factor: f64,
-    /// Empty until the board firmware reports instruction counts.
+    /// Instructions per element-step of a whole board step and the board real-time factor
+    /// ([`board_note`]), as text: "552 (board RTF 0.123)".
     pub board_instructions_per_element_step: String,
     pub compared_nodes: usize,
     pub u_err_max_m: f64,

@@ -31,7 +31,7 @@
 //! (table "DMAMUX1: assignment of multiplexer inputs to resources", as in the PAC).
 //!
 //! Not run here: the prototype has not been built. What needs checking on it is listed in
-//! the README ("The prototype board").
+//! docs/boards.md ("The prototype board").
 
 use core::mem::MaybeUninit;
 use core::sync::atomic::{compiler_fence, AtomicBool, Ordering};
