@@ -12,7 +12,7 @@ use std::process::Command;
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
-use pe_firmware::image::{blob, Integration, Precision};
+use pe_firmware::image::{blob, Feature, Integration, Precision};
 use pe_firmware::profile::BoardProfile;
 
 use crate::compile::{image_file_name, Manifest};
@@ -94,6 +94,82 @@ pub fn firmware_features(
         f.push("full");
     }
     f
+}
+
+/// The cargo features a firmware ELF was built with, read from its build record
+/// ([`blob::find_build`]): an error naming the difference when it was built for another
+/// profile, precision or integration than the images', or without a part `needed` names.
+/// A build carrying more parts than needed is accepted (it refuses nothing the images hold).
+pub fn firmware_build(
+    elf: &[u8],
+    precision: Precision,
+    integration: Integration,
+    profile: &BoardProfile,
+    needed: &[Feature],
+) -> Result<Vec<&'static str>> {
+    let hits: Vec<usize> = blob::find_build(elf).collect();
+    let [at] = hits[..] else {
+        bail!(
+            "holds {} build records (expected exactly one): not a pe-board ELF, or built before build records",
+            hits.len()
+        );
+    };
+    let record: &[u8; blob::BUILD_LEN] = elf
+        .get(at..at + blob::BUILD_LEN)
+        .and_then(|r| r.try_into().ok())
+        .context("build record cut off")?;
+    let (index, flags) = blob::build_of(record).context("build record damaged")?;
+    let built = pe_firmware::profile::PROFILES
+        .get(index as usize)
+        .with_context(|| {
+            format!("built for board profile number {index}, which this pe does not know")
+        })?;
+    if built.name != profile.name {
+        bail!(
+            "built for the board profile {}, the images for {} (build it with pe image without --firmware, or cargo features {})",
+            built.name,
+            profile.name,
+            profile.board_features.join(",")
+        );
+    }
+    let has = |bit: u8| flags & bit != 0;
+    let elf_precision = if has(blob::BUILD_F32) {
+        Precision::F32
+    } else {
+        Precision::F64
+    };
+    let elf_integration = if has(blob::BUILD_FULL) {
+        Integration::Full
+    } else {
+        Integration::Reduced
+    };
+    if elf_precision != precision || elf_integration != integration {
+        bail!(
+            "built for {} {}, the images are {} {}",
+            elf_precision.name(),
+            elf_integration.name(),
+            precision.name(),
+            integration.name()
+        );
+    }
+    let missing: Vec<&str> = (needed.iter())
+        .filter(|&&f| !has(blob::build_flag(f)))
+        .map(|f| f.name())
+        .collect();
+    if !missing.is_empty() {
+        bail!(
+            "built without {}, which the images need (cargo features of pe-firmware/board)",
+            missing.join(", ")
+        );
+    }
+    let mut features = firmware_features(precision, integration, profile);
+    features.extend(
+        Feature::ALL
+            .into_iter()
+            .filter(|&f| has(blob::build_flag(f)))
+            .map(Feature::name),
+    );
+    Ok(features)
 }
 
 /// Builds the firmware with cargo (release, thumbv7em-none-eabihf, -C target-cpu=cortex-m7
@@ -182,14 +258,21 @@ pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<Imag
     }
     crate::compile::check_image_set(&m, &files)?;
     // The firmware carries the parts some board's image needs, and no other.
-    let mut features = firmware_features(m.precision, m.integration, profile);
-    features.extend(parts_needed(files.iter().map(|f| &f.header)));
     let elf_path = match firmware {
         Some(p) => p.to_path_buf(),
-        None => build_firmware(&features, "pe-board")?,
+        None => {
+            let mut features = firmware_features(m.precision, m.integration, profile);
+            features.extend(parts_needed(files.iter().map(|f| &f.header)));
+            build_firmware(&features, "pe-board")?
+        }
     };
     let elf = std::fs::read(&elf_path)
         .with_context(|| format!("reading the firmware {}", elf_path.display()))?;
+    // What the ELF holds, from its build record: refused before anything is written when it
+    // was built for another board or lacks what the images need.
+    let needed = crate::compile::parts_of(files.iter().map(|f| &f.header));
+    let features = firmware_build(&elf, m.precision, m.integration, profile, &needed)
+        .with_context(|| format!("the firmware {}", elf_path.display()))?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     // A directory reused from a larger machine: its other boards' files go.
     crate::output::file::remove_owned(out, |n| {

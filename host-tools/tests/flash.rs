@@ -18,11 +18,25 @@ fn temp_dir(tag: &str) -> common::TempDir {
 }
 
 /// A 32-bit little-endian ELF with one loaded section at 0x0800_1000 holding the firmware's
-/// identity record (board (0,0,0)), between other bytes.
+/// identity record (board (0,0,0)) and the build record of an f64 reduced firmware for the
+/// prototype (`stm32h743-uart`) with every part, between other bytes.
 fn fake_firmware() -> Vec<u8> {
+    let all = blob::BUILD_CONTACT | blob::BUILD_GRAPHICS | blob::BUILD_LOADS;
+    fake_firmware_built(Some(blob::build_record(prototype_index(), all)))
+}
+
+/// The prototype's index in the profile registry.
+fn prototype_index() -> u8 {
+    pe_firmware::profile::profile_index("stm32h743-uart").expect("registered")
+}
+
+/// [`fake_firmware`] with another build record, or none.
+fn fake_firmware_built(build: Option<[u8; blob::BUILD_LEN]>) -> Vec<u8> {
     let mut data = vec![0xAAu8; 64];
     data.extend_from_slice(&blob::identity_record([0, 0, 0]));
-    data.extend(vec![0x55u8; 48]);
+    data.extend(vec![0x55u8; 16]);
+    data.extend(build.unwrap_or([0x55; blob::BUILD_LEN]));
+    data.extend(vec![0x55u8; 16]);
     let data_off = 52u32;
     let shoff = data_off + data.len() as u32;
     let mut e = vec![0u8; 52];
@@ -302,4 +316,64 @@ fn a_write_that_did_not_take_is_named() {
     );
     let log = std::fs::read_to_string(s.state.join("log")).unwrap();
     assert!(!log.contains("reset"), "{log}");
+}
+
+/// `pe image --firmware` reads what the ELF was built for from its build record and refuses,
+/// before writing anything, one built for another board profile, another precision, without
+/// a part the images need, or without a build record; the manifest records the features the
+/// ELF has (here every part, more than the images need).
+#[test]
+fn an_elf_built_for_something_else_is_refused() {
+    let s = setup("elf-check");
+    let compiled = s.dir.join("compiled");
+    let qemu = pe_firmware::profile::profile_index("qemu-mps2-an500").expect("registered");
+    let all = blob::BUILD_CONTACT | blob::BUILD_GRAPHICS | blob::BUILD_LOADS;
+    let proto = prototype_index();
+    for (build, want) in [
+        (
+            Some(blob::build_record(qemu, all)),
+            "built for the board profile qemu-mps2-an500, the images for stm32h743-uart",
+        ),
+        (
+            Some(blob::build_record(proto, all | blob::BUILD_F32)),
+            "built for f32 reduced, the images are f64 reduced",
+        ),
+        (
+            Some(blob::build_record(proto, blob::BUILD_LOADS)),
+            "built without contact, graphics, which the images need",
+        ),
+        (None, "holds 0 build records"),
+    ] {
+        let fw = s.dir.join("other.elf");
+        std::fs::write(&fw, fake_firmware_built(build)).unwrap();
+        let out_dir = s.dir.join("refused");
+        let out = Command::new(PE)
+            .arg("image")
+            .arg(&compiled)
+            .arg("-o")
+            .arg(&out_dir)
+            .arg("--firmware")
+            .arg(&fw)
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "accepted: {want}");
+        assert!(text.contains(want), "expected {want:?}:\n{text}");
+        assert!(text.contains("other.elf"), "the ELF is named: {text}");
+        assert!(!out_dir.exists(), "{want}: wrote {}", out_dir.display());
+    }
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(s.images.join("manifest.json")).unwrap())
+            .unwrap();
+    let features: Vec<&str> = m["firmware_features"]
+        .as_array()
+        .expect("features")
+        .iter()
+        .filter_map(|v| v.as_str())
+        .collect();
+    assert_eq!(
+        features,
+        ["stm32h743", "defmt", "contact", "graphics", "loads"],
+        "the ELF's features"
+    );
 }

@@ -215,7 +215,27 @@ pub mod mps2_uarts {
 /// The board profiles, the one registry every name is looked up in
 /// ([`BoardProfile::by_name`]): a new board is a `BoardProfile` constant above and its entry
 /// here.
-pub const PROFILES: [&BoardProfile; 3] = [&PE_BOARD, &STM32H743_UART, &QEMU_MPS2_AN500];
+pub static PROFILES: [&BoardProfile; 3] = [&PE_BOARD, &STM32H743_UART, &QEMU_MPS2_AN500];
+
+/// The index of the profile called `name` in [`PROFILES`] (for the firmware's build record,
+/// [`crate::image::blob::build_record`]), in a `const` context.
+pub const fn profile_index(name: &str) -> Option<u8> {
+    let mut i = 0;
+    while i < PROFILES.len() {
+        let (a, b) = (PROFILES[i].name.as_bytes(), name.as_bytes());
+        if a.len() == b.len() {
+            let mut k = 0;
+            while k < a.len() && a[k] == b[k] {
+                k += 1;
+            }
+            if k == a.len() {
+                return Some(i as u8);
+            }
+        }
+        i += 1;
+    }
+    None
+}
 
 impl BoardProfile {
     /// The registered profile called `name` ([`PROFILES`]); an unknown name is an error
@@ -620,9 +640,14 @@ mod tests {
     #[test]
     fn profiles_are_found_by_their_names_only() {
         assert_eq!(PROFILES.len(), 3);
-        for p in PROFILES {
+        for (i, p) in PROFILES.into_iter().enumerate() {
             let found = BoardProfile::by_name(p.name).expect("registered");
             assert!(core::ptr::eq(found, p), "{}", p.name);
+            assert_eq!(profile_index(p.name), Some(i as u8), "{}", p.name);
+        }
+        // A prefix, an extension and another case are other names.
+        for name in ["pe-boar", "pe-board-2", "PE-BOARD", ""] {
+            assert_eq!(profile_index(name), None, "{name:?}");
         }
         assert_eq!(
             BoardProfile::by_name("pe-board").unwrap().clock_hz,

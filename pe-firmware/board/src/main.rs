@@ -25,6 +25,9 @@ fn main() -> ! {
     let Some(board) = board_position() else {
         report::fault(UNKNOWN, format_args!("board identity record damaged"));
     };
+    if !region::build_record_intact() {
+        report::fault(board, format_args!("firmware build record damaged"));
+    }
     log_info!(
         "pe-board: {} on {}, position ({},{},{}), capacity {} elements",
         VARIANT,

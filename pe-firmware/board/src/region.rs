@@ -1,14 +1,19 @@
 //! The schedule image region (linker symbols `__pe_image_start`/`__pe_image_end`, see
-//! `schedule.x`) and the board's identity (its position in the machine).
+//! `schedule.x`), the board's identity (its position in the machine), its run options and
+//! the firmware's build record.
 //!
-//! The region holds a schedule blob and the firmware an identity record, both defined in
+//! The region holds a schedule blob and the firmware its records, all defined in
 //! [`pe_firmware::image::blob`]. The image itself (magic, version, CRC, board position,
 //! every record) is checked by the runtime's loader.
 
+use crate::config::PROFILE;
 use pe_firmware::image::blob::{
-    identity_position, identity_record, read_blob, run_options_flags, run_options_record,
-    BlobError, IDENTITY_LEN, RUN_HOST_GATE, RUN_OPTIONS_LEN,
+    build_flag, build_of, build_record, identity_position, identity_record, read_blob,
+    run_options_flags, run_options_record, BlobError, BUILD_F32, BUILD_FULL, BUILD_LEN,
+    IDENTITY_LEN, RUN_HOST_GATE, RUN_OPTIONS_LEN,
 };
+use pe_firmware::image::Feature;
+use pe_firmware::profile::profile_index;
 
 /// The image linked into the region when built with `PE_SCHEDULE_IMAGE=FILE` (otherwise
 /// empty, and the region is flashed or loaded separately).
@@ -67,4 +72,42 @@ pub fn host_gate() -> Option<bool> {
     // SAFETY: as for PE_BOARD_IDENTITY: a valid static the host tool may patch in the ELF.
     let r = unsafe { core::ptr::read_volatile(core::ptr::addr_of!(PE_RUN_OPTIONS)) };
     run_options_flags(&r).map(|f| f & RUN_HOST_GATE != 0)
+}
+
+/// What this build holds ([`pe_firmware::image::blob`]'s build record): its profile, its
+/// scalar and element, the parts it carries. Written by the build, never patched; `pe image
+/// --firmware` reads it to refuse an ELF built for another board or without what the images
+/// need.
+#[used]
+#[no_mangle]
+pub static PE_FIRMWARE_BUILD: [u8; BUILD_LEN] = build_record(PROFILE_INDEX, BUILD_FLAGS);
+
+const PROFILE_INDEX: u8 = match profile_index(PROFILE.name) {
+    Some(i) => i,
+    None => panic!("the firmware's profile is not registered in pe_firmware::profile::PROFILES"),
+};
+
+const BUILD_FLAGS: u8 = {
+    let mut f = 0;
+    if cfg!(feature = "f32") {
+        f |= BUILD_F32;
+    }
+    if cfg!(feature = "full") {
+        f |= BUILD_FULL;
+    }
+    let mut k = 0;
+    while k < Feature::ALL.len() {
+        if Feature::ALL[k].built() {
+            f |= build_flag(Feature::ALL[k]);
+        }
+        k += 1;
+    }
+    f
+};
+
+/// Whether the build record reads as this build wrote it (read, so the linker keeps it).
+pub fn build_record_intact() -> bool {
+    // SAFETY: as for PE_BOARD_IDENTITY: a valid, aligned, initialised static.
+    let r = unsafe { core::ptr::read_volatile(core::ptr::addr_of!(PE_FIRMWARE_BUILD)) };
+    build_of(&r) == Some((PROFILE_INDEX, BUILD_FLAGS))
 }

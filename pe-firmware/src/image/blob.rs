@@ -12,6 +12,12 @@
 //!   check byte `flags ^ 0x5A`. The firmware ships with no flag set; a host that needs one
 //!   (`board-sim qemu --replay`: the host's step gate, `link_proto::gate`) writes it into
 //!   its copy of the ELF, as `pe image` writes the identity.
+//! - The build record is 16 bytes in the firmware: [`BUILD_MARKER`] (`PE-FW-BUILD` and a
+//!   NUL), the board profile's index in [`crate::profile::PROFILES`], a flags byte
+//!   ([`BUILD_F32`], [`BUILD_FULL`], [`BUILD_CONTACT`], [`BUILD_GRAPHICS`], [`BUILD_LOADS`]:
+//!   what the build holds), a zero byte and a check byte `profile ^ flags ^ 0xC3`. Written
+//!   by the build, never patched: `pe image --firmware` reads it to refuse an ELF built for
+//!   another profile or without what the images need.
 //!
 //! Nothing here panics.
 
@@ -159,4 +165,45 @@ pub fn run_options_flags(record: &[u8; RUN_OPTIONS_LEN]) -> Option<u8> {
 /// Offsets of the run options records in a firmware file.
 pub fn find_run_options(elf: &[u8]) -> impl Iterator<Item = usize> + '_ {
     find_marked(elf, RUN_OPTIONS_MARKER, |r| run_options_flags(r).is_some())
+}
+
+/// The marker that starts the build record.
+pub const BUILD_MARKER: [u8; 12] = *b"PE-FW-BUILD\0";
+/// Bytes of the build record.
+pub const BUILD_LEN: usize = RECORD_LEN;
+/// Build flag: the schedule's scalar is `f32` (else `f64`).
+pub const BUILD_F32: u8 = 1;
+/// Build flag: full integration (else reduced).
+pub const BUILD_FULL: u8 = 2;
+/// Build flag: the contact code and tables.
+pub const BUILD_CONTACT: u8 = 4;
+/// Build flag: the graphics stream.
+pub const BUILD_GRAPHICS: u8 = 8;
+/// Build flag: loads (`[[load]]`).
+pub const BUILD_LOADS: u8 = 16;
+
+/// The build flag of a part ([`BUILD_CONTACT`], [`BUILD_GRAPHICS`], [`BUILD_LOADS`]).
+pub const fn build_flag(part: super::Feature) -> u8 {
+    match part {
+        super::Feature::Contact => BUILD_CONTACT,
+        super::Feature::Graphics => BUILD_GRAPHICS,
+        super::Feature::Loads => BUILD_LOADS,
+    }
+}
+
+/// The build record of a firmware for the profile at `profile` in
+/// [`crate::profile::PROFILES`] holding `flags`.
+pub const fn build_record(profile: u8, flags: u8) -> [u8; BUILD_LEN] {
+    marked_record(BUILD_MARKER, [profile, flags, 0, profile ^ flags ^ 0xC3])
+}
+
+/// The profile index and flags of a build record, or `None` if it is damaged.
+pub fn build_of(record: &[u8; BUILD_LEN]) -> Option<(u8, u8)> {
+    let (profile, flags) = (record[12], record[13]);
+    (record[14] == 0 && record[15] == profile ^ flags ^ 0xC3).then_some((profile, flags))
+}
+
+/// Offsets of the build records in a firmware file.
+pub fn find_build(elf: &[u8]) -> impl Iterator<Item = usize> + '_ {
+    find_marked(elf, BUILD_MARKER, |r| build_of(r).is_some())
 }
