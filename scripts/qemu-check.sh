@@ -2,7 +2,7 @@
 # QEMU check: the board firmware runs the built-in coarse scene on one emulated Cortex-M7
 # (QEMU mps2-an500) and its final state, reported via semihosting, must be bit-identical to
 # `pe solve` and to board-sim for the same scene and precision (f64 and f32, reduced
-# integration). Then the firmware must refuse a corrupted image, an image for another
+# integration; full integration on two of them). Then the firmware must refuse a corrupted image, an image for another
 # board and an unstable scene (the same numerical fault as the serial solver) -- each with
 # a fault report and a failing exit, never a hang. Fails loudly on any mismatch. Machines of
 # several boards (their links, a dead board, crossed cables) are scripts/qemu-array.sh's.
@@ -29,25 +29,31 @@ grep -q 'cells = \[10, 5, 5\]' "$OUT/box.toml"
 python3 scripts/turned-box.py "$OUT/turned-box.vtk"
 sed 's|^generate = .*$|file = "turned-box.vtk"|' "$OUT/box.toml" >"$OUT/turned.toml"
 grep -q '^file = "turned-box.vtk"' "$OUT/turned.toml"
-for SCENE in builtin box turned; do
-  case $SCENE in
-    builtin) SRC=(--builtin --level coarse) ;;
-    *) SRC=("$OUT/$SCENE.toml") ;;
-  esac
-  for PREC in f64 f32; do
-    D=$OUT/$SCENE-$PREC
-    echo "qemu-check: $SCENE scene, 1x1x1, $PREC reduced, $STEPS steps"
+# Every scene in both precisions with reduced integration; full integration (eight Gauss
+# points, no hourglass control: another element kernel on the board) on the built-in scene
+# in f64 (general cells, contact) and the turned box in f32 (parallelepipeds).
+CASES="builtin:f64:reduced builtin:f32:reduced box:f64:reduced box:f32:reduced
+       turned:f64:reduced turned:f32:reduced builtin:f64:full turned:f32:full"
+for CASE in $CASES; do
+    IFS=: read -r SCENE PREC INTEG <<<"$CASE"
+    case $SCENE in
+      builtin) SRC=(--builtin --level coarse) ;;
+      *) SRC=("$OUT/$SCENE.toml") ;;
+    esac
+    D=$OUT/$SCENE-$PREC-$INTEG
+    echo "qemu-check: $SCENE scene, 1x1x1, $PREC $INTEG, $STEPS steps"
     "$PE" compile "${SRC[@]}" --boards 1x1x1 --profile qemu-mps2-an500 \
-        --precision "$PREC" --steps "$STEPS" -o "$D/compiled" >/dev/null
-    "$PE" solve "${SRC[@]}" --steps "$STEPS" --precision "$PREC" --quiet \
-        --output-nodes "$D/solve.csv" >/dev/null 2>&1
+        --precision "$PREC" --integration "$INTEG" --steps "$STEPS" -o "$D/compiled" >/dev/null
+    "$PE" solve "${SRC[@]}" --steps "$STEPS" --precision "$PREC" --integration "$INTEG" \
+        --quiet --output-nodes "$D/solve.csv" >/dev/null 2>&1
     # A comparison of zero fields proves nothing: the probe must have moved the tube.
     awk -F, 'NR > 1 { for (i = 5; i <= 7; i++) { v = $i < 0 ? -$i : $i; if (v > m) m = v } }
         END { if (m + 0 <= 1e-4) { printf "qemu-check: max |u| = %g m: nothing moved, raise STEPS\n", m; exit 1 }
               printf "qemu-check: max |u| = %.3g m\n", m }' "$D/solve.csv"
     "$SIM" run "$D/compiled" --quiet --output-nodes "$D/board-sim.csv" >/dev/null
     FEATURES=qemu
-    [ "$PREC" = f32 ] && FEATURES=qemu,f32
+    [ "$PREC" = f32 ] && FEATURES=$FEATURES,f32
+    [ "$INTEG" = full ] && FEATURES=$FEATURES,full
     # The firmware with only the parts the scene needs: the boxes have no contact and no
     # loads, so their firmware is built without them (and must still match bit for bit).
     case $SCENE in
@@ -68,7 +74,6 @@ for SCENE in builtin box turned; do
     fi
     "$PE" compare "$D/solve.csv" "$D/qemu.txt"
     "$PE" compare "$D/solve.csv" "$D/board-sim.csv"
-  done
 done
 
 # Subnormals: the host flushes them to zero as the board's FPSCR.FZ does
@@ -126,7 +131,7 @@ expect_fault() { # NAME PATTERN QEMU-ARGS...
     fi
     echo "qemu-check: $name refused: $(grep -o 'FAULT.*' "$OUT/fault-$name.txt")"
 }
-I=$OUT/builtin-f64/image
+I=$OUT/builtin-f64-reduced/image
 python3 - "$I/board-0-0-0.sched" "$OUT/corrupt.sched" <<'PY'
 import sys
 b = bytearray(open(sys.argv[1], "rb").read())
@@ -137,7 +142,7 @@ expect_fault corrupted-image "CRC mismatch" -kernel "$I/board-0-0-0.elf" \
     -device loader,file="$OUT/corrupt.sched",addr=$ORIGIN
 expect_fault no-image "no schedule image" -kernel "$I/board-0-0-0.elf"
 # A firmware built without contact refuses an image with contact tables, naming the part.
-expect_fault no-contact "built without .contact." -kernel "$OUT/box-f64/image/board-0-0-0.elf" \
+expect_fault no-contact "built without .contact." -kernel "$OUT/box-f64-reduced/image/board-0-0-0.elf" \
     -device loader,file="$I/board-0-0-0.sched",addr=$ORIGIN
 "$PE" compile --builtin --level coarse --boards 2x1x1 --profile qemu-mps2-an500 \
     --steps 10 -o "$OUT/two/compiled" >/dev/null

@@ -125,6 +125,49 @@ fn machines_equal_serial_on_the_builtin_scene() {
     }
 }
 
+/// Full integration (eight Gauss points, no hourglass control: the boards' other element
+/// kernel) on the built-in scene after 1000 steps (the probe has pressed the tube: fields
+/// above 1e-4 m): one board is the serial run bit for bit, on the host's lanes and on the
+/// firmware's scalar loop; 2x2x2 equals it to 1e-12 relative (only the order of the force
+/// sums differs, as for reduced integration). The firmware itself under QEMU:
+/// `scripts/qemu-check.sh`.
+#[test]
+fn full_integration_on_boards_equals_serial() {
+    let mut p = builtin_problem("coarse", 1000);
+    p.solver.integration = pe_firmware::image::Integration::Full;
+    let serial = solver::run(&p, "serial full", &mut ()).unwrap();
+    assert_eq!(serial.report.integration, "full");
+    let u_max = max_abs(&serial.displacements);
+    assert!(
+        u_max > 1e-4,
+        "the probe has moved the tube: max |u| {u_max} m"
+    );
+    let reduced = solver::run(&builtin_problem("coarse", 1000), "serial", &mut ()).unwrap();
+    let apart = max_rel_diff(&serial.displacements, &reduced.displacements);
+    assert!(
+        apart > 1e-3,
+        "full and reduced differ ({apart:e}): another kernel ran"
+    );
+    let dir = compile(&p, "builtin:coarse", "1x1x1", "full-b111");
+    for batched in [true, false] {
+        let out = sim(
+            &dir,
+            &SimOptions {
+                batched,
+                ..Default::default()
+            },
+        );
+        assert_eq!(out.steps, 1000);
+        let what = format!("full, 1x1x1 against serial, batched {batched}");
+        assert_bit_identical(&serial.displacements, &out.displacements, &what);
+    }
+    let dir = compile(&p, "builtin:coarse", "2x2x2", "full-b222");
+    let out = sim(&dir, &SimOptions::default());
+    let d = max_rel_diff(&serial.displacements, &out.displacements);
+    println!("full 2x2x2: max relative difference {d:e}");
+    assert!(d < 1e-12, "full 2x2x2: {d:e}");
+}
+
 /// In f32 the boards send their contact nodes' f32 displacements as they are (16-byte
 /// entries, not 28): 2x2x2 on the built-in scene equals the f32 serial run to 5e-5 of the
 /// largest displacement. Only the order of the force sums differs, but in f32 (round-off
