@@ -247,16 +247,12 @@ fn global_retries_exhausted_stop_the_run() {
     let p = builtin_problem("coarse", 200);
     let dir = compile(&p, "builtin:coarse", "2x2x2", "global-retries");
     for w in [1, 2] {
-        let start = std::time::Instant::now();
         let f = stopped(&dir, &opts(Some("seed=1,drop=1.0,on=global"), w, true));
         println!("{f}");
-        // Recovery gives up after about 1.5 s (10 + 20 + 40 + 80 + 160 ms x 5, then the
-        // next timer), before the 10 s link timeout.
-        assert!(
-            start.elapsed() < Duration::from_secs(8),
-            "{:?}",
-            start.elapsed()
-        );
+        // Recovery gives up (after about 1.5 s of retransmissions: 10 + 20 + 40 + 80 +
+        // 160 ms x 5, then the next timer) before the 10 s link timeout: shown by what
+        // detected it, recovery's exhausted retries with the configured count, not by the
+        // wall clock (no timing assert on a shared machine).
         assert_global_cause(&f, "drop");
         let d = &f.observed[f.cause.detected];
         let K::GlobalError {
