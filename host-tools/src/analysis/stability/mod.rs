@@ -111,9 +111,9 @@ impl Case {
             let _ = writeln!(
                 s,
                 "| {} | {} | {} | {} |",
-                c.what,
+                c.what.replace('|', "\\|"),
                 c.value.replace('|', "/"),
-                c.bound,
+                c.bound.replace('|', "\\|"),
                 if c.ok { "ok" } else { "**FAILED**" }
             );
         }
@@ -340,4 +340,26 @@ pub fn run_cli(out: Option<&Path>, long: bool, only: Option<&str>) -> Result<()>
         bail!("stability cases failed: {failed:?}");
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A check named with `|u|` stays one cell: every row of the table has the header's
+    /// four columns (the report's rows once had six, read as a broken table).
+    #[test]
+    fn a_bar_in_a_check_name_keeps_the_table_whole() {
+        let mut c = Case::new("case", "expected");
+        c.lt("max |u| after unloading / peak", 1e-15, 1e-9);
+        c.lt("plain", 1.0, 2.0);
+        let md = c.markdown();
+        let rows: Vec<&str> = md.lines().filter(|l| l.starts_with('|')).collect();
+        assert_eq!(rows.len(), 4, "{md}");
+        for row in rows {
+            let cells = row.replace("\\|", "").matches('|').count() - 1;
+            assert_eq!(cells, 4, "{row}");
+        }
+        assert!(md.contains("max \\|u\\| after unloading"), "{md}");
+    }
 }
