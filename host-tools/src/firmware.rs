@@ -258,11 +258,12 @@ pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<Imag
     }
     crate::compile::check_image_set(&m, &files)?;
     // The firmware carries the parts some board's image needs, and no other.
+    let needed = crate::compile::parts_of(files.iter().map(|f| &f.header));
     let elf_path = match firmware {
         Some(p) => p.to_path_buf(),
         None => {
             let mut features = firmware_features(m.precision, m.integration, profile);
-            features.extend(parts_needed(files.iter().map(|f| &f.header)));
+            features.extend(needed.iter().map(|f| f.name()));
             build_firmware(&features, "pe-board")?
         }
     };
@@ -270,7 +271,6 @@ pub fn image_dir(dir: &Path, out: &Path, firmware: Option<&Path>) -> Result<Imag
         .with_context(|| format!("reading the firmware {}", elf_path.display()))?;
     // What the ELF holds, from its build record: refused before anything is written when it
     // was built for another board or lacks what the images need.
-    let needed = crate::compile::parts_of(files.iter().map(|f| &f.header));
     let features = firmware_build(&elf, m.precision, m.integration, profile, &needed)
         .with_context(|| format!("the firmware {}", elf_path.display()))?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;

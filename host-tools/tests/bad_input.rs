@@ -7,11 +7,11 @@ use std::process::{Command, Output};
 
 const PE: &str = env!("CARGO_BIN_EXE_pe");
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("pe-bad-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+mod common;
+
+/// A fresh scratch directory, removed when the test passes ([`common::temp_dir`]).
+fn temp_dir(tag: &str) -> common::TempDir {
+    common::temp_dir(&format!("bad-{tag}"))
 }
 
 fn run(args: &[&str]) -> Output {
@@ -72,7 +72,6 @@ fn compare_refuses_nan_in_either_file() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let _ = std::fs::remove_dir_all(&d);
 }
 
 /// Every option's domain is checked as it is parsed, naming the option: 0, negatives, NaN
@@ -145,7 +144,6 @@ fn scene_solver_keys_are_named() {
         std::fs::write(&p, scene(solver)).unwrap();
         refused(&["solve", p.to_str().unwrap()], needles);
     }
-    let _ = std::fs::remove_dir_all(&d);
 }
 
 /// A box of `cells` scene that runs `steps` steps.
@@ -190,7 +188,6 @@ fn output_paths_are_checked_before_the_run() {
         &["solve", s, "--vtk", file.to_str().unwrap()],
         &["--vtk", "is a file"],
     );
-    let _ = std::fs::remove_dir_all(&d);
 }
 
 /// Two `pe solve` runs writing the same nodes CSV at once (one of 5 steps, one of 6, so the
@@ -257,7 +254,6 @@ fn concurrent_runs_leave_a_whole_file() {
         names.iter().all(|n| !n.ends_with(".tmp")),
         "temporaries left: {names:?}"
     );
-    let _ = std::fs::remove_dir_all(&d);
 }
 
 /// A `--vtk` directory reused by a shorter run holds the shorter run's frames only: the
@@ -305,7 +301,6 @@ fn a_reused_frame_directory_holds_this_runs_frames_only() {
         frames.join("notes.txt").exists(),
         "a file the series does not own stays"
     );
-    let _ = std::fs::remove_dir_all(&d);
 }
 
 /// A recompile into an old directory for a smaller machine leaves only the new machine's
@@ -335,7 +330,6 @@ fn a_recompile_leaves_no_stale_images() {
     };
     assert_eq!(images("2x1x1"), ["board-0-0-0.bin", "board-1-0-0.bin"]);
     assert_eq!(images("1x1x1"), ["board-0-0-0.bin"]);
-    let _ = std::fs::remove_dir_all(&d);
 }
 
 /// A generated box too large for this machine's memory is refused before any allocation,
@@ -358,7 +352,6 @@ fn a_box_larger_than_memory_is_refused_before_allocation() {
         &["solve", scene.to_str().unwrap()],
         &["[mesh] generate", "GB of memory"],
     );
-    let _ = std::fs::remove_dir_all(&d);
 }
 
 /// `BYTES_PER_CELL`, the estimate the memory check relies on, bounds the peak resident
@@ -413,5 +406,4 @@ fn the_memory_estimate_bounds_a_runs_peak() {
         per_cell[1] <= estimate && per_cell[0] >= estimate / 4.0,
         "{per_cell:.0?} bytes per cell measured (reduced, full), {estimate:.0} estimated"
     );
-    let _ = std::fs::remove_dir_all(&d);
 }
