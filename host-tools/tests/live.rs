@@ -413,11 +413,29 @@ fn bad_input_is_answered_and_the_session_goes_on() {
             }
         )
     });
-    // Over 1 MiB: told, then closed.
-    c.send(&" ".repeat(1100 * 1024));
-    let e = c.error();
-    assert!(e.contains("disconnected"), "{e}");
-    assert!(matches!(c.next(), In::Closed(_)));
+    // Over 1 MiB: told, then closed. The server may close while the client is still
+    // writing the message (a broken pipe or reset here, seen once in CI under load): then
+    // the closed connection is the answer, and its error text, if it got through, is read.
+    let sent = c.ws.send(Message::text(" ".repeat(1100 * 1024)));
+    if let Err(e) = &sent {
+        let cut = matches!(e, tungstenite::Error::Io(io)
+            if matches!(io.kind(), std::io::ErrorKind::BrokenPipe | std::io::ErrorKind::ConnectionReset));
+        assert!(cut, "send: {e}");
+    }
+    loop {
+        match c.next() {
+            In::Text(ServerMessage::Error { message }) => {
+                assert!(message.contains("disconnected"), "{message}");
+                assert!(matches!(c.next(), In::Closed(_)));
+                break;
+            }
+            In::Closed(why) => {
+                assert!(sent.is_err(), "closed without an error message: {why}");
+                break;
+            }
+            _ => {} // frames and notices sent before the message was refused
+        }
+    }
 
     let http = |request: &[u8]| -> String {
         let mut t = TcpStream::connect(s.addr).unwrap();
