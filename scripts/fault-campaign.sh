@@ -10,7 +10,8 @@
 # cause. Rerun with the same SEED to replay every run.
 #
 # Env: RUNS (default 1000), SEED (1), STEPS (100), RECOVERY (on; "off" runs without link
-# recovery: every fault must then stop the run), OUT (default $CARGO_TARGET_DIR/fault-campaign
+# recovery: every fault must then stop the run), CLOCK (wall; "simulated": time that advances
+# only while every board waits, so that no verdict depends on the host's load), OUT (default $CARGO_TARGET_DIR/fault-campaign
 # or target/fault-campaign).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -18,6 +19,7 @@ RUNS=${RUNS:-1000}
 SEED=${SEED:-1}
 STEPS=${STEPS:-100}
 RECOVERY=${RECOVERY:-on}
+CLOCK=${CLOCK:-wall}
 TARGET_DIR=${CARGO_TARGET_DIR:-$(pwd)/target}
 OUT=${OUT:-$TARGET_DIR/fault-campaign}
 source scripts/host-bins.sh
@@ -30,4 +32,4 @@ FLAGS=()
 if [ "$RECOVERY" = off ]; then
     FLAGS+=(--no-recovery)
 fi
-"$SIM" campaign "$OUT/images" --swap-from "$OUT/images-other" --runs "$RUNS" --seed "$SEED" --steps "$STEPS" "${FLAGS[@]}"
+"$SIM" campaign "$OUT/images" --swap-from "$OUT/images-other" --runs "$RUNS" --seed "$SEED" --steps "$STEPS" --clock "$CLOCK" "${FLAGS[@]}"

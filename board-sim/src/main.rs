@@ -84,6 +84,10 @@ enum Command {
         /// host's manifest check off), and must be refused naming that board.
         #[arg(long, value_name = "DIR2")]
         swap_from: Option<PathBuf>,
+        /// The runs' time (as `board-sim run --clock`): with `simulated`, whether a run
+        /// stops and what it blames do not depend on how busy the host is.
+        #[arg(long, value_enum, default_value_t = board_sim::commands::run::Clock::Wall)]
+        clock: board_sim::commands::run::Clock,
     },
     /// The firmware itself on an emulated array: one QEMU mps2-an500 (Cortex-M7) per
     /// board of DIR (written by `pe compile --profile qemu-mps2-an500`), their UARTs wired
@@ -155,6 +159,7 @@ fn run(command: Command) -> Result<()> {
             steps,
             no_recovery,
             swap_from,
+            clock,
         } => board_sim::campaign::campaign(
             &dir,
             swap_from.as_deref(),
@@ -162,6 +167,7 @@ fn run(command: Command) -> Result<()> {
             seed,
             steps,
             !no_recovery,
+            clock.clocking(),
         ),
         Command::Qemu { dir, args } => qemu_array(&dir, args),
     }

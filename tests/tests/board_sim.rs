@@ -3,6 +3,7 @@
 use host_tools::compare::nan_max;
 use std::time::Duration;
 
+use board_sim::clock::Clocking;
 use board_sim::faults::FaultSpec;
 use board_sim::{run, SimFault, SimOptions};
 use host_tools::solver;
@@ -308,7 +309,16 @@ fn a_stall_outside_the_machine_is_refused() {
 }
 
 fn faulty(dir: &std::path::Path, spec: &str) -> SimFault {
-    faulty_with(dir, spec, None, Duration::from_millis(500))
+    faulty_with(dir, spec, None, Duration::from_millis(5), simulated())
+}
+
+/// Simulated time at board-sim's quantum (100 us): time advances only while every board
+/// waits, so a link timeout of a few ms names a fault whatever the host's load, and a
+/// healthy link never times out (`a_healthy_machine_never_waits_in_simulated_time`).
+fn simulated() -> Clocking {
+    Clocking::Simulated {
+        quantum_ns: Clocking::QUANTUM_NS,
+    }
 }
 
 fn faulty_with(
@@ -316,6 +326,7 @@ fn faulty_with(
     spec: &str,
     workers: Option<usize>,
     link_timeout: Duration,
+    clocking: Clocking,
 ) -> SimFault {
     // Without link recovery: every fault stops the run, and is named.
     let opts = SimOptions {
@@ -323,6 +334,7 @@ fn faulty_with(
         link_timeout,
         workers,
         recovery: None,
+        clocking,
         ..Default::default()
     };
     match run(dir, &opts, &mut |_, _| {}) {
@@ -406,6 +418,8 @@ fn corrupted_frames_are_detected_and_named() {
             "seed=7,corrupt=0.01,on=links",
             Some(w),
             Duration::from_millis(500),
+            // A CRC failure is seen on arrival, not by a timeout: the default clock.
+            Clocking::Wall,
         );
         println!("{f}");
         assert_true_cause(&f, "corrupt", w);
@@ -432,14 +446,18 @@ fn dropped_frames_are_detected_and_named() {
             &dir,
             "seed=3,drop=0.01,on=links",
             Some(w),
-            Duration::from_millis(500),
+            Duration::from_millis(5),
+            simulated(),
         );
         println!("{f}");
         assert_true_cause(&f, "drop", w);
     }
 }
 
-/// A board that stalls at step 50 is named (not the neighbours that wait for it).
+/// A board that stalls at step 50 is named (not the neighbours that wait for it), by a
+/// 2 ms link timeout in simulated time: its neighbours wait from the moment the machine is
+/// stuck, whatever the host's load (on the wall clock, a 2 ms timeout with eight workers on
+/// two cores names whichever board's thread the host left waiting).
 #[test]
 fn a_stalled_board_is_named() {
     let p = builtin_problem("coarse", 200);
@@ -447,7 +465,7 @@ fn a_stalled_board_is_named() {
     for w in WORKERS {
         for board in [[1, 0, 0], [1, 1, 1], [0, 0, 0]] {
             let spec = format!("seed=1,stall={}.{}.{}@50", board[0], board[1], board[2]);
-            let f = faulty_with(&dir, &spec, Some(w), Duration::from_millis(300));
+            let f = faulty_with(&dir, &spec, Some(w), Duration::from_millis(2), simulated());
             println!("{f}");
             assert_true_cause(&f, "stall", w);
             assert_eq!(f.cause.board, board, "workers {w}: {f}");
@@ -456,17 +474,98 @@ fn a_stalled_board_is_named() {
     }
 }
 
-/// Frames held longer than the link timeout: the wait names a delayed link, from its first
-/// frame.
+/// Frames held longer than the link timeout (10 ms against 5 ms of simulated time): the
+/// wait names a delayed link, from its first frame.
 #[test]
 fn a_delay_beyond_the_timeout_is_named() {
     let p = builtin_problem("coarse", 200);
     let dir = compile(&p, "builtin:coarse", "2x2x2", "delay");
     for w in WORKERS {
-        let f = faulty_with(&dir, "seed=1,delay=40", Some(w), Duration::from_millis(20));
+        let f = faulty_with(
+            &dir,
+            "seed=1,delay=10",
+            Some(w),
+            Duration::from_millis(5),
+            simulated(),
+        );
         println!("{f}");
         assert_true_cause(&f, "delay", w);
         assert_eq!(f.cause.step, 0);
+    }
+}
+
+/// The other side of the line: every frame held 1 ms, within a 5 ms link timeout of
+/// simulated time, and no recovery: the run finishes, with the clean run's bits (the
+/// frames were late, not lost). A board waits for a delayed frame about the delay (its
+/// neighbours send in the same quantum it starts waiting); a wait on the wall clock would
+/// add whatever the host's scheduler costs, and with eight workers on two cores a 5 ms
+/// timeout is not safe.
+#[test]
+fn a_delay_within_the_timeout_is_no_fault() {
+    // 1000 steps: the probe has pressed the tube (at 300 nothing has moved yet).
+    let p = builtin_problem("coarse", 1000);
+    let dir = compile(&p, "builtin:coarse", "2x2x2", "late");
+    let clean = sim(&dir, &SimOptions::default());
+    let u_max = max_abs(&clean.displacements);
+    assert!(u_max > 1e-4, "the fields compared move: max |u| {u_max} m");
+    for w in WORKERS {
+        let late = run(
+            &dir,
+            &SimOptions {
+                faults: Some(FaultSpec::parse("seed=1,delay=1").unwrap()),
+                link_timeout: Duration::from_millis(5),
+                workers: Some(w),
+                recovery: None,
+                global_recovery: None,
+                clocking: simulated(),
+                ..Default::default()
+            },
+            &mut |_, _| {},
+        )
+        .unwrap_or_else(|e| panic!("workers {w}: frames 1 ms late are no fault: {e:#}"));
+        assert_eq!(late.steps, clean.steps, "workers {w}");
+        assert_eq!(late.displacements.len(), clean.displacements.len());
+        assert!(
+            late.displacements == clean.displacements,
+            "workers {w}: the late run's bits are the clean run's"
+        );
+        assert!(
+            late.injected.iter().any(|i| i.what.starts_with("delay")),
+            "workers {w}: the delay was injected: {:?}",
+            late.injected
+        );
+    }
+}
+
+/// Simulated time stands still while anything in the machine can move: a clean run with a
+/// link timeout of two quanta (200 us), eight workers on however few cores, 1000 steps,
+/// finishes with
+/// the wall-clock run's bits. Seen failing: with time advancing whenever one worker found
+/// nothing to do (not every one), the run stops on a link timeout.
+#[test]
+fn a_healthy_machine_never_waits_in_simulated_time() {
+    let p = builtin_problem("coarse", 1000);
+    let dir = compile(&p, "builtin:coarse", "2x2x2", "still");
+    let clean = sim(&dir, &SimOptions::default());
+    let u_max = max_abs(&clean.displacements);
+    assert!(u_max > 1e-4, "the fields compared move: max |u| {u_max} m");
+    for w in WORKERS {
+        let still = run(
+            &dir,
+            &SimOptions {
+                link_timeout: Duration::from_micros(200),
+                workers: Some(w),
+                clocking: simulated(),
+                ..Default::default()
+            },
+            &mut |_, _| {},
+        )
+        .unwrap_or_else(|e| panic!("workers {w}: a healthy machine timed out: {e:#}"));
+        assert_eq!(still.displacements.len(), clean.displacements.len());
+        assert!(
+            still.displacements == clean.displacements,
+            "workers {w}: the bits of the wall-clock run"
+        );
     }
 }
 

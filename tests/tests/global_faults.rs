@@ -4,10 +4,14 @@
 
 use std::time::Duration;
 
+use board_sim::clock::Clocking;
 use board_sim::faults::FaultSpec;
 use board_sim::{run, SimFault, SimOptions, SimOutput};
 use system_tests::*;
 
+/// A run's options. Without recovery, a fault is found by a 5 ms link timeout in
+/// simulated time (time that advances only while every board waits, `board_sim::clock`):
+/// the blame does not depend on how busy the host is.
 fn opts(faults: Option<&str>, workers: usize, recovery: bool) -> SimOptions {
     let d = SimOptions::default();
     SimOptions {
@@ -18,7 +22,14 @@ fn opts(faults: Option<&str>, workers: usize, recovery: bool) -> SimOptions {
         link_timeout: if recovery {
             d.link_timeout
         } else {
-            Duration::from_millis(500)
+            Duration::from_millis(5)
+        },
+        clocking: if recovery {
+            d.clocking
+        } else {
+            Clocking::Simulated {
+                quantum_ns: Clocking::QUANTUM_NS,
+            }
         },
         ..d
     }
@@ -316,8 +327,13 @@ fn a_lost_graphics_or_tool_force_packet_is_not_a_silent_wrong_answer() {
 fn a_stalled_board_stops_its_global_packets_and_is_named() {
     let p = builtin_problem("coarse", 1000);
     let dir = compile(&p, "builtin:coarse", "1x1x1", "global-stall");
+    // Simulated time: the stalled board's wait times out after 20 ms of it, whatever the
+    // host's load.
     let o = SimOptions {
-        link_timeout: Duration::from_millis(300),
+        link_timeout: Duration::from_millis(20),
+        clocking: Clocking::Simulated {
+            quantum_ns: Clocking::QUANTUM_NS,
+        },
         ..opts(Some("seed=1,stall=0.0.0@900"), 1, true)
     };
     let f = stopped(&dir, &o);

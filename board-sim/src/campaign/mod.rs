@@ -16,6 +16,7 @@ use anyhow::{bail, Result};
 use host_tools::compile::{read_manifest, Manifest};
 
 use crate::check::SimFault;
+use crate::clock::Clocking;
 use crate::faults::{FaultSpec, Rng};
 use crate::results::SimOutput;
 use crate::runner::{run, SimOptions};
@@ -32,25 +33,33 @@ pub fn campaign(
     seed: u64,
     steps: u64,
     recovery: bool,
+    clocking: Clocking,
 ) -> Result<()> {
     let manifest = read_manifest(dir)?;
     let dims = manifest.machine;
     if let Some(other) = swap_from {
         check_other(other, &manifest)?;
     }
-    let base = base_options(steps, recovery);
+    let base = SimOptions {
+        clocking,
+        ..base_options(steps, recovery)
+    };
     let clean = run(dir, &base, &mut |_, _| {})?;
     let u_max = host_tools::compare::max_abs(&clean.displacements);
     if u_max <= 0.0 || clean.steps != steps {
         bail!("the clean run is trivial (max |u| {u_max} m after {} steps): choose a scene or more steps that move", clean.steps);
     }
     println!(
-        "campaign seed {seed}: {runs} runs of {steps} steps on {} ({}x{}x{}), recovery {}; clean run max |u| = {u_max:.3e} m",
+        "campaign seed {seed}: {runs} runs of {steps} steps on {} ({}x{}x{}), recovery {}, {} clock; clean run max |u| = {u_max:.3e} m",
         manifest.scene,
         dims[0],
         dims[1],
         dims[2],
-        if recovery { "on" } else { "off" }
+        if recovery { "on" } else { "off" },
+        match clocking {
+            Clocking::Wall => "wall",
+            Clocking::Simulated { .. } => "simulated",
+        }
     );
     let mut rng = Rng::new(seed);
     let mut tally = Tally::default();

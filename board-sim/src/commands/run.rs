@@ -11,6 +11,7 @@ use host_tools::solver::PoseSchedule;
 use pe_firmware::physics::vec3::norm;
 
 use crate::check::SimFault;
+use crate::clock::Clocking;
 use crate::faults::FaultSpec;
 use crate::outputs::{graphics, write_outputs, OutputArgs};
 use crate::report::{global_summary, recovery_summary, write_fault_report, write_report, RunFacts};
@@ -49,6 +50,12 @@ pub struct RunArgs {
     /// A link silent this long is a fault (s).
     #[arg(long, default_value_t = 10.0, value_parser = host_tools::domain::positive)]
     pub link_timeout_s: f64,
+    /// The run's time: `wall` (the host's clock) or `simulated` (time that advances, 100 us
+    /// at a time, only while every board waits: link timeouts, recovery's timers, injected
+    /// delays and the grace after a fault then do not depend on how busy the host is; for
+    /// fault runs whose blame must not depend on the machine).
+    #[arg(long, value_enum, default_value_t = Clock::Wall)]
+    pub clock: Clock,
     /// Link bandwidth for the timing model (bytes/s; default from the board profile).
     #[arg(long, value_parser = host_tools::domain::positive)]
     pub link_bandwidth: Option<f64>,
@@ -71,6 +78,26 @@ pub struct RunArgs {
     /// No progress bar (the summary is still printed).
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// `--clock`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Clock {
+    #[default]
+    Wall,
+    Simulated,
+}
+
+impl Clock {
+    /// The runner's clocking for this choice.
+    pub fn clocking(self) -> Clocking {
+        match self {
+            Clock::Wall => Clocking::Wall,
+            Clock::Simulated => Clocking::Simulated {
+                quantum_ns: Clocking::QUANTUM_NS,
+            },
+        }
+    }
 }
 
 /// `--storage`.
@@ -218,6 +245,7 @@ fn sim_options(a: &RunArgs, manifest: &Manifest) -> Result<SimOptions> {
         workers: a.workers,
         storage,
         batched: !a.scalar_kernel,
+        clocking: a.clock.clocking(),
         ..Default::default()
     };
     if a.no_recovery {

@@ -9,12 +9,17 @@ use std::time::Duration;
 
 use link_proto::{Peek, RecvError, SendError};
 
+use crate::clock::SimulatedTime;
+
 /// A board's doorbell: rung when a frame arrives for it.
 #[derive(Default)]
 pub struct Doorbell {
     /// Rung since the last wait, and how many threads are parked in [`Doorbell::wait`].
     state: Mutex<Bell>,
     cv: Condvar,
+    /// With simulated time: every frame queued or taken through this bell's links is
+    /// activity ([`SimulatedTime::touch`]).
+    activity: Option<Arc<SimulatedTime>>,
 }
 
 #[derive(Default)]
@@ -24,10 +29,28 @@ struct Bell {
 }
 
 impl Doorbell {
-    /// Rings: a parked waiter wakes, a later wait returns at once. Wakes (a system call)
+    /// A doorbell whose links' frames count as `time`'s activity.
+    pub fn counting(time: Arc<SimulatedTime>) -> Doorbell {
+        Doorbell {
+            activity: Some(time),
+            ..Default::default()
+        }
+    }
+    /// A frame was queued (rings) or taken: activity for simulated time.
+    pub fn touch(&self) {
+        if let Some(t) = &self.activity {
+            t.touch();
+        }
+    }
+    /// Rings, as something arrived: activity ([`Doorbell::touch`]), and a wake-up.
+    pub fn ring(&self) {
+        self.touch();
+        self.wake();
+    }
+    /// Wakes: a parked waiter wakes, a later wait returns at once. Wakes (a system call)
     /// only when a waiter is parked: most frames arrive while their board's worker is busy
     /// or spinning, and a ring per frame was a system call per frame.
-    pub fn ring(&self) {
+    pub fn wake(&self) {
         let parked = match self.state.lock() {
             Ok(mut b) => {
                 b.rung = true;
@@ -132,6 +155,10 @@ impl Channel {
         let mut q = self.queue.lock().map_err(|_| RecvError::NoLink)?;
         let front = q.frames.pop_front();
         self.len.store(q.len(), Ordering::Release);
+        if front.is_some() {
+            // A queue with room again may let its sender move.
+            self.bell.touch();
+        }
         match front {
             None => Ok(None),
             Some(f) => {

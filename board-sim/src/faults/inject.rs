@@ -5,12 +5,12 @@
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
 
 use link_proto::{Face, Links, RecvError, SendError};
 
 use super::rng::Rng;
 use super::spec::{FaultScope, FaultSpec};
+use crate::clock::SweepClock;
 use crate::fabric::{frame_step, global_face, packet_header, packet_step};
 
 /// Steps behind the latest that the fault injector keeps its per-step packet counts for.
@@ -36,8 +36,10 @@ pub struct FaultyLinks<L> {
     delayed: [bool; 6],
     /// Faces whose stall is recorded.
     stalled: [bool; 6],
-    /// Frames held by the delay: (due, face, bytes), in sending order.
-    held: VecDeque<(Instant, Face, Vec<u8>)>,
+    /// Frames held by the delay: (due, ns on `clock`; face; bytes), in sending order.
+    held: VecDeque<(u64, Face, Vec<u8>)>,
+    /// The board's worker's clock (wall or simulated), the delay's time.
+    clock: Arc<SweepClock>,
     /// Step of the last data frame sent per face.
     last_step: [u32; 6],
     /// The seed of the global packets' draws (the frames' stream stays as without them).
@@ -63,6 +65,7 @@ impl<L> FaultyLinks<L> {
         board_index: usize,
         spec: FaultSpec,
         injected: Arc<Mutex<Vec<Injected>>>,
+        clock: Arc<SweepClock>,
     ) -> Self {
         let rng = Rng::new(spec.seed ^ (board_index as u64).wrapping_mul(0xA24B_AED4_963E_E407));
         let global_seed = spec.seed
@@ -77,6 +80,7 @@ impl<L> FaultyLinks<L> {
             delayed: [false; 6],
             stalled: [false; 6],
             held: VecDeque::new(),
+            clock,
             last_step: [0; 6],
             global_seed,
             global_counts: Default::default(),
@@ -135,7 +139,7 @@ impl<L: Links> FaultyLinks<L> {
     /// Delivers the held frames that are due, in order (a frame the link refuses now waits
     /// with those behind it).
     fn release(&mut self) {
-        let now = Instant::now();
+        let now = self.clock.now_ns();
         while let Some((due, face, bytes)) = self.held.front() {
             if *due > now || self.inner.try_send(*face, bytes).is_err() {
                 break;
@@ -159,7 +163,8 @@ impl<L: Links> FaultyLinks<L> {
             self.delayed[face.index()] = true;
             self.record(face, step, &format!("delay {} ms", self.spec.delay_ms));
         }
-        let due = Instant::now() + Duration::from_millis(self.spec.delay_ms);
+        let due =
+            (self.clock.now_ns()).saturating_add(self.spec.delay_ms.saturating_mul(1_000_000));
         self.held.push_back((due, face, bytes));
         self.release();
     }

@@ -30,7 +30,7 @@ pub use options::SimOptions;
 pub(crate) use poses::{check_schedule, one_per_tool_and_step, pose_repr};
 
 use crate::check::{attribute, collect_sinks, missing_sink_packets, sink_observations, HostCheck};
-use crate::clock::SweepClock;
+use crate::clock::{Clocking, Participant, SimulatedTime, SweepClock};
 use crate::fabric::{build_links, Doorbell, EmuLinks, GlobalNet};
 use crate::faults::{FaultyLinks, Injected};
 use crate::results::SimOutput;
@@ -79,6 +79,7 @@ pub fn run(
         bells: workers.bells.clone(),
         stop: shared.stop.clone(),
         steps,
+        clock: workers.sender_clock.clone(),
     };
     sender.check()?;
     let start = Instant::now();
@@ -93,6 +94,10 @@ pub fn run(
         &header,
     )?;
     drop(tx);
+    if sender.poses.is_empty() {
+        // No sender runs: it holds no simulated time back.
+        workers.sender_clock.retire();
+    }
     let sending = (!sender.poses.is_empty()).then(|| std::thread::spawn(move || sender.run()));
     let mut c = Collected::new(steps, header.scene_nodes as usize, machine.count());
     let mut host_check = opts
@@ -106,6 +111,8 @@ pub fn run(
         // from.
         grace: opts.link_timeout.min(FAULT_GRACE),
         steps,
+        workers: &workers,
+        start,
     };
     let watched = watch.collect(&rx, &mut c, host_check.as_mut(), on_progress);
     join(handles);
@@ -215,7 +222,7 @@ fn prepare(dir: &Path, opts: &SimOptions) -> Result<Prepared> {
         spec.check(machine)?;
     }
     let holders = tool_holders(machine, &images, tools);
-    let workers = Workers::new(opts.workers, machine.count());
+    let workers = Workers::new(opts.workers, machine.count(), opts.clocking);
     let board_bells: Vec<Arc<Doorbell>> = (0..machine.count())
         .map(|b| workers.bells[workers.of(b)].clone())
         .collect();
@@ -251,17 +258,22 @@ pub(crate) fn tool_holders(machine: Machine, images: &[Vec<u8>], tools: usize) -
 
 /// The worker threads the boards are multiplexed over: contiguous blocks of boards (by
 /// index, x fastest) per worker, so that most links join boards of one worker, whose frames
-/// need no other core; a doorbell and a clock per worker.
+/// need no other core; a doorbell and a clock per worker, and the host's pose sender's
+/// clock (with simulated time, the sender is a participant: the boards it holds at the
+/// gate wait for it).
 struct Workers {
     count: usize,
     boards: usize,
     bells: Vec<Arc<Doorbell>>,
     clocks: Vec<Arc<SweepClock>>,
+    sender_clock: Arc<SweepClock>,
+    /// The run's simulated time, if [`Clocking::Simulated`].
+    time: Option<Arc<SimulatedTime>>,
 }
 
 impl Workers {
-    /// `asked` workers (default: the machine's cores), 1 to one per board.
-    fn new(asked: Option<usize>, boards: usize) -> Workers {
+    /// `asked` workers (default: the machine's cores), 1 to one per board, on `clocking`.
+    fn new(asked: Option<usize>, boards: usize, clocking: Clocking) -> Workers {
         let count = asked
             .unwrap_or_else(|| {
                 std::thread::available_parallelism()
@@ -269,11 +281,43 @@ impl Workers {
                     .unwrap_or(2)
             })
             .clamp(1, boards);
+        let Clocking::Simulated { quantum_ns } = clocking else {
+            return Workers {
+                count,
+                boards,
+                bells: (0..count).map(|_| Arc::new(Doorbell::default())).collect(),
+                clocks: (0..count).map(|_| SweepClock::new()).collect(),
+                sender_clock: SweepClock::new(),
+                time: None,
+            };
+        };
+        // Participants: the workers, then the pose sender.
+        let time = SimulatedTime::new(count + 1, quantum_ns);
+        let bells: Vec<Arc<Doorbell>> = (0..count)
+            .map(|_| Arc::new(Doorbell::counting(time.clone())))
+            .collect();
+        let clock = |index| {
+            SweepClock::simulated(Participant {
+                time: time.clone(),
+                index,
+                bells: bells.clone(),
+            })
+        };
         Workers {
             count,
             boards,
-            bells: (0..count).map(|_| Arc::new(Doorbell::default())).collect(),
-            clocks: (0..count).map(|_| SweepClock::new()).collect(),
+            clocks: (0..count).map(clock).collect(),
+            sender_clock: clock(count),
+            bells,
+            time: Some(time),
+        }
+    }
+
+    /// The run's time now (ns): simulated, or `start`'s wall clock.
+    fn now_ns(&self, start: Instant) -> u64 {
+        match &self.time {
+            Some(t) => t.now_ns(),
+            None => start.elapsed().as_nanos() as u64,
         }
     }
 
@@ -335,7 +379,14 @@ fn board_links(
 ) -> Result<BoxedLinks> {
     let lower = match &opts.faults {
         Some(spec) => {
-            let mut f = FaultyLinks::new(link, coords, b, spec.clone(), shared.injected.clone());
+            let mut f = FaultyLinks::new(
+                link,
+                coords,
+                b,
+                spec.clone(),
+                shared.injected.clone(),
+                clock.clone(),
+            );
             f.global_envelopes = opts.global_recovery.is_some();
             Lower::Faulty(Box::new(f))
         }
@@ -365,6 +416,9 @@ struct Watch<'a> {
     shared: &'a Shared,
     grace: Duration,
     steps: u64,
+    /// The run's time (the grace is counted in it).
+    workers: &'a Workers,
+    start: Instant,
 }
 
 impl Watch<'_> {
@@ -378,7 +432,7 @@ impl Watch<'_> {
         mut host_check: Option<&mut HostCheck>,
         on_progress: &mut dyn FnMut(u64, u64),
     ) -> Result<()> {
-        let mut first_fault: Option<Instant> = None;
+        let mut first_fault_ns: Option<u64> = None;
         loop {
             match rx.recv_timeout(Duration::from_millis(20)) {
                 Ok(report) => c.file(report),
@@ -391,8 +445,9 @@ impl Watch<'_> {
             }
             c.faults.extend(sink_observations(self.net));
             if !c.faults.is_empty() {
-                let t = *first_fault.get_or_insert_with(Instant::now);
-                if t.elapsed() >= self.grace {
+                let now = self.workers.now_ns(self.start);
+                let t = *first_fault_ns.get_or_insert(now);
+                if now.saturating_sub(t) >= self.grace.as_nanos() as u64 {
                     self.shared.stop.store(true, Ordering::Relaxed);
                 }
             }

@@ -21,6 +21,7 @@ use super::poses::{PoseFeed, PoseSender};
 use super::worker::spawn_workers;
 use super::{prepare, Prepared, Shared, SimOptions};
 use crate::check::{attribute, sink_observations, Observed};
+use crate::clock::Clocking;
 use crate::fabric::GlobalNet;
 
 /// A compiled machine's boards running open-ended, stepped by the host.
@@ -46,6 +47,10 @@ pub struct OpenArray {
 pub fn start_open(dir: &Path, opts: &SimOptions) -> Result<OpenArray> {
     if opts.faults.is_some() {
         bail!("a live array runs without injected faults");
+    }
+    if opts.clocking != Clocking::Wall {
+        // The host steps a live array as the trainer's clock goes.
+        bail!("a live array runs on the wall clock, not simulated time");
     }
     let Prepared {
         machine,
@@ -73,6 +78,7 @@ pub fn start_open(dir: &Path, opts: &SimOptions) -> Result<OpenArray> {
         bells: workers.bells.clone(),
         stop: shared.stop.clone(),
         steps: u64::MAX,
+        clock: workers.sender_clock.clone(),
     };
     let opts = SimOptions {
         frame_every: 0,

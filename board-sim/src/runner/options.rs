@@ -5,6 +5,7 @@ use std::time::Duration;
 use link_proto::recovery::face::ReliableConfig;
 use link_proto::recovery::global::GlobalConfig;
 
+use crate::clock::Clocking;
 use crate::faults::FaultSpec;
 use crate::storage::StorageSizing;
 
@@ -41,6 +42,10 @@ pub struct SimOptions {
     /// Tool poses the host sends to the boards holding each tool, each to take effect at
     /// its step (a recorded live session replayed: `--replay`; see `runner::poses`).
     pub poses: host_tools::solver::PoseSchedule,
+    /// The run's time: the wall clock, or simulated (link timeouts, link recovery's timers,
+    /// the fault injector's delays and the grace after a first fault counted in time that
+    /// advances only while every board waits; `crate::clock`).
+    pub clocking: Clocking,
 }
 
 impl Default for SimOptions {
@@ -57,6 +62,7 @@ impl Default for SimOptions {
             global_recovery: Some(GlobalConfig::default()),
             batched: true,
             poses: Default::default(),
+            clocking: Clocking::Wall,
         }
     }
 }

@@ -25,6 +25,7 @@ use link_proto::tool_pose::{ToolPoseRepr, POSE_DELAY_STEPS};
 use link_proto::{PacketKind, PacketRepr};
 use pe_firmware::physics::pose::Pose;
 
+use crate::clock::{Retire, SweepClock};
 use crate::fabric::{Doorbell, GlobalNet};
 
 /// What the workers and the pose sender share: each board's steps done and the gate.
@@ -92,6 +93,9 @@ pub(crate) struct PoseSender {
     pub bells: Vec<Arc<Doorbell>>,
     pub stop: Arc<AtomicBool>,
     pub steps: u64,
+    /// The sender's clock: with simulated time, a participant (boards held at the gate
+    /// wait for the sender, so time stands still while it has poses to send).
+    pub clock: Arc<SweepClock>,
 }
 
 /// Checks a schedule against the boards (every tool held somewhere, every pose a unit
@@ -122,10 +126,13 @@ impl PoseSender {
         let mut seq = vec![0u16; link_proto::BOARD_COUNT];
         let (mut next, mut sent, mut idle) = (0, 0u64, 0u32);
         let mut buf = vec![0u8; link_proto::PACKET_LEN_MAX + 16];
+        let _retire = Retire(&self.clock);
         loop {
             if self.stop.load(Ordering::Relaxed) {
                 return Ok(sent);
             }
+            // What the sender sends or raises is activity (the boards' doorbells count it).
+            let sweep = self.clock.tick();
             let slowest = self.feed.slowest();
             let target = slowest.saturating_add(POSE_DELAY_STEPS).min(self.steps);
             while let Some(&(step, tool, pose)) = self.poses.get(next) {
@@ -142,6 +149,9 @@ impl PoseSender {
             }
             if slowest >= self.steps {
                 return Ok(sent);
+            }
+            if self.clock.swept(sweep, false) {
+                idle = 0;
             }
             idle += 1;
             if idle < 64 {

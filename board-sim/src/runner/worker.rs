@@ -18,7 +18,7 @@ use pe_firmware::runtime::{Fault, FaultKind, LinkStats, Runtime, RuntimeConfig, 
 use super::collect::Report;
 use super::stack::BoardLinks;
 use crate::check::{phase, Observed};
-use crate::clock::{SweepClock, ThreadEnv};
+use crate::clock::{Retire, SweepClock, ThreadEnv};
 use crate::fabric::Doorbell;
 use crate::results::BoardResult;
 use crate::storage::{HostStorage, StorageSizing};
@@ -69,6 +69,9 @@ pub(crate) fn spawn_workers(
             .spawn(move || {
                 // The firmware runs with subnormals flushed (FPSCR.FZ), so do its boards here.
                 let _mode = FlushGuard::enter(Subnormals::Flush);
+                // However the worker ends, it holds no simulated time back.
+                let retiring = clock.clone();
+                let _retire = Retire(&retiring);
                 let mut env = ThreadEnv::new(bell, clock);
                 if let Err(f) = dispatch(ctxs, sizing, &mut ls, &mut env, &out, p, i) {
                     // A board's image was refused: nothing of this worker runs.
@@ -131,7 +134,7 @@ fn run_worker<T: WireReal + 'static, E: ElementRecord<T> + 'static>(
     };
     let mut idle_sweeps = 0u32;
     loop {
-        env.clock.tick();
+        let sweep = env.clock.tick();
         let progressed = w.sweep(env);
         let exiting = stop.load(Ordering::Relaxed) || w.finished.load(Ordering::Relaxed) >= total;
         if exiting {
@@ -146,7 +149,8 @@ fn run_worker<T: WireReal + 'static, E: ElementRecord<T> + 'static>(
         if w.finished.load(Ordering::Relaxed) >= total {
             return Ok(());
         }
-        if progressed {
+        // Time advanced (simulated, every board waiting): sweep again at once.
+        if env.clock.swept(sweep, progressed) || progressed {
             idle_sweeps = 0;
         } else {
             idle_sweeps += 1;
