@@ -17,6 +17,8 @@ cargo test --workspace --release
 cargo test --workspace --release -q --test solver lanes_tested_and_skipped_are_named \
     -- --nocapture 2>/dev/null | grep '^lanes tested'
 
+bash scripts/lanes-emulated.sh
+
 # The host's SIMD element loops keep their lanes in registers (no kernel closure, `map` or
 # intrinsic left out of line): a speed property the bit-identity tests cannot see.
 bash scripts/check-simd-inlined.sh

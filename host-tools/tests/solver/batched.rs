@@ -162,8 +162,9 @@ fn isas() -> Vec<Isa> {
 
 /// Which lanes the bit-identity tests of this file run here and which they skip, and why:
 /// printed (`scripts/test.sh` shows the line), so a machine that tests less says so. The
-/// lanes a CPU lacks cannot run on it (no emulator here runs AVX-512); the AVX lanes run on
-/// every x86-64 CPU with AVX, AVX-512 machines included, unless `PE_ISA` caps them.
+/// lanes a CPU lacks cannot run on it (`scripts/lanes-emulated.sh` runs this file again as
+/// older CPUs under QEMU, which runs AVX and AVX2, not AVX-512); the AVX lanes run on every
+/// x86-64 CPU with AVX, AVX-512 machines included, unless `PE_ISA` caps them.
 #[test]
 fn lanes_tested_and_skipped_are_named() {
     let run = isas();
