@@ -34,6 +34,11 @@ pub struct Manifest {
     pub integration: Integration,
     pub dt_s: f64,
     pub steps: u64,
+    /// How `dt_s` was found: the step at rest, or the smallest step `pe solve`'s tracking
+    /// reached, run again from rest (`crate::solver::settle`), so that `pe solve` and the
+    /// boards agree.
+    #[serde(default)]
+    pub dt_settled: Option<crate::solver::settle::SettledStep>,
     pub boards: Vec<ManifestBoard>,
 }
 
@@ -59,6 +64,10 @@ pub fn compile_to_dir(
 ) -> Result<CompileReport> {
     // The manifest names a registered profile (the figures may be a variant of it).
     let registered = BoardProfile::by_name(profile.name)?;
+    // One step for the boards and `pe solve`: where tracking would lower dt, the smallest
+    // step it reaches, settled as `pe solve` settles it.
+    let (settled, dt_settled) = crate::solver::settle::settled_problem(problem, scene)?;
+    let problem = &settled;
     let (plan, images, balance_other) = plan_for_real_time(problem, machine, profile)?;
     check_fit(&images, profile)?;
     write_images(dir, &images)?;
@@ -77,6 +86,7 @@ pub fn compile_to_dir(
         integration: problem.solver.integration,
         dt_s: dt,
         steps: problem.steps(dt),
+        dt_settled: Some(dt_settled),
         boards: images
             .iter()
             .map(|im| ManifestBoard {

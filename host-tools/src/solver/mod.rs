@@ -22,6 +22,7 @@ pub use crate::problem::batched;
 mod monitor;
 mod nodes;
 mod run;
+pub mod settle;
 pub mod stable_step;
 
 pub use monitor::{DtChange, DtMonitor, Energies};

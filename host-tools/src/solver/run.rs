@@ -137,6 +137,11 @@ pub struct RunOutput {
 /// Called every step with the model's state after the step (for progress and frames).
 pub trait Observer {
     fn after_step(&mut self, step: u64, time_s: f64, steps_total: u64, state: &dyn StepState);
+    /// The run starts again from rest at step `dt_s` (`pe solve` settling its step,
+    /// [`super::settle`]): outputs begun are begun again.
+    fn restart(&mut self, _dt_s: f64) -> Result<()> {
+        Ok(())
+    }
 }
 
 impl Observer for () {

@@ -123,6 +123,11 @@ pub struct SolveArgs {
     /// subnormals arise (to see whether they do).
     #[arg(long)]
     pub keep_subnormals: bool,
+    /// Keep the run whose tracking lowered dt as it went, instead of running again from
+    /// rest at the smallest step reached (the default, so that this reference and the
+    /// boards, which run one step, agree bit for bit; `host_tools::solver::settle`).
+    #[arg(long)]
+    pub dt_as_tracked: bool,
     /// Apply the poses a `pe live --record FILE` session recorded, at their steps (its
     /// bits; give --steps the session's step count to end where it ended).
     #[arg(long)]

@@ -47,13 +47,35 @@ fn run(command: Command) -> Result<()> {
     }
 }
 
-struct Progress {
+struct Progress<'m> {
     bar: Option<indicatif::ProgressBar>,
     frames: Option<output::FrameWriter>,
     error: Option<anyhow::Error>,
+    /// What the frames are of, for a run that starts again: the directory, the mesh and the
+    /// interval (s).
+    vtk: Option<(&'m std::path::Path, &'m host_tools::mesh::Mesh, f64)>,
 }
 
-impl Observer for Progress {
+impl Progress<'_> {
+    /// The ParaView frames' writer, from rest, at step `dt_s` (None without `--vtk`).
+    fn frame_writer(&self, dt_s: f64) -> Result<Option<output::FrameWriter>> {
+        self.vtk
+            .map(|(d, mesh, interval)| output::FrameWriter::new(d, mesh, interval, dt_s))
+            .transpose()
+    }
+}
+
+impl Observer for Progress<'_> {
+    fn restart(&mut self, dt_s: f64) -> Result<()> {
+        if let Some(b) = &self.bar {
+            b.set_position(0);
+        }
+        // The frames of the run whose step moved go; the new run's are written afresh.
+        self.frames = self.frame_writer(dt_s)?;
+        self.error = None;
+        Ok(())
+    }
+
     fn after_step(&mut self, step: u64, time_s: f64, total: u64, state: &dyn StepState) {
         if let Some(b) = &self.bar {
             if step.is_multiple_of(64) || step == total {
@@ -123,25 +145,41 @@ fn solve(a: SolveArgs) -> Result<()> {
         problem.solver.integration
     );
     let bar = (!a.quiet && total > 2000).then(|| output::progress_bar(total));
-    let frames = match &a.outputs.vtk {
-        Some(d) => Some(output::FrameWriter::new(
-            d,
-            &problem.mesh,
-            problem.solver.output_interval,
-            dt,
-        )?),
-        None => None,
-    };
     let mut obs = Progress {
         bar,
-        frames,
+        frames: None,
         error: None,
+        vtk: a
+            .outputs
+            .vtk
+            .as_deref()
+            .map(|d| (d, &problem.mesh, problem.solver.output_interval)),
     };
+    obs.frames = obs.frame_writer(dt)?;
     let poses = match &a.replay {
         Some(p) => host_tools::live::session::record::replay_schedule(p, &name, &problem)?,
         None => Default::default(),
     };
-    let out = solver::run_with_poses(&problem, &name, &mut obs, threads, poses)?;
+    // One step for this reference and the boards (`solver::settle`): where tracking lowers
+    // dt, the scene runs again from rest at the smallest step reached.
+    let settled = if a.dt_as_tracked {
+        None
+    } else {
+        Some(solver::settle::settle(
+            &problem, &name, threads, &poses, &mut obs,
+        )?)
+    };
+    let (out, step) = match settled {
+        Some(solver::settle::Settled {
+            output: Some(out),
+            step,
+            ..
+        }) => (out, Some(step)),
+        other => (
+            solver::run_with_poses(&problem, &name, &mut obs, threads, poses)?,
+            other.map(|s| s.step),
+        ),
+    };
     if let Some(b) = &obs.bar {
         b.finish_and_clear();
     }
@@ -157,6 +195,12 @@ fn solve(a: SolveArgs) -> Result<()> {
         .filter(|k| matches!(k, host_tools::problem::NodeKind::Prescribed(_)))
         .count();
     println!("{}", out.report.console_summary(prescribed));
+    if let Some(st) = step.as_ref().filter(|st| st.runs > 1) {
+        println!(
+            "  step settled at {:.4e} s (at rest {:.4e} s) in {} runs: {}",
+            st.dt_s, st.dt_at_rest_s, st.runs, st.how
+        );
+    }
     a.outputs
         .result
         .write_nodes(&problem.mesh, &out.displacements)?;
