@@ -21,17 +21,20 @@ fi
 if ! command -v qemu-x86_64 >/dev/null 2>&1; then
     apt-get update -qq && apt-get install -y -qq qemu-user >/dev/null
 fi
-# The test executables, as cargo built them.
+# The test executables, as `cargo test --workspace --release` built them (the same build:
+# a package alone would unify other features and compile the crates again).
 exe() {
-    cargo test --release "$@" --no-run --message-format=json 2>/dev/null | python3 -c '
+    cargo test --workspace --release --no-run --message-format=json 2>/dev/null | python3 -c '
 import json, sys
+pkg, name = sys.argv[1], sys.argv[2]
 paths = [m["executable"] for m in map(json.loads, sys.stdin)
-         if m.get("reason") == "compiler-artifact" and m.get("executable") and m["profile"]["test"]]
-assert len(paths) == 1, paths
-print(paths[0])'
+         if m.get("reason") == "compiler-artifact" and m.get("executable") and m["profile"]["test"]
+         and m["target"]["name"] == name and m["package_id"].split("#")[0].rstrip("/").split("/")[-1].split("@")[0] in (pkg, "")]
+assert len(paths) == 1, (pkg, name, paths)
+print(paths[0])' "$1" "$2"
 }
-SOLVER=$(exe -p host-tools --test solver)
-BOARDS=$(exe -p system-tests --test board_sim)
+SOLVER=$(exe host-tools solver)
+BOARDS=$(exe tests board_sim)
 for cpu in Haswell SandyBridge Nehalem; do
     out=$(timeout 900 qemu-x86_64 -cpu "$cpu" "$SOLVER" batched:: --nocapture --test-threads 2 2>&1) || { echo "$out" >&2; echo "lanes-emulated.sh: the solver's batched tests failed on $cpu" >&2; exit 1; }
     lanes=$(grep '^lanes tested' <<<"$out")
