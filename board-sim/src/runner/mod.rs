@@ -94,11 +94,7 @@ pub fn run(
         &header,
     )?;
     drop(tx);
-    if sender.poses.is_empty() {
-        // No sender runs: it holds no simulated time back.
-        workers.sender_clock.retire();
-    }
-    let sending = (!sender.poses.is_empty()).then(|| std::thread::spawn(move || sender.run()));
+    let sending = sender.start();
     let mut c = Collected::new(steps, header.scene_nodes as usize, machine.count());
     let mut host_check = opts
         .check_manifest
@@ -106,9 +102,6 @@ pub fn run(
     let watch = Watch {
         net: &net,
         shared: &shared,
-        // After the first fault the other boards run on for a grace period, so that every
-        // board reports its own fault or where it waits: the evidence the cause is found
-        // from.
         grace: opts.link_timeout.min(FAULT_GRACE),
         steps,
         workers: &workers,
@@ -414,6 +407,9 @@ fn join(handles: Vec<JoinHandle<()>>) {
 struct Watch<'a> {
     net: &'a GlobalNet,
     shared: &'a Shared,
+    /// After the first fault the other boards run on this long (on the run's clock), so
+    /// that every board reports its own fault or where it waits: the evidence the cause is
+    /// found from.
     grace: Duration,
     steps: u64,
     /// The run's time (the grace is counted in it).

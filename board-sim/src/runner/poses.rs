@@ -121,6 +121,16 @@ impl PoseSender {
         check_schedule(&self.poses, &self.holders)
     }
 
+    /// The sender's thread, when there are poses to send ([`PoseSender::run`]); without
+    /// any, none runs, and its clock holds no simulated time back.
+    pub(crate) fn start(self) -> Option<std::thread::JoinHandle<Result<u64>>> {
+        if self.poses.is_empty() {
+            self.clock.retire();
+            return None;
+        }
+        Some(std::thread::spawn(move || self.run()))
+    }
+
     /// Sends the poses as the boards go, raising the gate; returns the packets sent.
     pub(crate) fn run(self) -> Result<u64> {
         let mut seq = vec![0u16; link_proto::BOARD_COUNT];
