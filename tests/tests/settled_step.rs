@@ -41,7 +41,7 @@ fn where_tracking_lowers_dt_the_reference_and_the_boards_run_one_step() {
         tracked.report.dt_reductions > 0,
         "the scene exercises a moving step"
     );
-    let s = settle(&p, "settled", 2, &PoseSchedule::default(), &mut ()).expect("settles");
+    let s = settle(p.clone(), "settled", 2, &PoseSchedule::default(), &mut ()).expect("settles");
     let out = s.output.expect("a pilot ran");
     println!(
         "tracked: {} reductions, {:.4e} -> {:.4e} s; settled at {:.4e} s in {} runs",

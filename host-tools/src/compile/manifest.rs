@@ -67,7 +67,7 @@ pub fn compile_to_dir(
     // One step for the boards and `pe solve`: where tracking would lower dt, the smallest
     // step it reaches, settled as `pe solve` settles it.
     let (settled, dt_settled) = crate::solver::settle::settled_problem(problem, scene)?;
-    let problem = &settled;
+    let problem: &Problem = &settled;
     let (plan, images, balance_other) = plan_for_real_time(problem, machine, profile)?;
     check_fit(&images, profile)?;
     write_images(dir, &images)?;

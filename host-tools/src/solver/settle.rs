@@ -17,6 +17,8 @@
 //! compile time (measured in `docs/measurements/settled-step.md`), and `pe solve` runs
 //! twice only where `dt` moved.
 
+use std::borrow::Cow;
+
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 
@@ -48,14 +50,6 @@ pub fn may_lower_dt(problem: &Problem) -> bool {
     tracks && s.adapt_dt.unwrap_or(problem.contact.is_none())
 }
 
-/// `problem` at step `dt_s` from rest (the critical step found at rest is kept: the
-/// trackers calibrate against it).
-pub fn with_dt(problem: &Problem, dt_s: f64) -> Problem {
-    let mut p = problem.clone();
-    p.time_step.dt_s = dt_s;
-    p
-}
-
 /// The settled run: its problem (at the settled step), its output and how the step was
 /// found.
 pub struct Settled {
@@ -69,26 +63,23 @@ pub struct Settled {
 /// run after the first. `output` is the last run's (None when no pilot ran: the caller
 /// runs the problem itself).
 pub fn settle(
-    problem: &Problem,
+    problem: Problem,
     name: &str,
     threads: usize,
     poses: &PoseSchedule,
     observer: &mut dyn Observer,
 ) -> Result<Settled> {
     let dt_at_rest_s = problem.time_step.dt_s;
-    if !may_lower_dt(problem) {
+    if !may_lower_dt(&problem) {
         return Ok(Settled {
-            problem: problem.clone(),
+            problem,
             output: None,
-            step: SettledStep {
-                dt_s: dt_at_rest_s,
-                dt_at_rest_s,
-                runs: 0,
-                how: "the step at rest: this scene's step does not move (contact, adapt_dt = false, no tracking or a forced step)".into(),
-            },
+            step: at_rest(dt_at_rest_s),
         });
     }
-    let mut current = problem.clone();
+    // One problem, its step changed in place between runs (a second copy of a large mesh's
+    // problem was a third of `pe solve`'s peak memory).
+    let mut current = problem;
     for runs in 1..=RUNS_MAX {
         if runs > 1 {
             observer.restart(current.time_step.dt_s)?;
@@ -126,7 +117,7 @@ pub fn settle(
             "{name}: run {runs} lowered dt {} time(s), to {dt_next:.4e} s (at rest {dt_at_rest_s:.4e} s): running again from rest at that step, so that the boards (one step, from their images) and this reference agree",
             r.dt_reductions
         );
-        current = with_dt(problem, dt_next);
+        current.time_step.dt_s = dt_next;
     }
     bail!(
         "{name}: the step did not settle in {RUNS_MAX} runs from rest (each lowered dt again; last {:e} s): lower dt_safety or set [solver] dt",
@@ -135,9 +126,31 @@ pub fn settle(
 }
 
 /// [`settle`] with no observer or poses: the step `pe compile` writes (the problem at it,
-/// and how it was found).
-pub fn settled_problem(problem: &Problem, name: &str) -> Result<(Problem, SettledStep)> {
+/// borrowed when its step cannot move, and how it was found).
+pub fn settled_problem<'p>(
+    problem: &'p Problem,
+    name: &str,
+) -> Result<(Cow<'p, Problem>, SettledStep)> {
+    if !may_lower_dt(problem) {
+        return Ok((Cow::Borrowed(problem), at_rest(problem.time_step.dt_s)));
+    }
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let s = settle(problem, name, threads, &PoseSchedule::default(), &mut ())?;
-    Ok((s.problem, s.step))
+    let s = settle(
+        problem.clone(),
+        name,
+        threads,
+        &PoseSchedule::default(),
+        &mut (),
+    )?;
+    Ok((Cow::Owned(s.problem), s.step))
+}
+
+/// How a step that cannot move was found.
+fn at_rest(dt_s: f64) -> SettledStep {
+    SettledStep {
+        dt_s,
+        dt_at_rest_s: dt_s,
+        runs: 0,
+        how: "the step at rest: this scene's step does not move (contact, adapt_dt = false, no tracking or a forced step)".into(),
+    }
 }

@@ -53,14 +53,15 @@ struct Progress<'m> {
     error: Option<anyhow::Error>,
     /// What the frames are of, for a run that starts again: the directory, the mesh and the
     /// interval (s).
-    vtk: Option<(&'m std::path::Path, &'m host_tools::mesh::Mesh, f64)>,
+    vtk: Option<(&'m std::path::Path, host_tools::mesh::Mesh, f64)>,
 }
 
 impl Progress<'_> {
     /// The ParaView frames' writer, from rest, at step `dt_s` (None without `--vtk`).
     fn frame_writer(&self, dt_s: f64) -> Result<Option<output::FrameWriter>> {
         self.vtk
-            .map(|(d, mesh, interval)| output::FrameWriter::new(d, mesh, interval, dt_s))
+            .as_ref()
+            .map(|(d, mesh, interval)| output::FrameWriter::new(d, mesh, *interval, dt_s))
             .transpose()
     }
 }
@@ -153,7 +154,8 @@ fn solve(a: SolveArgs) -> Result<()> {
             .outputs
             .vtk
             .as_deref()
-            .map(|d| (d, &problem.mesh, problem.solver.output_interval)),
+            // Its own copy of the mesh (only with --vtk): the problem goes to the runs.
+            .map(|d| (d, problem.mesh.clone(), problem.solver.output_interval)),
     };
     obs.frames = obs.frame_writer(dt)?;
     let poses = match &a.replay {
@@ -162,23 +164,16 @@ fn solve(a: SolveArgs) -> Result<()> {
     };
     // One step for this reference and the boards (`solver::settle`): where tracking lowers
     // dt, the scene runs again from rest at the smallest step reached.
-    let settled = if a.dt_as_tracked {
-        None
+    let (problem, out, step) = if a.dt_as_tracked {
+        let out = solver::run_with_poses(&problem, &name, &mut obs, threads, poses)?;
+        (problem, out, None)
     } else {
-        Some(solver::settle::settle(
-            &problem, &name, threads, &poses, &mut obs,
-        )?)
-    };
-    let (out, step) = match settled {
-        Some(solver::settle::Settled {
-            output: Some(out),
-            step,
-            ..
-        }) => (out, Some(step)),
-        other => (
-            solver::run_with_poses(&problem, &name, &mut obs, threads, poses)?,
-            other.map(|s| s.step),
-        ),
+        let s = solver::settle::settle(problem, &name, threads, &poses, &mut obs)?;
+        let out = match s.output {
+            Some(out) => out,
+            None => solver::run_with_poses(&s.problem, &name, &mut obs, threads, poses)?,
+        };
+        (s.problem, out, Some(s.step))
     };
     if let Some(b) = &obs.bar {
         b.finish_and_clear();
