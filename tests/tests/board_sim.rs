@@ -494,6 +494,18 @@ fn a_delay_beyond_the_timeout_is_named() {
     }
 }
 
+/// The built-in coarse scene on 2x2x2, 1000 steps, compiled into a directory named
+/// `name`, and its clean run on the wall clock, whose fields move (the probe has pressed
+/// the tube; at 300 steps nothing has moved yet): asserted above 1e-4 m.
+fn moving_clean_run(name: &str) -> (TempDir, board_sim::SimOutput) {
+    let p = builtin_problem("coarse", 1000);
+    let dir = compile(&p, "builtin:coarse", "2x2x2", name);
+    let clean = sim(&dir, &SimOptions::default());
+    let u_max = max_abs(&clean.displacements);
+    assert!(u_max > 1e-4, "the fields compared move: max |u| {u_max} m");
+    (dir, clean)
+}
+
 /// The other side of the line: every frame held 1 ms, within a 5 ms link timeout of
 /// simulated time, and no recovery: the run finishes, with the clean run's bits (the
 /// frames were late, not lost). A board waits for a delayed frame about the delay (its
@@ -502,12 +514,7 @@ fn a_delay_beyond_the_timeout_is_named() {
 /// timeout is not safe.
 #[test]
 fn a_delay_within_the_timeout_is_no_fault() {
-    // 1000 steps: the probe has pressed the tube (at 300 nothing has moved yet).
-    let p = builtin_problem("coarse", 1000);
-    let dir = compile(&p, "builtin:coarse", "2x2x2", "late");
-    let clean = sim(&dir, &SimOptions::default());
-    let u_max = max_abs(&clean.displacements);
-    assert!(u_max > 1e-4, "the fields compared move: max |u| {u_max} m");
+    let (dir, clean) = moving_clean_run("late");
     for w in WORKERS {
         let late = run(
             &dir,
@@ -539,16 +546,11 @@ fn a_delay_within_the_timeout_is_no_fault() {
 
 /// Simulated time stands still while anything in the machine can move: a clean run with a
 /// link timeout of two quanta (200 us), eight workers on however few cores, 1000 steps,
-/// finishes with
-/// the wall-clock run's bits. Seen failing: with time advancing whenever one worker found
+/// finishes with the wall-clock run's bits. Seen failing: with time advancing whenever one worker found
 /// nothing to do (not every one), the run stops on a link timeout.
 #[test]
 fn a_healthy_machine_never_waits_in_simulated_time() {
-    let p = builtin_problem("coarse", 1000);
-    let dir = compile(&p, "builtin:coarse", "2x2x2", "still");
-    let clean = sim(&dir, &SimOptions::default());
-    let u_max = max_abs(&clean.displacements);
-    assert!(u_max > 1e-4, "the fields compared move: max |u| {u_max} m");
+    let (dir, clean) = moving_clean_run("still");
     for w in WORKERS {
         let still = run(
             &dir,

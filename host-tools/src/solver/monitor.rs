@@ -47,6 +47,12 @@ pub struct DtMonitor<'p> {
     last_tracked: Option<(u64, f64)>,
 }
 
+/// Whether a check that finds `dt` too large lowers it (`adapt_dt`; by default yes, except
+/// with contact, whose penalty follows from the step: the run stops instead).
+pub fn adapts(problem: &Problem) -> bool {
+    problem.solver.adapt_dt.unwrap_or(problem.contact.is_none())
+}
+
 impl<'p> DtMonitor<'p> {
     pub fn new(problem: &'p Problem, dt_critical_s: f64) -> Self {
         let s = &problem.solver;
@@ -59,7 +65,7 @@ impl<'p> DtMonitor<'p> {
             tracker,
             interval: s.dt_recheck_interval,
             iterations: s.dt_recheck_iterations.max(1),
-            adapt: s.adapt_dt.unwrap_or(problem.contact.is_none()),
+            adapt: adapts(problem),
             has_contact: problem.contact.is_some(),
             vector: None,
             dt_critical_initial_s: dt_critical_s,

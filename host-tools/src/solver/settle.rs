@@ -47,7 +47,7 @@ pub struct SettledStep {
 pub fn may_lower_dt(problem: &Problem) -> bool {
     let s = &problem.solver;
     let tracks = (s.dt_track_interval > 0 || s.dt_recheck_interval.is_some()) && !s.force_dt;
-    tracks && s.adapt_dt.unwrap_or(problem.contact.is_none())
+    tracks && super::monitor::adapts(problem)
 }
 
 /// The settled run: its problem (at the settled step), its output and how the step was
