@@ -9,6 +9,12 @@ rustup target add thumbv7em-none-eabihf >/dev/null 2>&1 || rustup target add thu
 RUSTFLAGS="-C target-cpu=cortex-m7" cargo build --release --target thumbv7em-none-eabihf \
     -p pe-firmware -p link-proto
 
+# The prototype board's register words (DMA stream configuration with TRBUFF, the MPU's
+# uncached region, clocks by silicon revision), computed through the STM32H7 PAC: the
+# board crate's unit tests, on the host.
+cargo test --manifest-path pe-firmware/board/Cargo.toml --lib --no-default-features \
+    --features stm32h743
+
 # Host tests (optimised: the physics tests run 1e5-step simulations).
 cargo test --workspace --release
 

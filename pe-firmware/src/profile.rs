@@ -120,11 +120,11 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
     contact_sends_max: 1024,
 };
 
-/// The prototype array: STM32H743 boards (NUCLEO-H743ZI or any board with the part and the
-/// pins of `pe-firmware/board/src/bsp/stm32h743.rs`) whose six faces and global port are
+/// The prototype array: STM32H743 boards (NUCLEO-H743ZI2 or any board with the part and the
+/// pins of `pe-firmware/board/src/bsp/stm32h743/`) whose six faces and global port are
 /// USART/UARTs driven by DMA, one cable (TX, RX, ground) per face. The PE board's memory and
-/// tables. Rate: 7.5 Mbaud, the USART's kernel clock (`rcc_pclk1`/`rcc_pclk2`, 120 MHz at a
-/// 480 MHz core) divided by 16 (RM0433, USART baud rate generation, 16x oversampling, as
+/// tables. Rate: 7.5 Mbaud, the U(S)ARTs' kernel clock (PLL2 Q at 120 MHz on every silicon
+/// revision: the core runs 480 MHz on revision V, 400 MHz on Y) divided by 16 (RM0433, USART baud rate generation, 16x oversampling, as
 /// stm32h7xx-hal configures it); ten bits a byte (start, 8 data, stop): 750 000 bytes/s
 /// each way. Per frame: 5 us to restart the TX DMA stream and let the last byte leave the
 /// shift register (an assumption, to be measured). DS12110 gives the USARTs up to
@@ -137,6 +137,10 @@ pub const STM32H743_UART: BoardProfile = BoardProfile {
     board_features: &["stm32h743", "defmt"],
     link_bytes_per_s: 750_000,
     link_latency_ns: 5_000,
+    // The global port is USART3 on the NUCLEO-H743ZI2's STLINK-V3E virtual COM port: 2 Mbaud
+    // (an exact divisor of the 120 MHz kernel clock, under the older ST-LINK/V2-1 bridge's
+    // ~2.25 Mbaud), ten bits a byte.
+    global_bytes_per_s: 200_000,
     ..PE_BOARD
 };
 

@@ -21,3 +21,24 @@ macro_rules! log_info {
         let _ = format_args!($($arg)*);
     }};
 }
+
+/// Copies the RTT control block and buffer (`memory.x`'s `.rtt` section, in the uncached
+/// area of SRAM1 where the debug probe and the core see the same bytes with the data cache
+/// on) from their load image in flash, as the start-up code does for `.data`. First thing in
+/// `main`, before the first log; empty without `defmt`.
+#[cfg(all(not(feature = "qemu"), target_arch = "arm"))]
+pub fn init_rtt_section() {
+    extern "C" {
+        static mut __srtt: u32;
+        static mut __ertt: u32;
+        static __sirtt: u32;
+    }
+    // SAFETY: the linker's symbols bound the section (word-aligned) and its load image;
+    // nothing has used the section yet (no log before this).
+    unsafe {
+        let start = core::ptr::addr_of_mut!(__srtt);
+        let end = core::ptr::addr_of_mut!(__ertt);
+        let words = (end as usize - start as usize) / 4;
+        core::ptr::copy_nonoverlapping(core::ptr::addr_of!(__sirtt), start, words);
+    }
+}

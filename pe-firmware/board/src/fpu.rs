@@ -6,13 +6,17 @@
 //! sign. Besides matching the host's bits, it keeps the cost of an operation independent
 //! of how small the numbers are (the tissue far from the tool is nearly at rest).
 
+#[cfg(target_arch = "arm")]
 use cortex_m::peripheral::FPU;
+#[cfg(target_arch = "arm")]
 use cortex_m::register::fpscr::{self, Fpscr};
 
 /// FPSCR.FZ and FPDSCR.FZ: bit 24 of both.
+#[cfg(target_arch = "arm")]
 const FZ: u32 = 1 << 24;
 
 /// Sets flush-to-zero mode for this context and for exception handlers' contexts.
+#[cfg(target_arch = "arm")]
 pub fn flush_subnormals() {
     // FPSCR bit 24, FZ, "Flush-to-zero mode control bit" (ARMv7-M Architecture Reference
     // Manual, DDI 0403E, "Floating-point Status and Control Register, FPSCR"; Cortex-M7

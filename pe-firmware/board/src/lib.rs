@@ -6,7 +6,11 @@
 //! few `unsafe` blocks (memory-mapped registers, linker-provided regions, the one-time
 //! take of the static buffers) live here, each with its argument; `pe-firmware` stays
 //! `#![forbid(unsafe_code)]`.
-#![no_std]
+//!
+//! The board support's register words are unit-tested on the host (`scripts/test.sh`:
+//! `cargo test --lib --target x86_64-unknown-linux-gnu` with the board's features); what
+//! only a Cortex-M7 has is `#[cfg(target_arch = "arm")]`.
+#![cfg_attr(not(test), no_std)]
 #![deny(unsafe_op_in_unsafe_fn)]
 
 #[cfg(all(feature = "qemu", feature = "stm32h743"))]

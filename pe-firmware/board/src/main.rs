@@ -22,6 +22,18 @@ const UNKNOWN: [u8; 3] = [0xFF; 3];
 fn main() -> ! {
     // Subnormals flushed to zero, as the host computes: before any floating-point work.
     pe_board::fpu::flush_subnormals();
+    // The RTT control block and buffer (memory.x's `.rtt`, in SRAM1) from flash, before the
+    // first log.
+    #[cfg(not(feature = "qemu"))]
+    pe_board::fmt::init_rtt_section();
+    let Some(mut cp) = cortex_m::Peripherals::take() else {
+        report::fault(UNKNOWN, format_args!("core peripherals taken twice"));
+    };
+    // The prototype: the chip's revision and its errata fix, caches on; before the storage
+    // fills.
+    #[cfg(feature = "stm32h743")]
+    let chip = pe_board::bsp::stm32h743::early(&mut cp)
+        .unwrap_or_else(|e| report::fault(UNKNOWN, format_args!("board start-up: {e}")));
     let Some(board) = board_position() else {
         report::fault(UNKNOWN, format_args!("board identity record damaged"));
     };
@@ -85,13 +97,17 @@ fn main() -> ! {
             ),
         )
     });
-    let Some(mut cp) = cortex_m::Peripherals::take() else {
-        report::fault(board, format_args!("core peripherals taken twice"));
-    };
     // Time, and the board's own hardware (clocks, ports) before the links use it.
     #[cfg(feature = "stm32h743")]
-    let mut env = pe_board::bsp::stm32h743::start(&mut cp)
-        .unwrap_or_else(|e| report::fault(board, format_args!("board start-up: {e}")));
+    let mut env = {
+        log_info!(
+            "pe-board: STM32H743 revision {}, core at {} MHz",
+            chip.revision.name(),
+            chip.clocks.core_hz / 1_000_000
+        );
+        pe_board::bsp::stm32h743::start(&mut cp, &chip)
+            .unwrap_or_else(|e| report::fault(board, format_args!("board start-up: {e}")))
+    };
     #[cfg(not(feature = "stm32h743"))]
     let mut env = clock::BoardClock::start(&mut cp, PROFILE.clock_hz);
     let Some(links) = links::take(drivers) else {

@@ -1,44 +1,27 @@
-//! The prototype board (profile `stm32h743-uart`): an STM32H743 whose six faces and global
-//! port are USART/UARTs moved by DMA, a core clock at 480 MHz and a cycle counter for time.
+//! The seven ports (six faces, the global port) as byte streams over their U(S)ARTs' DMA
+//! streams: the port table, the stream configuration words, [`DmaSerial`] and the start of
+//! each port. See the module doc of [`super`] for the pins.
 //!
-//! What is hardware-specific stays here and small: [`start`] sets up clocks, pins, the seven
-//! ports and their DMA streams once; [`DmaSerial`] is a port as an `embedded-io` byte
-//! stream (`Read`, `ReadReady`, `Write`, `WriteReady`), which is all `link_proto`'s
-//! `StreamLinks` asks of a link: the same traits, framing and runtime as the QEMU build's
-//! CMSDK UARTs, which CI runs. [`CycleClock`] is the runtime's `Environment`.
+//! Receive: a circular DMA stream fills a ring of [`RX_RING`] bytes, read behind the
+//! stream's counter; the USART's overrun detection is off, so bytes lost to a full ring or a
+//! slow stream damage a frame, which its CRC catches (the runtime names the link). Transmit:
+//! one normal-mode DMA transfer of up to [`TX_BUF`] bytes at a time. The buffers are in
+//! `.dma_buffers`, inside the uncached area at the start of SRAM1 ([`super::memory`]):
+//! DMA1/DMA2 reach SRAM1-3, not the DTCM (RM0433, "Bus matrix", Figure 1 "System
+//! architecture"). DMAMUX1 request numbers are RM0433's (table "DMAMUX1: assignment of
+//! multiplexer inputs to resources", as in the PAC).
 //!
-//! | port | carries | peripheral | TX, RX pins (alternate function) | DMA RX, TX streams |
-//! |---|---|---|---|---|
-//! | 0 | face +x | USART1 | PB14, PB15 (AF4) | DMA1 0, 1 |
-//! | 1 | face -x | USART2 | PD5, PD6 (AF7) | DMA1 2, 3 |
-//! | 2 | face +y | UART4 | PD1, PD0 (AF8) | DMA1 4, 5 |
-//! | 3 | face -y | UART5 | PB13, PB12 (AF14) | DMA1 6, 7 |
-//! | 4 | face +z | USART6 | PC6, PC7 (AF7) | DMA2 0, 1 |
-//! | 5 | face -z | UART7 | PE8, PE7 (AF7) | DMA2 2, 3 |
-//! | 6 | global port | USART3 | PD8, PD9 (AF7) | DMA2 4, 5 |
-//!
-//! All pins are on the LQFP144 package of the NUCLEO-H743ZI; USART3 on PD8/PD9 is that
-//! board's ST-LINK virtual COM port, so a host on the prototype reads the global port over
-//! the probe's USB. A cable crosses TX and RX between neighbours and shares ground.
-//!
-//! Each port runs at 7.5 Mbaud, 8N1 (the USART kernel clock, `rcc_pclk1` or `rcc_pclk2` at
-//! 120 MHz, over 16: the rate `pe_firmware::profile::STM32H743_UART` is built on). Receive:
-//! a circular DMA stream fills a ring of [`RX_RING`] bytes in SRAM1 (`.dma_buffers`, which
-//! DMA1/DMA2 reach; the data cache stays off), read behind the stream's counter; the
-//! USART's overrun detection is off, so bytes lost to a full ring or a slow stream damage a
-//! frame, which its CRC catches (the runtime names the link). Transmit: one normal-mode DMA
-//! transfer of up to [`TX_BUF`] bytes at a time. DMAMUX1 request numbers are RM0433's
-//! (table "DMAMUX1: assignment of multiplexer inputs to resources", as in the PAC).
-//!
-//! Not run here: the prototype has not been built. What needs checking on it is listed in
-//! docs/boards.md ("The prototype board").
+//! Ordering: the core may reorder a Normal-memory access (the buffers) against a Device one
+//! (the DMA registers), and a compiler fence emits no instruction; each hand-over between
+//! the core and a stream is an `atomic::fence(SeqCst)`, a DMB on the M7 (ARMv7-M ARM
+//! A3.7.3 "Memory barriers"), as stm32h7xx-hal does around its DMA transfers (`dma/mod.rs`).
 
 use core::mem::MaybeUninit;
-use core::sync::atomic::{compiler_fence, AtomicBool, Ordering};
+use core::sync::atomic::{fence, AtomicBool, Ordering};
 
 use embedded_io::{ErrorKind, ErrorType, Read, ReadReady, Write, WriteReady};
 use stm32h7xx_hal::pac;
-use stm32h7xx_hal::prelude::*;
+use stm32h7xx_hal::pac::dma1::st::cr;
 
 /// The ports: the six faces in `link_proto::Face::index` order, then the global port.
 pub const PORTS: usize = 7;
@@ -49,8 +32,6 @@ pub const GLOBAL_PORT: usize = 6;
 pub const RX_RING: usize = 4096;
 /// Bytes of a port's transmit buffer (one DMA transfer).
 pub const TX_BUF: usize = 1024;
-/// Each link's rate.
-pub const BAUD: u32 = 7_500_000;
 
 /// Where a port's hardware is.
 struct PortHw {
@@ -128,6 +109,11 @@ fn clear_stream_flags(dma: &pac::dma1::RegisterBlock, s: usize) {
     } else {
         dma.hifcr.write(|w| unsafe { w.bits(bits) });
     }
+}
+
+/// Lets [`DmaSerial::port`] hand out ports: after every [`start_port`].
+pub(super) fn mark_started() {
+    STARTED.store(true, Ordering::Release);
 }
 
 /// A transfer error on a port's DMA stream (a bus error: a buffer outside DMA's reach).
@@ -208,8 +194,9 @@ impl Read for DmaSerial {
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, DmaError> {
         self.rx_error()?;
         let end = Self::written(self.port);
-        // The DMA wrote the bytes before NDTR said so: no read below may move above it.
-        compiler_fence(Ordering::Acquire);
+        // The DMA wrote the bytes before NDTR said so: a DMB keeps the ring's reads below
+        // behind the counter's read.
+        fence(Ordering::SeqCst);
         let ring = core::ptr::addr_of!(RX_RINGS) as *const [u8; RX_RING];
         let mut n = 0;
         while self.read_at != end && n < buf.len() {
@@ -249,8 +236,9 @@ impl Write for DmaSerial {
             // SAFETY: k < n <= TX_BUF.
             unsafe { core::ptr::write_volatile(dst.add(k), b) };
         }
-        // The bytes are in memory before the stream starts reading them.
-        compiler_fence(Ordering::Release);
+        // The bytes are in memory before the stream starts reading them (a DMB between the
+        // buffer's stores and the stream's enable).
+        fence(Ordering::SeqCst);
         // SAFETY: the table's registers; the stream is off, so its address and count may
         // change.
         let dma = unsafe { &*hw.dma };
@@ -273,7 +261,7 @@ impl Write for DmaSerial {
 ///
 /// # Safety
 /// Once, at start, with the port's USART configured and enabled and DMA1/DMA2 clocked.
-unsafe fn start_port(p: usize) {
+pub(super) unsafe fn start_port(p: usize) {
     let hw = &HW[p];
     // SAFETY: the caller's: the USART of the table, configured by the HAL.
     let u = unsafe { &*hw.usart };
@@ -303,184 +291,156 @@ unsafe fn start_port(p: usize) {
     rx.m0ar
         .write(|w| unsafe { w.bits((*ring.add(p)).as_mut_ptr() as u32) });
     rx.ndtr.write(|w| unsafe { w.bits(RX_RING as u32) });
-    rx.cr.write(|w| {
-        w.dir()
-            .peripheral_to_memory()
-            .circ()
-            .enabled()
-            .minc()
-            .incremented()
-            .psize()
-            .bits8()
-            .msize()
-            .bits8()
-            .pl()
-            .high()
-    });
+    rx.cr.write(|w| rx_stream_cr(w));
+    // The ring's address and count are set before the stream starts.
+    fence(Ordering::SeqCst);
     rx.cr.modify(|_, w| w.en().enabled());
     let tx = &dma.st[hw.tx_stream];
     tx.par
         .write(|w| unsafe { w.bits(core::ptr::addr_of!(u.tdr) as u32) });
-    tx.cr.write(|w| {
-        w.dir()
-            .memory_to_peripheral()
-            .minc()
-            .incremented()
-            .psize()
-            .bits8()
-            .msize()
-            .bits8()
-            .pl()
-            .high()
-    });
+    tx.cr.write(|w| tx_stream_cr(w));
 }
 
-/// Why the board could not start.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum StartError {
-    /// The device peripherals were taken before.
-    Taken,
-    /// A port's USART refused its configuration (its kernel clock cannot make [`BAUD`]).
-    Port(usize),
+/// A receive stream's DMA_SxCR (RM0433, "DMA stream x configuration register (DMA_SxCR)"):
+/// peripheral to memory, circular, memory address incremented, bytes both sides, high
+/// priority, TRBUFF set. TRBUFF (bit 20): RM0433 says it must be set when the stream serves
+/// a U(S)ART (bufferable transfers); stm32h7xx-hal sets it for every serial target
+/// (`dma/mod.rs`, `if PERIPHERAL::TRBUFF`), and NuttX found transfers unstable without it
+/// (apache/nuttx PR 4331). Not yet enabled.
+pub fn rx_stream_cr(w: &mut cr::W) -> &mut cr::W {
+    w.dir()
+        .peripheral_to_memory()
+        .circ()
+        .enabled()
+        .minc()
+        .incremented()
+        .psize()
+        .bits8()
+        .msize()
+        .bits8()
+        .pl()
+        .high()
+        .trbuff()
+        .enabled()
 }
 
-impl core::fmt::Display for StartError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            StartError::Taken => write!(f, "STM32H743 peripherals taken twice"),
-            StartError::Port(p) => write!(f, "port {p}: its USART cannot run at {BAUD} baud"),
+/// A transmit stream's DMA_SxCR: memory to peripheral, normal mode, otherwise as
+/// [`rx_stream_cr`] (TRBUFF set). Not yet enabled.
+pub fn tx_stream_cr(w: &mut cr::W) -> &mut cr::W {
+    w.dir()
+        .memory_to_peripheral()
+        .circ()
+        .disabled()
+        .minc()
+        .incremented()
+        .psize()
+        .bits8()
+        .msize()
+        .bits8()
+        .pl()
+        .high()
+        .trbuff()
+        .enabled()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The word `f` writes into a DMA_SxCR, through the PAC, in a register block in
+    /// ordinary memory (the PAC's accessors are volatile reads and writes of its fields).
+    fn stream_cr(f: fn(&mut cr::W) -> &mut cr::W) -> u32 {
+        // SAFETY: a register block is plain u32 cells; all-zero is every register's value.
+        let block: pac::dma1::RegisterBlock = unsafe { core::mem::zeroed() };
+        block.st[3].cr.write(|w| f(w));
+        block.st[3].cr.read().bits()
+    }
+
+    // DMA_SxCR fields (RM0433, "DMA stream x configuration register"), written out here:
+    // EN [0], DIR [7:6] (00 peripheral to memory, 01 memory to peripheral), CIRC [8],
+    // PINC [9], MINC [10], PSIZE [12:11], MSIZE [14:13], PL [17:16], TRBUFF [20].
+    const EN: u32 = 1;
+    const CIRC: u32 = 1 << 8;
+    const PINC: u32 = 1 << 9;
+    const MINC: u32 = 1 << 10;
+    const TRBUFF: u32 = 1 << 20;
+    const fn dir(w: u32) -> u32 {
+        (w >> 6) & 0b11
+    }
+    const fn sizes(w: u32) -> (u32, u32) {
+        ((w >> 11) & 0b11, (w >> 13) & 0b11)
+    }
+    const fn priority(w: u32) -> u32 {
+        (w >> 16) & 0b11
+    }
+
+    #[test]
+    fn receive_streams_are_circular_bufferable_byte_streams_into_memory() {
+        let w = stream_cr(rx_stream_cr);
+        assert_ne!(w, 0, "the word sets something");
+        assert_eq!(
+            w & TRBUFF,
+            TRBUFF,
+            "TRBUFF: RM0433 requires it for a U(S)ART"
+        );
+        assert_eq!(dir(w), 0b00, "peripheral to memory");
+        assert_eq!(w & CIRC, CIRC, "circular: the ring refills itself");
+        assert_eq!(
+            (w & MINC, w & PINC),
+            (MINC, 0),
+            "memory address moves, RDR stays"
+        );
+        assert_eq!(sizes(w), (0, 0), "bytes on both sides");
+        assert_eq!(priority(w), 0b10, "high priority");
+        assert_eq!(w & EN, 0, "configured, started later");
+        assert_eq!(w, TRBUFF | (0b10 << 16) | MINC | CIRC, "no other bit");
+    }
+
+    #[test]
+    fn transmit_streams_are_one_shot_bufferable_byte_streams_to_the_peripheral() {
+        let w = stream_cr(tx_stream_cr);
+        assert_eq!(
+            w & TRBUFF,
+            TRBUFF,
+            "TRBUFF: RM0433 requires it for a U(S)ART"
+        );
+        assert_eq!(dir(w), 0b01, "memory to peripheral");
+        assert_eq!(w & CIRC, 0, "one transfer per write");
+        assert_eq!(
+            (w & MINC, w & PINC),
+            (MINC, 0),
+            "memory address moves, TDR stays"
+        );
+        assert_eq!(sizes(w), (0, 0), "bytes on both sides");
+        assert_eq!(priority(w), 0b10, "high priority");
+        assert_eq!(w & EN, 0, "started by each write");
+        assert_eq!(
+            w,
+            TRBUFF | (0b10 << 16) | MINC | (0b01 << 6),
+            "no other bit"
+        );
+    }
+
+    #[test]
+    fn every_port_has_its_own_streams_and_multiplexer_channels() {
+        // Two ports on one stream (or one DMAMUX1 channel) would steal each other's bytes.
+        let mut seen = [[false; 8]; 2];
+        let mut mux = [false; 16];
+        for hw in &HW {
+            let dma = usize::from(!core::ptr::eq(hw.dma, pac::DMA1::ptr()));
+            for (s, m) in [(hw.rx_stream, hw.rx_mux), (hw.tx_stream, hw.tx_mux)] {
+                assert!(!seen[dma][s], "DMA{} stream {s} used twice", dma + 1);
+                seen[dma][s] = true;
+                assert_eq!(
+                    m,
+                    s + 8 * dma,
+                    "DMAMUX1 channel of DMA{} stream {s}",
+                    dma + 1
+                );
+                assert!(!mux[m]);
+                mux[m] = true;
+            }
         }
-    }
-}
-
-/// Clocks (480 MHz core, 240 MHz AHB, 120 MHz APB, voltage scale 0), the seven ports and
-/// their DMA streams, and the cycle counter. Once, at start.
-pub fn start(cp: &mut cortex_m::Peripherals) -> Result<CycleClock, StartError> {
-    let dp = pac::Peripherals::take().ok_or(StartError::Taken)?;
-    let pwr = dp.PWR.constrain().vos0(&dp.SYSCFG).freeze();
-    let ccdr = dp
-        .RCC
-        .constrain()
-        .sys_ck(480.MHz())
-        .hclk(240.MHz())
-        .pclk1(120.MHz())
-        .pclk2(120.MHz())
-        .freeze(pwr, &dp.SYSCFG);
-    // SRAM1-3 (the DMA buffers) clocked.
-    // SAFETY: setting enable bits of the D2 SRAMs only.
-    unsafe {
-        (*pac::RCC::ptr()).ahb2enr.modify(|_, w| {
-            w.sram1en()
-                .set_bit()
-                .sram2en()
-                .set_bit()
-                .sram3en()
-                .set_bit()
-        });
-    }
-    let b = dp.GPIOB.split(ccdr.peripheral.GPIOB);
-    let c = dp.GPIOC.split(ccdr.peripheral.GPIOC);
-    let d = dp.GPIOD.split(ccdr.peripheral.GPIOD);
-    let e = dp.GPIOE.split(ccdr.peripheral.GPIOE);
-    let clocks = &ccdr.clocks;
-    // Each port's USART at BAUD, 8N1 (the HAL enables its clock and checks the pins).
-    macro_rules! serial {
-        ($port:expr, $usart:ident, $tx:expr, $rx:expr) => {
-            dp.$usart
-                .serial(($tx, $rx), BAUD.bps(), ccdr.peripheral.$usart, clocks)
-                .map_err(|_| StartError::Port($port))?
-        };
-    }
-    serial!(
-        0,
-        USART1,
-        b.pb14.into_alternate::<4>(),
-        b.pb15.into_alternate::<4>()
-    );
-    serial!(
-        1,
-        USART2,
-        d.pd5.into_alternate::<7>(),
-        d.pd6.into_alternate::<7>()
-    );
-    serial!(
-        2,
-        UART4,
-        d.pd1.into_alternate::<8>(),
-        d.pd0.into_alternate::<8>()
-    );
-    serial!(
-        3,
-        UART5,
-        b.pb13.into_alternate::<14>(),
-        b.pb12.into_alternate::<14>()
-    );
-    serial!(
-        4,
-        USART6,
-        c.pc6.into_alternate::<7>(),
-        c.pc7.into_alternate::<7>()
-    );
-    serial!(
-        5,
-        UART7,
-        e.pe8.into_alternate::<7>(),
-        e.pe7.into_alternate::<7>()
-    );
-    serial!(
-        GLOBAL_PORT,
-        USART3,
-        d.pd8.into_alternate::<7>(),
-        d.pd9.into_alternate::<7>()
-    );
-    use stm32h7xx_hal::rcc::ResetEnable;
-    ccdr.peripheral.DMA1.enable();
-    ccdr.peripheral.DMA2.enable();
-    for p in 0..PORTS {
-        // SAFETY: once, each port's USART configured above, DMA1/DMA2 clocked.
-        unsafe { start_port(p) };
-    }
-    STARTED.store(true, Ordering::Release);
-    Ok(CycleClock::start(cp, clocks.c_ck().raw()))
-}
-
-/// Time from the core's cycle counter (DWT CYCCNT), extended to 64 bits: exact to a cycle,
-/// as long as it is read at least once per wrap (8.9 s at 480 MHz; the runtime reads it at
-/// every wait and its link timeout is shorter).
-pub struct CycleClock {
-    hz: u64,
-    last: u32,
-    high: u64,
-}
-
-impl CycleClock {
-    fn start(cp: &mut cortex_m::Peripherals, hz: u32) -> Self {
-        cp.DCB.enable_trace();
-        cp.DWT.enable_cycle_counter();
-        CycleClock {
-            hz: hz.max(1) as u64,
-            last: cortex_m::peripheral::DWT::cycle_count(),
-            high: 0,
-        }
-    }
-}
-
-impl link_proto::Clock for CycleClock {
-    fn now_ns(&mut self) -> u64 {
-        let c = cortex_m::peripheral::DWT::cycle_count();
-        if c < self.last {
-            self.high += 1 << 32;
-        }
-        self.last = c;
-        let cycles = self.high + c as u64;
-        // cycles * 1e9 / hz without overflow for any run shorter than centuries.
-        (cycles / self.hz) * 1_000_000_000 + (cycles % self.hz) * 1_000_000_000 / self.hz
-    }
-}
-
-impl pe_firmware::runtime::Environment for CycleClock {
-    /// The ports move by DMA: nothing to wait for but the next poll.
-    fn idle(&mut self) {
-        core::hint::spin_loop();
+        assert_eq!(HW.len(), PORTS);
     }
 }
