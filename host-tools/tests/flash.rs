@@ -2,7 +2,8 @@
 //! probe-rs commands each board gets, and the read-back that must find what was written.
 //! probe-rs itself is stood in for by a small program that keeps each probe's "flash" in a
 //! directory: it writes what `download` gives it and answers `read` from what it holds, so
-//! the flow runs end to end; an option makes one probe's writes fail silently.
+//! the flow runs end to end; an option makes one probe's writes fail silently, another
+//! says which chip (unique ID) each probe is on.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -62,7 +63,9 @@ fn fake_firmware_built(build: Option<[u8; blob::BUILD_LEN]>) -> Vec<u8> {
 }
 
 /// The stand-in probe-rs (python3): state per probe serial under $FAKE_PROBES;
-/// FAKE_BROKEN=SERIAL makes that probe drop its writes.
+/// FAKE_BROKEN=SERIAL makes that probe drop its writes; FAKE_UIDS="SERIAL=W0:W1:W2,..."
+/// puts a probe on the chip with that unique ID (read at 0x1FF1E800, three little-endian
+/// words; by default the probe's serial's bytes).
 const FAKE_PROBE_RS: &str = r#"#!/usr/bin/env python3
 import os, sys
 args = sys.argv[1:]
@@ -96,6 +99,14 @@ if cmd == "download":
 elif cmd == "read":
     width, addr, n = args[-3], int(args[-2], 16), int(args[-1])
     out = []
+    if addr == 0x1FF1E800:
+        serial = probe.split(":")[-1]
+        uids = dict(kv.split("=") for kv in os.environ.get("FAKE_UIDS", "").split(",") if kv)
+        if serial in uids:
+            import struct
+            out = b"".join(struct.pack("<I", int(w, 16)) for w in uids[serial].split(":"))
+        else:
+            out = serial.encode().ljust(12, b"\0")[:12]
     for name in os.listdir(mem):
         base = int(name, 16)
         blob = open(os.path.join(mem, name), "rb").read()
@@ -170,12 +181,20 @@ fn setup(tag: &str) -> Setup {
 }
 
 fn map(dir: &Path, entries: &[([usize; 3], &str)]) -> PathBuf {
+    let with_uids: Vec<_> = entries.iter().map(|&(p, probe)| (p, probe, None)).collect();
+    map_with_uids(dir, &with_uids)
+}
+
+fn map_with_uids(dir: &Path, entries: &[([usize; 3], &str, Option<&str>)]) -> PathBuf {
     let mut t = String::new();
-    for (p, probe) in entries {
+    for (p, probe, uid) in entries {
         t.push_str(&format!(
             "[[board]]\nposition = [{}, {}, {}]\nprobe = \"{probe}\"\n",
             p[0], p[1], p[2]
         ));
+        if let Some(u) = uid {
+            t.push_str(&format!("uid = \"{u}\"\n"));
+        }
     }
     let p = dir.join("boards.toml");
     std::fs::write(&p, t).unwrap();
@@ -183,6 +202,17 @@ fn map(dir: &Path, entries: &[([usize; 3], &str)]) -> PathBuf {
 }
 
 fn flash(s: &Setup, map: &Path, extra: &[&str], broken: Option<&str>) -> (bool, String) {
+    flash_on_chips(s, map, extra, broken, "")
+}
+
+/// [`flash`] with the probes on the chips `uids` names (`SERIAL=W0:W1:W2,...`).
+fn flash_on_chips(
+    s: &Setup,
+    map: &Path,
+    extra: &[&str],
+    broken: Option<&str>,
+    uids: &str,
+) -> (bool, String) {
     let mut c = Command::new(PE);
     c.arg("flash")
         .arg(&s.images)
@@ -192,6 +222,7 @@ fn flash(s: &Setup, map: &Path, extra: &[&str], broken: Option<&str>) -> (bool, 
         .arg(&s.probe_rs)
         .args(extra)
         .env("FAKE_PROBES", &s.state)
+        .env("FAKE_UIDS", uids)
         .env("RUST_BACKTRACE", "0");
     if let Some(b) = broken {
         c.env("FAKE_BROKEN", b);
@@ -210,9 +241,10 @@ fn flash(s: &Setup, map: &Path, extra: &[&str], broken: Option<&str>) -> (bool, 
 const A: &str = "0483:374e:AAAA0001";
 const B: &str = "0483:374e:BBBB0002";
 
-/// Both boards flashed through their own probes: each probe got the board's ELF and its
-/// schedule at the profile's address, read back the identity and the schedule head, and
-/// was reset; the probes now hold different identities (each its board's).
+/// Both boards flashed through their own probes: each probe first read the unique ID of
+/// its chip, then got the board's ELF and its schedule at the profile's address, read back
+/// the identity and the schedule head, and was reset; the probes now hold different
+/// identities (each its board's). A map without uids gets each board's printed.
 #[test]
 fn every_board_is_flashed_through_its_probe_and_read_back() {
     let s = setup("ok");
@@ -223,35 +255,92 @@ fn every_board_is_flashed_through_its_probe_and_read_back() {
         text.contains("2 boards flashed, checked and reset"),
         "{text}"
     );
+    // The stand-in's chips: each probe's serial as the ID's bytes ("AAAA0001" + zeros).
+    assert!(
+        text.contains("position = [0, 0, 0]  uid = \"41414141:31303030:00000000\""),
+        "{text}"
+    );
     let log = std::fs::read_to_string(s.state.join("log")).unwrap();
     let lines: Vec<&str> = log.lines().collect();
-    assert_eq!(lines.len(), 2 * 5, "{log}");
+    assert_eq!(lines.len(), 2 * 6, "{log}");
+    // Both chips are read before anything is written.
+    assert!(lines[0].contains(" b8 0x1ff1e800 12") && lines[1].contains(" b8 0x1ff1e800 12"));
     for (probe, board) in [(A, "board-0-0-0"), (B, "board-1-0-0")] {
         let mine: Vec<&&str> = lines.iter().filter(|l| l.contains(probe)).collect();
-        assert_eq!(mine.len(), 5, "{log}");
-        assert!(mine[0].starts_with("download") && mine[0].ends_with(&format!("{board}.elf")));
+        assert_eq!(mine.len(), 6, "{log}");
+        assert!(mine[0].starts_with("read") && mine[0].contains(" b8 0x1ff1e800 12"));
+        assert!(mine[1].starts_with("download") && mine[1].ends_with(&format!("{board}.elf")));
         assert!(
-            mine[1].contains("--base-address 0x08100000")
-                && mine[1].ends_with(&format!("{board}.sched"))
+            mine[2].contains("--base-address 0x08100000")
+                && mine[2].ends_with(&format!("{board}.sched"))
         );
         assert!(
-            mine[2].starts_with("read") && mine[2].contains(" b8 0x08001040 16"),
+            mine[3].starts_with("read") && mine[3].contains(" b8 0x08001040 16"),
             "{log}"
         );
         assert!(
-            mine[3].starts_with("read") && mine[3].contains(" b8 0x08100000 64"),
+            mine[4].starts_with("read") && mine[4].contains(" b8 0x08100000 64"),
             "{log}"
         );
-        assert!(mine[4].starts_with("reset"));
+        assert!(mine[5].starts_with("reset"));
     }
     // Resets come after every board was flashed and checked.
     let first_reset = lines.iter().position(|l| l.starts_with("reset")).unwrap();
-    assert_eq!(first_reset, 8, "{log}");
+    assert_eq!(first_reset, 10, "{log}");
     // What each fake board holds at the identity address is its own position's record.
     for (probe, pos) in [(A, [0u8, 0, 0]), (B, [1, 0, 0])] {
         let held = std::fs::read(s.state.join(probe.replace(':', "_")).join("08001000")).unwrap();
         assert_eq!(&held[64..80], &blob::identity_record(pos));
     }
+}
+
+/// The board map knows each board by its chip: probes swapped at the array (each on the
+/// other's board) are refused naming both positions, before any board is written; with the
+/// probes where the map says, the chips are reported as mapped.
+#[test]
+fn a_probe_on_the_wrong_board_is_refused_before_anything_is_written() {
+    let s = setup("swapped");
+    let (u0, u1) = ("003A0028:31385104:33333439", "00290041:3137510B:36383830");
+    let m = map_with_uids(
+        &s.dir,
+        &[([0, 0, 0], A, Some(u0)), ([1, 0, 0], B, Some(u1))],
+    );
+    let swapped = format!("AAAA0001={u1},BBBB0002={u0}");
+    let (ok, text) = flash_on_chips(&s, &m, &[], None, &swapped);
+    assert!(!ok, "{text}");
+    assert!(
+        text.contains(&format!("board (0,0,0): probe {A} is on the chip with unique ID {u1}, which the board map gives board (1,0,0): the probes of boards (0,0,0) and (1,0,0) look swapped")),
+        "{text}"
+    );
+    let log = std::fs::read_to_string(s.state.join("log")).unwrap();
+    assert!(!log.contains("download"), "written before the check: {log}");
+    assert_eq!(
+        log.lines().count(),
+        2,
+        "both chips read, nothing else: {log}"
+    );
+    // A uid that is no unique ID is refused naming the entry.
+    let bad = map_with_uids(
+        &s.dir,
+        &[([0, 0, 0], A, Some("12:34")), ([1, 0, 0], B, None)],
+    );
+    let (ok, text) = flash(&s, &bad, &[], None);
+    assert!(
+        !ok && text.contains("[[board]] 0 (0,0,0): uid \"12:34\" is not a 96-bit unique ID"),
+        "{text}"
+    );
+    // In their places, the same map flashes, and says each chip is the mapped one.
+    let m = map_with_uids(
+        &s.dir,
+        &[([0, 0, 0], A, Some(u0)), ([1, 0, 0], B, Some(u1))],
+    );
+    let (ok, text) = flash_on_chips(&s, &m, &[], None, &format!("AAAA0001={u0},BBBB0002={u1}"));
+    assert!(ok, "{text}");
+    assert!(
+        text.contains(&format!("board (1,0,0): chip {u1} as mapped")),
+        "{text}"
+    );
+    assert!(!text.contains("add each board's uid"), "{text}");
 }
 
 /// --dry-run prints the same commands and runs none.

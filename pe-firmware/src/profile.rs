@@ -36,6 +36,10 @@ pub struct BoardProfile {
     pub image_origin: u64,
     /// probe-rs `--chip` of the board's MCU (empty for an emulation profile).
     pub probe_chip: &'static str,
+    /// Address of the MCU's 96-bit unique device ID (three little-endian words), which
+    /// `pe flash` reads through each probe before writing anything, to know the boards by
+    /// their chips; 0: none.
+    pub unique_id_address: u64,
     /// The board crate's cargo features of this board's support (`pe image` builds the
     /// firmware with them, beside the precision's, the element's and the parts'): its
     /// drivers, clocks and log transport.
@@ -103,6 +107,8 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
     face_ports: 6,
     image_origin: 0x0810_0000,
     probe_chip: "STM32H743ZITx",
+    // RM0433, "Unique device ID register (96 bits)": base address 0x1FF1_E800.
+    unique_id_address: 0x1FF1_E800,
     // Logs and fault messages over RTT (probe-rs attach).
     board_features: &["defmt"],
     // Contact tables (the whole scene's, on every board): some 190 bytes per contact node
@@ -162,6 +168,7 @@ pub const QEMU_MPS2_AN500: BoardProfile = BoardProfile {
     face_ports: mps2_uarts::FACE_UARTS.len() as u8,
     image_origin: 0x0020_0000,
     probe_chip: "",
+    unique_id_address: 0,
     board_features: &["qemu"],
     // The frames' node limit, and otherwise the PE board's tables (the RAM decides the
     // elements).

@@ -48,7 +48,7 @@ pub enum Command {
     /// names, and check what each board then holds (its identity record and the head of its
     /// schedule); then reset them all. OUT is a `pe image` directory of a board profile.
     #[command(
-        after_help = "Example:\n  pe compile scenes/seed-box.toml --boards 2x2x2 --profile stm32h743-uart -o out/c\n  pe image out/c -o out/img\n  cat boards.toml   # [[board]] position = [0, 0, 0]  probe = \"0483:374e:002C00283132510D33353533\" ... one per board\n  pe flash out/img --map boards.toml --dry-run   # the commands, nothing run\n  pe flash out/img --map boards.toml"
+        after_help = "Example:\n  pe compile scenes/seed-box.toml --boards 2x2x2 --profile stm32h743-uart -o out/c\n  pe image out/c -o out/img\n  cat boards.toml   # [[board]] position = [0, 0, 0]  probe = \"0483:374e:002C00283132510D33353533\"  uid = \"003A0028:31385104:33333439\" ... one per board\n  pe flash out/img --map boards.toml --dry-run   # the commands, nothing run\n  pe flash out/img --map boards.toml"
     )]
     Flash(FlashArgs),
     /// Compare final displacements bit for bit: REFERENCE is a nodes CSV (`pe solve
@@ -180,8 +180,9 @@ pub struct ImageArgs {
 pub struct FlashArgs {
     /// Directory written by `pe image`.
     pub out: PathBuf,
-    /// Board map (TOML): one `[[board]]` with `position = [x, y, z]` and `probe =
-    /// "VID:PID:SERIAL"` per board of the machine.
+    /// Board map (TOML): one `[[board]]` with `position = [x, y, z]`, `probe =
+    /// "VID:PID:SERIAL"` and (recommended) `uid = "W0:W1:W2"`, the MCU's unique ID, per
+    /// board of the machine.
     #[arg(long)]
     pub map: PathBuf,
     /// The probe-rs binary (default: probe-rs on PATH).

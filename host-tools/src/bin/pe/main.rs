@@ -257,10 +257,27 @@ fn flash(a: FlashArgs) -> Result<()> {
                 println!("{} {}", probe_rs.display(), c.join(" "));
             }
         } else {
+            let chip = match (b.uid, b.uid_in_map) {
+                (Some(u), true) => format!("chip {u} as mapped, "),
+                (Some(u), false) => format!("chip {u} (not in the map), "),
+                (None, _) => String::new(),
+            };
             println!(
-                "board ({x},{y},{z}): flashed through probe {}, identity and schedule read back",
+                "board ({x},{y},{z}): {chip}flashed through probe {}, identity and schedule read back",
                 b.probe
             );
+        }
+    }
+    let unmapped: Vec<_> = (boards.iter())
+        .filter_map(|b| b.uid.filter(|_| !b.uid_in_map).map(|u| (b.board, u)))
+        .collect();
+    if !unmapped.is_empty() {
+        println!(
+            "{}: add each board's uid, so that a probe on the wrong board is refused before anything is written:",
+            a.map.display()
+        );
+        for ([x, y, z], u) in unmapped {
+            println!("  position = [{x}, {y}, {z}]  uid = \"{u}\"");
         }
     }
     if !dry_run {

@@ -12,13 +12,18 @@
 //! probe = "0483:374e:002C00283132510D33353533"
 //! ```
 //!
+//! A board may also give its MCU's unique ID (`uid = "003A0028:31385104:33333439"`, the
+//! three words at the profile's `unique_id_address`; `pe flash` prints each board's).
+//!
 //! Before anything is written the map is checked against the array: every board has a
-//! probe, no probe serves two boards, no position lies outside the machine. Each board
+//! probe, no probe serves two boards, no position lies outside the machine; then every
+//! probe reads the unique ID of the chip it is on ([`identity`]): a probe on another
+//! board than the map says (two probes swapped), two probes on one chip, or a chip the map
+//! does not know is refused naming the positions, before any board is written. Each board
 //! then gets `probe-rs download` of its ELF and of its schedule blob at the profile's image
 //! address; after that the board's identity record and the head of its schedule region are
 //! read back (`probe-rs read b8`) and must be the bytes written: its position and the
-//! compilation's image. A probe plugged into the wrong board is named with both positions
-//! (the identity it holds says where it is). Then every board is reset.
+//! compilation's image. Then every board is reset.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -28,9 +33,12 @@ use anyhow::{anyhow, bail, Context, Result};
 use serde::Deserialize;
 
 use crate::firmware::{read_image_manifest, ImageBoard, ImageManifest};
+use identity::{check_unique_ids, UniqueId, UNIQUE_ID_BYTES};
 use link_proto::machine::Coords;
 use link_proto::Machine;
 use pe_firmware::image::blob;
+
+pub mod identity;
 
 /// Bytes of the schedule region read back: the blob's length word and the image header
 /// (magic, version, compilation id, position).
@@ -50,10 +58,21 @@ struct MapEntry {
     /// `VID:PID:SERIAL` (or `VID:PID` for a single probe of its kind), as `probe-rs --probe`
     /// takes it.
     probe: String,
+    /// The board's MCU unique ID ([`UniqueId::parse`]).
+    uid: Option<String>,
 }
 
-/// Reads a board map and checks it against a machine of `dims` boards: position -> probe.
-pub fn read_board_map(path: &Path, dims: [usize; 3]) -> Result<BTreeMap<Coords, String>> {
+/// A board map checked against the machine.
+#[derive(Debug, Default)]
+pub struct MappedBoards {
+    /// Position -> probe, every board.
+    pub probes: BTreeMap<Coords, String>,
+    /// Position -> unique ID, the boards that give one.
+    pub uids: BTreeMap<Coords, UniqueId>,
+}
+
+/// Reads a board map and checks it against a machine of `dims` boards.
+pub fn read_board_map(path: &Path, dims: [usize; 3]) -> Result<MappedBoards> {
     let machine = Machine::new(dims).with_context(|| {
         format!(
             "{}: a {}x{}x{} machine: 1..{} boards per axis",
@@ -68,6 +87,7 @@ pub fn read_board_map(path: &Path, dims: [usize; 3]) -> Result<BTreeMap<Coords, 
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let map: BoardMap = toml::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let mut out = BTreeMap::new();
+    let mut uids: BTreeMap<Coords, UniqueId> = BTreeMap::new();
     let mut seen: BTreeMap<String, [usize; 3]> = BTreeMap::new();
     for (k, e) in map.board.iter().enumerate() {
         let [x, y, z] = e.position;
@@ -94,6 +114,21 @@ pub fn read_board_map(path: &Path, dims: [usize; 3]) -> Result<BTreeMap<Coords, 
         if out.insert(e.position, probe).is_some() {
             bail!("{}: board ({x},{y},{z}) is listed twice", path.display());
         }
+        if let Some(text) = &e.uid {
+            let uid = UniqueId::parse(text).with_context(|| {
+                format!(
+                    "{}: [[board]] {k} ({x},{y},{z}): uid {text:?} is not a 96-bit unique ID (24 hex digits, e.g. \"003A0028:31385104:33333439\")",
+                    path.display()
+                )
+            })?;
+            if let Some((&[a, b, c], _)) = uids.iter().find(|(_, u)| **u == uid) {
+                bail!(
+                    "{}: uid {uid} is given to boards ({a},{b},{c}) and ({x},{y},{z}): one chip per board",
+                    path.display()
+                );
+            }
+            uids.insert(e.position, uid);
+        }
     }
     let missing: Vec<String> = machine
         .boards()
@@ -107,7 +142,7 @@ pub fn read_board_map(path: &Path, dims: [usize; 3]) -> Result<BTreeMap<Coords, 
             missing.join(" ")
         );
     }
-    Ok(out)
+    Ok(MappedBoards { probes: out, uids })
 }
 
 /// The memory address of file offset `offset` of a 32-bit little-endian ELF: from the
@@ -166,6 +201,10 @@ fn parse_hex_bytes(text: &str) -> Vec<u8> {
 pub struct FlashedBoard {
     pub board: Coords,
     pub probe: String,
+    /// The unique ID its probe read (none on a dry run or a profile without one).
+    pub uid: Option<UniqueId>,
+    /// Whether the board map gave it.
+    pub uid_in_map: bool,
     /// The probe-rs command lines run (or, dry, to run).
     pub commands: Vec<Vec<String>>,
 }
@@ -362,7 +401,7 @@ pub fn flash_array(
             m.profile.name
         );
     }
-    let probes = read_board_map(map, m.machine)?;
+    let mapped = read_board_map(map, m.machine)?;
     let probe_rs = ProbeRs {
         program: probe_rs,
         chip: m.profile.probe_chip,
@@ -371,18 +410,52 @@ pub fn flash_array(
     let expected = (m.boards.iter())
         .map(|b| expected_of(out, b))
         .collect::<Result<Vec<_>>>()?;
-    let mut done = Vec::new();
-    for (b, e) in m.boards.iter().zip(&expected) {
-        let probe = probes.get(&b.board).cloned().unwrap_or_default();
-        let cmds = board_commands(&probe_rs, out, b, &probe, e);
-        if !dry_run {
-            flash_and_check(&probe_rs, b.board, &probe, &cmds, e, &m.compilation)?;
-        }
-        done.push(FlashedBoard {
+    let mut done: Vec<FlashedBoard> = (m.boards.iter())
+        .map(|b| FlashedBoard {
             board: b.board,
-            probe,
-            commands: cmds.to_vec(),
-        });
+            probe: mapped.probes.get(&b.board).cloned().unwrap_or_default(),
+            uid: None,
+            uid_in_map: mapped.uids.contains_key(&b.board),
+            commands: Vec::new(),
+        })
+        .collect();
+    // Every board's chip, through its probe, before any board is written.
+    if m.profile.unique_id_address != 0 {
+        let mut read = BTreeMap::new();
+        for f in &mut done {
+            let cmd = [
+                probe_rs.command("read", &f.probe),
+                vec![
+                    "b8".into(),
+                    format!("{:#010x}", m.profile.unique_id_address),
+                    UNIQUE_ID_BYTES.to_string(),
+                ],
+            ]
+            .concat();
+            if !dry_run {
+                let [x, y, z] = f.board;
+                let who = format!("board ({x},{y},{z}) (probe {})", f.probe);
+                let bytes =
+                    parse_hex_bytes(&probe_rs.run(&cmd, &format!("{who}: reading its unique ID"))?);
+                let uid = UniqueId::from_bytes(&bytes).with_context(|| {
+                    format!(
+                        "{who}: its unique ID read back as {} bytes, not {UNIQUE_ID_BYTES}",
+                        bytes.len()
+                    )
+                })?;
+                read.insert(f.board, uid);
+                f.uid = Some(uid);
+            }
+            f.commands.push(cmd);
+        }
+        check_unique_ids(&read, &mapped.uids, &mapped.probes)?;
+    }
+    for ((b, e), f) in m.boards.iter().zip(&expected).zip(&mut done) {
+        let cmds = board_commands(&probe_rs, out, b, &f.probe, e);
+        if !dry_run {
+            flash_and_check(&probe_rs, b.board, &f.probe, &cmds, e, &m.compilation)?;
+        }
+        f.commands.extend(cmds);
     }
     // Every board flashed and checked: start them together.
     for f in &mut done {
@@ -501,6 +574,7 @@ mod tests {
             assert_eq!(
                 f.commands,
                 vec![
+                    cmd("read", &["b8", "0x1ff1e800", "12"]),
                     cmd("download", &[&elf]),
                     cmd(
                         "download",
