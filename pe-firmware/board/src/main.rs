@@ -29,11 +29,7 @@ fn main() -> ! {
     let Some(mut cp) = cortex_m::Peripherals::take() else {
         report::fault(UNKNOWN, format_args!("core peripherals taken twice"));
     };
-    // The prototype: the chip's revision and its errata fix, caches on; before the storage
-    // fills.
-    #[cfg(feature = "stm32h743")]
-    let chip = pe_board::bsp::stm32h743::early(&mut cp)
-        .unwrap_or_else(|e| report::fault(UNKNOWN, format_args!("board start-up: {e}")));
+    let chip = early(&mut cp);
     let Some(board) = board_position() else {
         report::fault(UNKNOWN, format_args!("board identity record damaged"));
     };
@@ -97,19 +93,7 @@ fn main() -> ! {
             ),
         )
     });
-    // Time, and the board's own hardware (clocks, ports) before the links use it.
-    #[cfg(feature = "stm32h743")]
-    let mut env = {
-        log_info!(
-            "pe-board: STM32H743 revision {}, core at {} MHz",
-            chip.revision.name(),
-            chip.clocks.core_hz / 1_000_000
-        );
-        pe_board::bsp::stm32h743::start(&mut cp, &chip)
-            .unwrap_or_else(|e| report::fault(board, format_args!("board start-up: {e}")))
-    };
-    #[cfg(not(feature = "stm32h743"))]
-    let mut env = clock::BoardClock::start(&mut cp, PROFILE.clock_hz);
+    let mut env = start_board(&mut cp, &chip, board);
     let Some(links) = links::take(drivers) else {
         report::fault(board, format_args!("links taken twice"));
     };
@@ -143,6 +127,49 @@ fn main() -> ! {
     }
     log_info!("pe-board: end nodes");
     report::exit(true)
+}
+
+/// The prototype: the chip's revision and its errata fix, caches on; before the storage
+/// fills.
+#[cfg(feature = "stm32h743")]
+fn early(cp: &mut cortex_m::Peripherals) -> pe_board::bsp::stm32h743::Chip {
+    pe_board::bsp::stm32h743::early(cp)
+        .unwrap_or_else(|e| report::fault(UNKNOWN, format_args!("board start-up: {e}")))
+}
+
+/// What other boards know of their chip before the storage fills: nothing.
+#[cfg(not(feature = "stm32h743"))]
+struct NoChip;
+
+#[cfg(not(feature = "stm32h743"))]
+fn early(_cp: &mut cortex_m::Peripherals) -> NoChip {
+    NoChip
+}
+
+/// Time, and the prototype's own hardware (clocks, ports) before the links use it.
+#[cfg(feature = "stm32h743")]
+fn start_board(
+    cp: &mut cortex_m::Peripherals,
+    chip: &pe_board::bsp::stm32h743::Chip,
+    board: [u8; 3],
+) -> pe_board::bsp::stm32h743::CycleClock {
+    log_info!(
+        "pe-board: STM32H743 revision {}, core at {} MHz",
+        chip.revision.name(),
+        chip.clocks.core_hz / 1_000_000
+    );
+    pe_board::bsp::stm32h743::start(cp, chip)
+        .unwrap_or_else(|e| report::fault(board, format_args!("board start-up: {e}")))
+}
+
+/// Time from SysTick at the profile's clock.
+#[cfg(not(feature = "stm32h743"))]
+fn start_board(
+    cp: &mut cortex_m::Peripherals,
+    _chip: &NoChip,
+    _board: [u8; 3],
+) -> clock::BoardClock {
+    clock::BoardClock::start(cp, PROFILE.clock_hz)
 }
 
 /// The linked faces, for messages (`+x -y`).
