@@ -50,3 +50,8 @@ bash scripts/live-check.sh
 # target dir): TRANSFORMs move the probe; forces (POINT) and the surface (POLYDATA) come back;
 # an unknown device is answered with an error while the connection goes on.
 bash scripts/igtl-check.sh
+
+# The result frames in the readers users have: meshio 5.3.5 and pyvista (VTK's reader), pinned
+# in a venv under the target dir: pe solve's volume frames and board-sim's surface frames
+# load in both with the same values and the region names (tests/vtu/readers.py).
+bash scripts/vtu-readers.sh

@@ -182,7 +182,8 @@ fn solve_frames_are_reference_points_with_displacement_and_velocity() {
         assert_eq!(names, [vtk::DISPLACEMENT, vtk::VELOCITY], "frame {f}");
         let (u, v) = (&fr.arrays[vtk::DISPLACEMENT], &fr.arrays[vtk::VELOCITY]);
         assert_eq!((u.len(), v.len()), (750, 750));
-        let regions = vtk::field_strings(&fr.text, vtk::REGION_NAME).unwrap();
+        let regions = vtk::region_names(&fr.text).unwrap();
+        let regions: Vec<&str> = regions.values().map(String::as_str).collect();
         assert_eq!(regions, ["lower", "upper"], "frame {f}");
         if f == 0 {
             assert!(u.iter().chain(v).all(|&x| x == 0.0), "the rest frame");

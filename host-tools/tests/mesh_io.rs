@@ -713,11 +713,11 @@ fn vtu_series_round_trip() {
         };
         let text = std::fs::read_to_string(&path).unwrap();
         let used: BTreeSet<i32> = mesh.cell_regions.iter().copied().collect();
-        let want: Vec<String> = used
+        let want: std::collections::BTreeMap<i32, String> = used
             .iter()
-            .map(|r| mesh.region_names.get(r).cloned().unwrap_or_default())
+            .filter_map(|r| Some((*r, mesh.region_names.get(r)?.clone())))
             .collect();
-        assert_eq!(vtk::field_strings(&text, vtk::REGION_NAME), Some(want));
+        assert_eq!(vtk::region_names(&text), Some(want));
         assert_eq!(disp, u.iter().flatten().copied().collect::<Vec<f64>>());
     }
     assert_eq!(w.frame_count(), 3);
@@ -774,13 +774,10 @@ fn vtu_real_mesh_round_trip() {
         .unwrap();
     w.finish().unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
-    let names = vtk::field_strings(&text, vtk::REGION_NAME).expect("region_name lookup");
+    let names = vtk::region_names(&text).expect("region name lookup");
     assert_eq!(names.len(), 5, "{names:?}");
-    assert!(names.iter().all(|n| !n.is_empty()), "{names:?}");
-    assert_eq!(
-        names,
-        mesh.region_names.values().cloned().collect::<Vec<_>>()
-    );
+    assert!(names.values().all(|n| !n.is_empty()), "{names:?}");
+    assert_eq!(names, mesh.region_names);
     let vtk = vtkio::Vtk::import(&path).unwrap();
     let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
         panic!("not an unstructured grid")

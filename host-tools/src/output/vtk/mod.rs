@@ -14,9 +14,10 @@
 //!   time from.
 //! - Cell data `region` (Int32): the mesh's region (physical group) tag of each cell; on a
 //!   surface, the region of the cell the face bounds. Its names are a lookup in the field
-//!   data: `region_id` (Int32) and `region_name` (String, empty when the mesh names none),
-//!   in the same order, one entry per region present (ParaView: *Spreadsheet View*,
-//!   *Field Data*).
+//!   data: `region_id` (Int32), the tags present, and per named region an Int32 array
+//!   `region:NAME` holding its tag (ParaView: *Information*, *Data Arrays*; meshio:
+//!   `mesh.field_data`). Only numeric arrays: the frames load in ParaView, VTK and pyvista
+//!   and in meshio, which refuses `String` arrays.
 //!
 //! Hexahedra are `VTK_HEXAHEDRON` (12), prisms `VTK_WEDGE` (13), surface quads `VTK_QUAD` (9)
 //! (a prism's triangles `VTK_TRIANGLE`, 5). Open `series.pvd` in ParaView.
@@ -29,9 +30,7 @@ use crate::mesh::{Mesh, MeshError};
 
 mod xml;
 
-#[cfg(test)]
-use xml::ascii_string;
-use xml::{cells_xml, frame_xml, region_lookup_xml, write_pvd_file, xml_attr, Sections};
+use xml::{cells_xml, frame_xml, region_lookup_xml, write_pvd_file, Sections};
 
 /// Point vector: displacement from the reference position (m).
 pub const DISPLACEMENT: &str = "displacement_m";
@@ -39,10 +38,11 @@ pub const DISPLACEMENT: &str = "displacement_m";
 pub const VELOCITY: &str = "velocity_m_per_s";
 /// Cell data: region tag of each cell (or of the cell a surface face bounds).
 pub const REGION: &str = "region";
-/// Field data: the region tags of the lookup, in the order of [`REGION_NAME`].
+/// Field data: the region tags present (Int32).
 pub const REGION_ID: &str = "region_id";
-/// Field data: the name of each region of [`REGION_ID`] (String array).
-pub const REGION_NAME: &str = "region_name";
+/// Field data: a named region's Int32 array (one value, its tag) is named this prefix and
+/// the region's name.
+pub const REGION_NAME_PREFIX: &str = "region:";
 
 /// Extra per-node data for a frame.
 #[derive(Clone, Copy, Debug)]
@@ -236,7 +236,7 @@ impl VtkSeriesWriter {
 /// ParaView series of a surface (quads): `DIR/surface_NNNNN.vtu` + `DIR/series.pvd`.
 ///
 /// Each frame holds the reference points, the quads (`VTK_QUAD` = 9), the point vector
-/// `displacement_m`, the cell data `region` with its `region_id`/`region_name` lookup and
+/// `displacement_m`, the cell data `region` with its `region_id` and `region:NAME` lookup and
 /// the time as field data `TimeValue` (the module's conventions). Existing files of those
 /// names in `DIR` are overwritten.
 #[derive(Debug)]
@@ -328,30 +328,36 @@ impl SurfaceSeriesWriter {
     }
 }
 
-/// Reads the field data String array `name` of a `.vtu` text written here (or by VTK in
-/// ASCII): the strings in order. None when the array is absent or not a String array of
-/// byte values.
-pub fn field_strings(vtu: &str, name: &str) -> Option<Vec<String>> {
+/// The region names of a `.vtu` text written here: tag -> name, from the field data's
+/// [`REGION_NAME_PREFIX`] arrays (XML entities decoded). None without field data or when
+/// such an array does not hold one integer.
+pub fn region_names(vtu: &str) -> Option<BTreeMap<i32, String>> {
     let field = vtu
         .split("<FieldData>")
         .nth(1)?
         .split("</FieldData>")
         .next()?;
-    let tag = format!("Name=\"{}\"", xml_attr(name));
-    let (_, rest) = field
-        .split("<DataArray")
-        .filter_map(|a| a.split_once('>'))
-        .find(|(attrs, _)| attrs.contains(&tag) && attrs.contains("type=\"String\""))?;
-    let mut out = Vec::new();
-    let mut cur = Vec::new();
-    for t in rest.split("</DataArray>").next()?.split_whitespace() {
-        match t.parse::<i16>().ok()? {
-            0 => out.push(String::from_utf8(std::mem::take(&mut cur)).ok()?),
-            // A signed char's bits are the byte.
-            b => cur.push(b as u8),
-        }
+    let prefix = format!("Name=\"{REGION_NAME_PREFIX}");
+    let mut out = BTreeMap::new();
+    for (attrs, rest) in field.split("<DataArray").filter_map(|a| a.split_once('>')) {
+        let Some((_, name)) = attrs.split_once(&prefix) else {
+            continue;
+        };
+        let name = name.split('"').next()?;
+        let name = name
+            .replace("&lt;", "<")
+            .replace("&gt;", ">")
+            .replace("&quot;", "\"")
+            .replace("&amp;", "&");
+        let values: Vec<&str> = rest
+            .split("</DataArray>")
+            .next()?
+            .split_whitespace()
+            .collect();
+        let [tag] = values[..] else { return None };
+        out.insert(tag.parse().ok()?, name);
     }
-    cur.is_empty().then_some(out)
+    Some(out)
 }
 
 #[cfg(test)]
@@ -437,8 +443,12 @@ mod surface_series_tests {
         // names it; the unused name 9 is left out.
         let text = fs::read_to_string(&path).unwrap();
         assert_eq!(
-            field_strings(&text, REGION_NAME).unwrap(),
-            ["uterus", "", "right tube", ""]
+            region_names(&text).unwrap(),
+            BTreeMap::from([(1, "uterus".to_string()), (3, "right tube".to_string())])
+        );
+        assert!(
+            !text.contains("type=\"String\""),
+            "meshio refuses String arrays"
         );
         assert!(
             text.contains(&format!(
@@ -458,24 +468,39 @@ mod surface_series_tests {
         let _ = fs::remove_dir_all(&dir);
     }
 
-    /// A name is spelt as VTK's writer spells an ASCII String array: its bytes (as signed
-    /// chars), then 0; the reader takes back what the writer wrote, non-ASCII included.
+    /// Names become array names, XML-escaped, and read back: non-ASCII, markup characters
+    /// and a repeated name (told apart by its tag); an unnamed or unused region has none.
     #[test]
-    fn string_array_spelling() {
-        assert_eq!(ascii_string("ab"), "97 98 0");
-        assert_eq!(ascii_string(""), "0");
-        let names: BTreeMap<i32, String> =
-            [(1, "ovary é".to_string()), (2, "tube".to_string())].into();
+    fn region_names_are_numeric_field_arrays() {
+        let names: BTreeMap<i32, String> = [
+            (1, "ovary é"),
+            (2, "tube <left> & \"right\""),
+            (3, "tube <left> & \"right\""),
+            (5, ""),
+            (9, "unused"),
+        ]
+        .map(|(r, n)| (r, n.to_string()))
+        .into();
         let xml = format!(
             "<FieldData>\n{}</FieldData>",
-            region_lookup_xml(&[2, 1, 2], &names)
+            region_lookup_xml(&[2, 1, 3, 5, 2], &names)
         );
-        assert!(xml.contains("-61 -87 0"), "é is the bytes C3 A9: {xml}");
-        assert_eq!(
-            field_strings(&xml, REGION_NAME).unwrap(),
-            ["ovary é", "tube"]
+        assert!(
+            xml.contains("Name=\"region:tube &lt;left&gt; &amp; &quot;right&quot;\""),
+            "{xml}"
         );
-        assert_eq!(field_strings(&xml, REGION_ID), None, "not a String array");
+        assert!(!xml.contains("String"), "{xml}");
+        let read = region_names(&xml).unwrap();
+        assert_eq!(read.len(), 3, "{read:?}");
+        assert_eq!(read[&1], "ovary é");
+        assert_eq!(read[&2], "tube <left> & \"right\"");
+        assert_eq!(read[&3], "tube <left> & \"right\" (tag 3)");
+        assert!(
+            xml.contains(&format!(
+                "Name=\"{REGION_ID}\" NumberOfTuples=\"4\" format=\"ascii\">\n        1 2 3 5\n"
+            )),
+            "{xml}"
+        );
     }
 
     #[test]

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use super::{io_err, PointField, DISPLACEMENT, REGION, REGION_ID, REGION_NAME};
+use super::{io_err, PointField, DISPLACEMENT, REGION, REGION_ID, REGION_NAME_PREFIX};
 use crate::mesh::MeshError;
 
 /// `f64` in a form that reads back to the same value (`{:e}` is shortest round-trip).
@@ -110,44 +110,40 @@ pub(super) fn cells_xml<'a>(
     c
 }
 
-/// The region lookup of the field data: `region_id` (Int32) and `region_name` (String),
-/// one entry per region tag that some cell has, ascending, named from `names` (empty when
-/// unnamed).
+/// The region lookup of the field data: `region_id` (Int32), every region tag some cell
+/// has, ascending; and per named region among them an Int32 array of one value, its tag,
+/// named [`REGION_NAME_PREFIX`] + the name (a second region of the same name gets
+/// ` (tag N)` after it). Numbers only: meshio refuses a `String` array ("Illegal data type"),
+/// and ParaView shows the names as the arrays' names (*Information*, *Data Arrays*).
 pub(super) fn region_lookup_xml(cell_regions: &[i32], names: &BTreeMap<i32, String>) -> String {
     let ids: std::collections::BTreeSet<i32> = cell_regions.iter().copied().collect();
-    let names: Vec<&str> = ids
-        .iter()
-        .map(|r| names.get(r).map_or("", String::as_str))
-        .collect();
     let mut s = String::new();
     let _ = writeln!(
         s,
         "      <DataArray type=\"Int32\" Name=\"{REGION_ID}\" NumberOfTuples=\"{}\" format=\"ascii\">",
         ids.len()
     );
-    let ids: Vec<String> = ids.iter().map(i32::to_string).collect();
-    for chunk in ids.chunks(32) {
+    let list: Vec<String> = ids.iter().map(i32::to_string).collect();
+    for chunk in list.chunks(32) {
         let _ = writeln!(s, "        {}", chunk.join(" "));
     }
     s.push_str("      </DataArray>\n");
-    let _ = writeln!(
-        s,
-        "      <DataArray type=\"String\" Name=\"{REGION_NAME}\" NumberOfTuples=\"{}\" format=\"ascii\">",
-        names.len()
-    );
-    for name in names {
-        let _ = writeln!(s, "        {}", ascii_string(name));
+    let mut used = std::collections::BTreeSet::new();
+    for id in &ids {
+        let Some(name) = names.get(id).filter(|n| !n.is_empty()) else {
+            continue;
+        };
+        let mut array = format!("{REGION_NAME_PREFIX}{name}");
+        if !used.insert(array.clone()) {
+            array = format!("{array} (tag {id})");
+        }
+        let _ = writeln!(
+            s,
+            "      <DataArray type=\"Int32\" Name=\"{}\" NumberOfTuples=\"1\" format=\"ascii\">\n        {id}\n      </DataArray>",
+            xml_attr(&array)
+        );
     }
-    s.push_str("      </DataArray>\n");
     s
-}
-
-/// A string as VTK's XML writer spells it in an ASCII `String` array: each byte as a
-/// (signed char) number, then the terminating 0.
-pub(super) fn ascii_string(name: &str) -> String {
-    let mut v: Vec<String> = name.bytes().map(|b| (b as i8).to_string()).collect();
-    v.push("0".into());
-    v.join(" ")
 }
 
 /// The parts of a frame that are the same in every frame.
