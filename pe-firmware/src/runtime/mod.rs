@@ -24,6 +24,7 @@ mod load;
 mod marks;
 pub mod pose;
 pub mod program;
+mod ramps;
 pub mod storage;
 
 use link_proto::{Face, Links, Values};
@@ -309,6 +310,8 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         let points = &path_points[..c.path_points as usize];
         let loads = &loads[..c.loads as usize];
         let records = external.get(start as usize..end as usize).unwrap_or(&[]);
+        // Each load ramp once at `t`, however many records share it.
+        let mut ramps = ramps::RampValues::new();
         for x in records {
             let Some(f) = force.get_mut(x.node as usize) else {
                 continue;
@@ -322,7 +325,7 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
                 }
                 *f = v;
             } else {
-                let fe = external_force(x, points, loads, contact.force, t);
+                let fe = external_force(x, points, loads, contact.force, t, &mut ramps);
                 for i in 0..3 {
                     f[i] -= fe[i];
                 }
@@ -525,7 +528,8 @@ fn add_reaction<T: Real>(r: &mut [f64; 3], total: [T; 3]) {
 }
 
 /// The external force of a record with loads or a contact node: gravity, then each load
-/// (ramped by its path at `t`), then the contact force, in the serial solver's order.
+/// (ramped by its path at `t`, from `ramps`), then the contact force, in the serial
+/// solver's order.
 #[inline(always)]
 fn external_force<T: Real>(
     x: &ExternalRecord<T>,
@@ -533,13 +537,14 @@ fn external_force<T: Real>(
     loads: &[LoadRecord],
     contact_force: &[[f64; 3]],
     t: f64,
+    ramps: &mut ramps::RampValues,
 ) -> [T; 3] {
     let mut fe = x.gravity;
     // (A build without loads or contact loads no image that has them.)
     if cfg!(feature = "loads") {
         let first = x.first_load as usize;
         for l in loads.get(first..first + x.loads as usize).unwrap_or(&[]) {
-            let s = l.ramp.map_or(1.0, |p| path_value(points, p, t)[0]);
+            let s = l.ramp.map_or(1.0, |p| ramps.factor(points, p, t));
             for i in 0..3 {
                 fe[i] += T::from_f64(l.force[i] * s);
             }
