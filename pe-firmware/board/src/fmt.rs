@@ -33,12 +33,13 @@ pub fn init_rtt_section() {
         static mut __ertt: u32;
         static __sirtt: u32;
     }
-    // SAFETY: the linker's symbols bound the section (word-aligned) and its load image;
-    // nothing has used the section yet (no log before this).
+    // SAFETY: the linker's symbols bound the section and its load image; nothing has used
+    // the section yet (no log before this).
     unsafe {
-        let start = core::ptr::addr_of_mut!(__srtt);
-        let end = core::ptr::addr_of_mut!(__ertt);
-        let words = (end as usize - start as usize) / 4;
-        core::ptr::copy_nonoverlapping(core::ptr::addr_of!(__sirtt), start, words);
+        crate::section::copy_from_flash(
+            core::ptr::addr_of_mut!(__srtt),
+            core::ptr::addr_of_mut!(__ertt),
+            core::ptr::addr_of!(__sirtt),
+        )
     }
 }

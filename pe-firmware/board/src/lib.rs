@@ -29,5 +29,6 @@ pub mod fpu;
 pub mod links;
 pub mod region;
 pub mod report;
+mod section;
 pub mod storage;
 pub mod uart;

@@ -183,12 +183,14 @@ unsafe fn init_link_section() {
         static mut __elinks: u32;
         static __silinks: u32;
     }
-    // SAFETY: the linker's symbols bound the section (word-aligned) and its load image.
+    // SAFETY: the linker's symbols bound the section and its load image; the caller's
+    // "once, before anything reads LINKS".
     unsafe {
-        let start = core::ptr::addr_of_mut!(__slinks);
-        let end = core::ptr::addr_of_mut!(__elinks);
-        let words = (end as usize - start as usize) / 4;
-        core::ptr::copy_nonoverlapping(core::ptr::addr_of!(__silinks), start, words);
+        crate::section::copy_from_flash(
+            core::ptr::addr_of_mut!(__slinks),
+            core::ptr::addr_of_mut!(__elinks),
+            core::ptr::addr_of!(__silinks),
+        )
     }
 }
 

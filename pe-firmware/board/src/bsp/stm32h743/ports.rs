@@ -301,18 +301,14 @@ pub(super) unsafe fn start_port(p: usize) {
     tx.cr.write(|w| tx_stream_cr(w));
 }
 
-/// A receive stream's DMA_SxCR (RM0433, "DMA stream x configuration register (DMA_SxCR)"):
-/// peripheral to memory, circular, memory address incremented, bytes both sides, high
-/// priority, TRBUFF set. TRBUFF (bit 20): RM0433 says it must be set when the stream serves
-/// a U(S)ART (bufferable transfers); stm32h7xx-hal sets it for every serial target
-/// (`dma/mod.rs`, `if PERIPHERAL::TRBUFF`), and NuttX found transfers unstable without it
-/// (apache/nuttx PR 4331). Not yet enabled.
-pub fn rx_stream_cr(w: &mut cr::W) -> &mut cr::W {
-    w.dir()
-        .peripheral_to_memory()
-        .circ()
-        .enabled()
-        .minc()
+/// What every port's streams share in DMA_SxCR (RM0433, "DMA stream x configuration
+/// register (DMA_SxCR)"): memory address incremented, bytes both sides, high priority,
+/// TRBUFF set. TRBUFF (bit 20): RM0433 says it must be set when the stream serves a U(S)ART
+/// (bufferable transfers); stm32h7xx-hal sets it for every serial target (`dma/mod.rs`,
+/// `if PERIPHERAL::TRBUFF`), and NuttX found transfers unstable without it (apache/nuttx
+/// PR 4331). Not yet enabled.
+fn byte_stream_cr(w: &mut cr::W) -> &mut cr::W {
+    w.minc()
         .incremented()
         .psize()
         .bits8()
@@ -324,23 +320,14 @@ pub fn rx_stream_cr(w: &mut cr::W) -> &mut cr::W {
         .enabled()
 }
 
-/// A transmit stream's DMA_SxCR: memory to peripheral, normal mode, otherwise as
-/// [`rx_stream_cr`] (TRBUFF set). Not yet enabled.
+/// A receive stream's DMA_SxCR: peripheral to memory, circular, as [`byte_stream_cr`].
+pub fn rx_stream_cr(w: &mut cr::W) -> &mut cr::W {
+    byte_stream_cr(w.dir().peripheral_to_memory().circ().enabled())
+}
+
+/// A transmit stream's DMA_SxCR: memory to peripheral, normal mode, as [`byte_stream_cr`].
 pub fn tx_stream_cr(w: &mut cr::W) -> &mut cr::W {
-    w.dir()
-        .memory_to_peripheral()
-        .circ()
-        .disabled()
-        .minc()
-        .incremented()
-        .psize()
-        .bits8()
-        .msize()
-        .bits8()
-        .pl()
-        .high()
-        .trbuff()
-        .enabled()
+    byte_stream_cr(w.dir().memory_to_peripheral().circ().disabled())
 }
 
 #[cfg(test)]
