@@ -11,9 +11,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
-use pe_firmware::physics::{
-    HourglassControl, LameParameters, MaterialLaw, ReferenceHex, Volumetric,
-};
+use pe_firmware::physics::{LameParameters, MaterialLaw, ReferenceHex, Volumetric};
 
 use crate::mesh::Mesh;
 use crate::scene::{Law, MaterialSpec, RegionRef, Scene, Selector, SolverSpec};
@@ -405,11 +403,6 @@ fn check_solver(s: &SolverSpec, has_contact: bool) -> Result<()> {
         if !ok {
             let bound = if strict { ">" } else { ">=" };
             bail!("[solver] {key} must be {bound} {least}, got {value}");
-        }
-    }
-    if let HourglassControl::Scalar(k) = s.hourglass {
-        if !(k >= 0.0 && k.is_finite()) {
-            bail!("[solver] hourglass must be \"physical\" or a coefficient >= 0, got {k}");
         }
     }
     if has_contact && s.adapt_dt == Some(true) {

@@ -102,9 +102,10 @@ pub mod hourglass_text {
             Coefficient(f64),
         }
         match Text::deserialize(d)? {
-            Text::Coefficient(k) => Ok(HourglassControl::Scalar(k)),
-            Text::Name(n) => hourglass_from_text(&n).map_err(serde::de::Error::custom),
+            Text::Coefficient(k) => coefficient(k),
+            Text::Name(n) => hourglass_from_text(&n),
         }
+        .map_err(serde::de::Error::custom)
     }
 }
 
@@ -114,11 +115,23 @@ pub fn hourglass_from_text(text: &str) -> Result<HourglassControl, String> {
     if text == "physical" {
         return Ok(HourglassControl::Physical);
     }
-    text.parse::<f64>()
-        .map(HourglassControl::Scalar)
-        .map_err(|_| {
-            format!("hourglass \"{text}\": expected \"physical\" or the scalar form's coefficient (a number, e.g. 0.1)")
-        })
+    match text.parse::<f64>() {
+        Ok(k) => coefficient(k),
+        Err(_) => Err(format!(
+            "hourglass \"{text}\": expected \"physical\" or the scalar form's coefficient (a number, e.g. 0.1)"
+        )),
+    }
+}
+
+/// The scalar form's coefficient `k`, refused unless finite and `>= 0`.
+fn coefficient(k: f64) -> Result<HourglassControl, String> {
+    if k >= 0.0 && k.is_finite() {
+        Ok(HourglassControl::Scalar(k))
+    } else {
+        Err(format!(
+            "hourglass must be \"physical\" or a coefficient >= 0, got {k}"
+        ))
+    }
 }
 
 /// The hyperelastic law of a `[material]`.
