@@ -25,7 +25,6 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use pe_firmware::image::{Integration, Precision};
-use pe_firmware::physics::HourglassControl;
 use pe_firmware::profile::BoardProfile;
 use serde::Serialize;
 
@@ -60,8 +59,7 @@ pub struct Config {
     pub precision: Precision,
     #[serde(serialize_with = "crate::scene::settings::integration_text::serialize")]
     pub integration: Integration,
-    #[serde(serialize_with = "crate::scene::settings::hourglass_text::serialize")]
-    pub hourglass: HourglassControl,
+    pub hourglass: f64,
     pub dt_safety: f64,
     pub level: String,
     pub mass_scaling: f64,
@@ -99,8 +97,7 @@ pub struct Row {
     pub precision: Precision,
     #[serde(serialize_with = "crate::scene::settings::integration_text::serialize")]
     pub integration: Integration,
-    #[serde(serialize_with = "crate::scene::settings::hourglass_text::serialize")]
-    pub hourglass: HourglassControl,
+    pub hourglass: f64,
     pub dt_safety: f64,
     pub level: String,
     pub mass_scaling: f64,
@@ -221,13 +218,7 @@ pub fn grid(base: &Scene, levels: &Levels, base_level: &str) -> Vec<Config> {
         }
     }
     if b.integration == Integration::Reduced {
-        let forms = [
-            HourglassControl::Physical,
-            HourglassControl::Scalar(0.05),
-            HourglassControl::Scalar(0.1),
-            HourglassControl::Scalar(0.2),
-        ];
-        for h in forms {
+        for h in [0.05, 0.1, 0.2] {
             push(Config {
                 varied: "hourglass".into(),
                 hourglass: h,

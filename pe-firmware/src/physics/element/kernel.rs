@@ -28,7 +28,14 @@ pub trait Element<T: Real>: HexElement<T> + Copy {
     fn from_reference(r: &ReferenceHex, connectivity: Connectivity, hourglass: Hourglass) -> Self;
 }
 
-pub use super::hourglass::Hourglass;
+/// What a kind with hourglass control takes besides the geometry: the material's hourglass
+/// modulus ([`crate::physics::MaterialLaw::hourglass_modulus`], Pa) and the scene's
+/// coefficient `κ_hg`. A kind without hourglass control ignores it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hourglass {
+    pub modulus_pa: f64,
+    pub coefficient: f64,
+}
 
 /// An element that turns nodal displacements into internal nodal forces.
 pub trait HexElement<T: Real> {
