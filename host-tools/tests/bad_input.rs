@@ -107,8 +107,8 @@ fn option_domains_are_checked_before_work() {
     );
 }
 
-/// A scene's `[solver]` keys: both `steps` and `duration`, a zero `output_interval` and a
-/// negative `damping` are refused naming the key (the last said "hourglass and damping >=
+/// A scene's `[solver]` keys: both `steps` and `duration`, a zero `output_interval`, a
+/// negative `damping` and a negative or misspelt `hourglass` are refused naming the key (the last said "hourglass and damping >=
 /// 0" without saying which). The control scene, with none of them, is accepted.
 #[test]
 fn scene_solver_keys_are_named() {
@@ -140,6 +140,17 @@ fn scene_solver_keys_are_named() {
             &["output_interval must be > 0"],
         ),
         ("steps = 10\ndamping = -1.0\n", &["damping must be >= 0"]),
+        (
+            "steps = 10\nhourglass = -0.1\n",
+            &[
+                "hourglass must be \"physical\" or a coefficient >= 0, got -0.1",
+                "line 14",
+            ],
+        ),
+        (
+            "steps = 10\nhourglass = \"phys\"\n",
+            &["hourglass \"phys\": expected \"physical\"", "line 14"],
+        ),
     ] {
         std::fs::write(&p, scene(solver)).unwrap();
         refused(&["solve", p.to_str().unwrap()], needles);

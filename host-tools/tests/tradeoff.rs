@@ -138,7 +138,7 @@ fn tradeoff_grid_on_a_box_scene() {
         }
     }
     for (factor, values) in [
-        ("hourglass", vec!["0.05", "0.1", "0.2"]),
+        ("hourglass", vec!["physical", "0.05", "0.1", "0.2"]),
         ("dt_safety", vec!["0.5", "0.9"]),
         ("level", vec!["x0.5", "x1", "x2"]),
         ("mass_scaling", vec!["1.0", "4.0", "16.0"]),
@@ -176,7 +176,7 @@ fn tradeoff_grid_on_a_box_scene() {
                 && is(r, "precision", "f64")
                 && is(r, "integration", "reduced")
                 && is(r, "mass_scaling", "1.0")
-                && is(r, "hourglass", "0.1")
+                && is(r, "hourglass", "physical")
                 && is(r, "dt_safety", "0.9")
         })
     };

@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use anyhow::{anyhow, Result};
 use pe_firmware::image::{Integration, Precision};
-use pe_firmware::physics::{HexElement, Real};
+use pe_firmware::physics::{Element, HexBox, HexCuboid, HexElement, HexReduced, Real};
 
 use crate::problem::Problem;
 use crate::scene::{builders, Scene};
@@ -162,7 +162,6 @@ pub fn element_step_flops(
     let scene = bench_scene(32, integration, Precision::F64)?;
     let p = Problem::from_scene(&scene, std::path::Path::new("."))?;
     let law = p.laws[0].cast::<Counted>();
-    let modulus = p.laws[0].hourglass_modulus();
     let u: [[Counted; 3]; 8] = core::array::from_fn(|a| {
         core::array::from_fn(|i| Counted(1e-4 * ((a * 3 + i) as f64).sin()))
     });
@@ -173,23 +172,25 @@ pub fn element_step_flops(
     let turned = pe_firmware::physics::ReferenceHex::new(&turned).map_err(|e| anyhow!("{e}"))?;
     x[6][0] += 0.1 * cell.characteristic_length;
     let distorted = pe_firmware::physics::ReferenceHex::new(&x).map_err(|e| anyhow!("{e}"))?;
-    let (nodes, m, k) = (p.mesh.cells[0], 0, p.solver.hourglass);
+    let hourglass = pe_firmware::physics::Hourglass::of_law(&p.laws[0], p.solver.hourglass);
+    let connectivity = pe_firmware::physics::Connectivity {
+        nodes: p.mesh.cells[0],
+        material: 0,
+    };
+    let (nodes, m) = (p.mesh.cells[0], 0);
     let mut out = Vec::new();
     take_flops();
     if integration == Integration::Full {
         let _ = cell.full::<Counted>(nodes, m).internal_forces(&law, &u);
         out.push(("full", take_flops()));
     } else {
-        let _ = cell
-            .cuboid::<Counted>(nodes, m, modulus, k)
+        let _ = HexCuboid::<Counted>::from_reference(&cell, connectivity, hourglass)
             .internal_forces(&law, &u);
         out.push(("cuboid", take_flops()));
-        let _ = turned
-            .parallelepiped::<Counted>(nodes, m, modulus, k)
+        let _ = HexBox::<Counted>::from_reference(&turned, connectivity, hourglass)
             .internal_forces(&law, &u);
         out.push(("parallelepiped", take_flops()));
-        let _ = distorted
-            .reduced::<Counted>(nodes, m, modulus, k)
+        let _ = HexReduced::<Counted>::from_reference(&distorted, connectivity, hourglass)
             .internal_forces(&law, &u);
         out.push(("general", take_flops()));
     }

@@ -40,10 +40,7 @@ pub fn kind_of(p: &Problem, e: usize) -> ElementKind {
 /// place the problem's cells become element records (the serial solver's and every image's).
 pub fn record_of<T: Real, E: Element<T>>(p: &Problem, e: usize, nodes: [u32; 8]) -> E {
     let material = p.cell_material[e];
-    let hourglass = Hourglass {
-        modulus_pa: p.laws[material as usize].hourglass_modulus(),
-        coefficient: p.solver.hourglass,
-    };
+    let hourglass = Hourglass::of_law(&p.laws[material as usize], p.solver.hourglass);
     E::from_reference(&p.reference[e], Connectivity { nodes, material }, hourglass)
 }
 

@@ -392,7 +392,6 @@ fn check_solver(s: &SolverSpec, has_contact: bool) -> Result<()> {
     }
     for (key, value, least, strict) in [
         ("dt_safety", s.dt_safety, 0.0, true),
-        ("hourglass", s.hourglass, 0.0, false),
         ("damping", s.damping, 0.0, false),
         ("output_interval", s.output_interval, 0.0, true),
     ] {

@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 
 use pe_firmware::image::Segment;
 pub use pe_firmware::image::{Integration, Precision};
+use pe_firmware::physics::HourglassControl;
 use serde::{Deserialize, Serialize};
 
 pub use args::SceneArgs;
@@ -288,8 +289,11 @@ pub struct SolverSpec {
     /// "reduced" | "full"
     #[serde(with = "settings::integration_text")]
     pub integration: Integration,
-    /// Hourglass coefficient κ_hg (reduced integration only).
-    pub hourglass: f64,
+    /// Hourglass control of reduced integration: `"physical"` (the default: a stiffness per
+    /// mode and direction from each cell and its material) or a number, the coefficient
+    /// κ_hg of the seed's scalar form (`pe_firmware::physics::element::hourglass`).
+    #[serde(with = "settings::hourglass_text")]
+    pub hourglass: HourglassControl,
     /// Mass-proportional damping α (1/s).
     pub damping: f64,
     /// dt = dt_safety × dt_critical, unless `dt` is given.
@@ -338,7 +342,7 @@ impl Default for SolverSpec {
         SolverSpec {
             precision: Precision::F64,
             integration: Integration::Reduced,
-            hourglass: 0.1,
+            hourglass: HourglassControl::DEFAULT,
             damping: 0.0,
             dt_safety: 0.9,
             dt: None,

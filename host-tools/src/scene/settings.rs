@@ -3,6 +3,7 @@
 //! reports) and the material law, each with its TOML spelling, and their command-line forms.
 
 use pe_firmware::image::{Integration, Precision};
+use pe_firmware::physics::HourglassControl;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 /// One of a closed set of names: parsed from and written as its text.
@@ -80,6 +81,56 @@ pub mod integration_text {
     }
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Integration, D::Error> {
         deserialize_named(d)
+    }
+}
+
+/// `#[serde(with = "hourglass_text")]`: a [`HourglassControl`] as `"physical"` or the
+/// scalar form's coefficient `κ_hg` (a number).
+pub mod hourglass_text {
+    use super::*;
+    pub fn serialize<S: Serializer>(v: &HourglassControl, s: S) -> Result<S::Ok, S::Error> {
+        match v {
+            HourglassControl::Physical => s.serialize_str("physical"),
+            HourglassControl::Scalar(k) => s.serialize_f64(*k),
+        }
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<HourglassControl, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Text {
+            Name(String),
+            Coefficient(f64),
+        }
+        match Text::deserialize(d)? {
+            Text::Coefficient(k) => coefficient(k),
+            Text::Name(n) => hourglass_from_text(&n),
+        }
+        .map_err(serde::de::Error::custom)
+    }
+}
+
+/// A hourglass control from its text: `"physical"` or a coefficient (`"0.1"`), e.g. a
+/// command line's.
+pub fn hourglass_from_text(text: &str) -> Result<HourglassControl, String> {
+    if text == "physical" {
+        return Ok(HourglassControl::Physical);
+    }
+    match text.parse::<f64>() {
+        Ok(k) => coefficient(k),
+        Err(_) => Err(format!(
+            "hourglass \"{text}\": expected \"physical\" or the scalar form's coefficient (a number, e.g. 0.1)"
+        )),
+    }
+}
+
+/// The scalar form's coefficient `k`, refused unless finite and `>= 0`.
+fn coefficient(k: f64) -> Result<HourglassControl, String> {
+    if k >= 0.0 && k.is_finite() {
+        Ok(HourglassControl::Scalar(k))
+    } else {
+        Err(format!(
+            "hourglass must be \"physical\" or a coefficient >= 0, got {k}"
+        ))
     }
 }
 

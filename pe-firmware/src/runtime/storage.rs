@@ -25,6 +25,17 @@ pub type LinkBuffers = link_proto::StreamLinks<(), ()>;
 /// Displacements a partner sent for one contact node, by step parity: (step + 1, u).
 pub type RemoteSlot = [(u32, [f64; 3]); 2];
 
+/// The parallelepipeds and cuboids a board's storage holds per node, as a fraction: a
+/// third of the nodes each. A block of hexahedra has fewer cells than nodes (a cube of
+/// `n³` nodes has `(n − 1)³` cells: 0.67 at 512 nodes), but the physical hourglass form's
+/// records (384 and 216 bytes in f64) left a 512-KiB board no room for general elements at
+/// a table per node, and 151 at half (too few for the built-in coarse scene on two
+/// boards, 176 each); at a third, each table holds some three times what a board runs in
+/// real time (the measured cost allows some 35 general cells, 47 parallelepipeds or 60
+/// cuboids at 10 kHz in f64). A block beyond a table is refused by the compiler, naming
+/// the board and the table. (One pool shared by the three tables would hold any mix.)
+pub const BLOCK_CELLS_PER_NODE: (usize, usize) = (1, 3);
+
 /// How many records of each kind a board's storage holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Capacities {
@@ -80,8 +91,8 @@ impl Capacities {
     }
 
     /// What a board of profile `p` holds for scalar `T` and element `E`: the profile's
-    /// table (its nodes, at most the frames' limit), as many parallelepipeds and as many
-    /// cuboids as nodes with reduced integration (a board's block of cells has fewer cells than nodes), and as
+    /// table (its nodes, at most the frames' limit), parallelepipeds and cuboids for a third of
+    /// the nodes each with reduced integration ([`BLOCK_CELLS_PER_NODE`]), and as
     /// many general elements as the RAM allows after the reserve (stack, the runtime), the
     /// link buffers ([`LinkBuffers`], unless the profile gives them a region of their own)
     /// and the rest of the storage.
@@ -97,11 +108,11 @@ impl Capacities {
             materials: p.materials_max as usize,
             elements: 0,
             boxes: match E::INTEGRATION {
-                Integration::Reduced => nodes,
+                Integration::Reduced => nodes * BLOCK_CELLS_PER_NODE.0 / BLOCK_CELLS_PER_NODE.1,
                 Integration::Full => 0,
             },
             cuboids: match E::INTEGRATION {
-                Integration::Reduced => nodes,
+                Integration::Reduced => nodes * BLOCK_CELLS_PER_NODE.0 / BLOCK_CELLS_PER_NODE.1,
                 Integration::Full => 0,
             },
             nodes,

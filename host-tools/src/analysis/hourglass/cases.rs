@@ -4,6 +4,7 @@
 
 use anyhow::Result;
 use pe_firmware::image::Integration;
+use pe_firmware::physics::HourglassControl;
 
 use super::{mean, problem_on, traction_loads, Grid, Statics};
 
@@ -125,7 +126,7 @@ impl Cantilever {
     }
 
     /// Mean tip deflection (y) of the small-load static solution for a unit load.
-    pub fn tip(&self, integration: Integration, hourglass: f64) -> Result<f64> {
+    pub fn tip(&self, integration: Integration, hourglass: HourglassControl) -> Result<f64> {
         let g = self.grid();
         let nodes = g.mesh.nodes.clone();
         let p = problem_on(g.mesh.clone(), self.e, self.nu, integration, hourglass)?;
@@ -165,7 +166,7 @@ impl Cantilever {
 pub const COOK_REFERENCE: f64 = 25.18;
 
 /// Cook's membrane on `m x m` cells: the top right corner's vertical displacement.
-pub fn cook_tip(m: usize, integration: Integration, hourglass: f64) -> Result<f64> {
+pub fn cook_tip(m: usize, integration: Integration, hourglass: HourglassControl) -> Result<f64> {
     let g = Grid::new([m, m, 1], |s, _| {
         let x = 48.0 * s[0];
         let (y0, y1) = (44.0 * s[0], 44.0 + 16.0 * s[0]);
@@ -220,7 +221,13 @@ pub fn neo_hookean_uniaxial(e: f64, nu: f64, l: f64) -> (f64, f64) {
 /// faces x = 0, y = 0, z = 0 held in its normal direction, the top moved down, the other
 /// faces free): the lateral stretch (mean over the face x = 1) and the nominal stress
 /// (the top face's reaction over the reference area).
-pub fn block_compression(n: usize, e: f64, nu: f64, l: f64, hourglass: f64) -> Result<(f64, f64)> {
+pub fn block_compression(
+    n: usize,
+    e: f64,
+    nu: f64,
+    l: f64,
+    hourglass: HourglassControl,
+) -> Result<(f64, f64)> {
     let g = Grid::new([n, n, n], |s, [i, j, k]| {
         let interior = [i, j, k].iter().all(|&c| c > 0 && c < n);
         if !interior {

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 
 use anyhow::Result;
 use pe_firmware::image::Integration;
+use pe_firmware::physics::HourglassControl;
 
 use crate::geom::{cross, norm};
 use crate::mesh::grid::GridNumbering;
@@ -134,7 +135,7 @@ pub fn problem_on(
     e: f64,
     nu: f64,
     integration: Integration,
-    hourglass: f64,
+    hourglass: HourglassControl,
 ) -> Result<Problem> {
     let text = format!(
         "[mesh]\ngenerate = {{ kind = \"box\", size = [1.0, 1.0, 1.0], cells = [1, 1, 1] }}\n\

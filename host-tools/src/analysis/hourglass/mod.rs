@@ -1,5 +1,5 @@
-//! Calibration of the hourglass coefficient (`[solver] hourglass`) against references that
-//! do not depend on it: beam theory for MacNeal and Harder's straight cantilever (regular,
+//! The hourglass controls (`[solver] hourglass`: the physical form and the scalar form's
+//! coefficients) against references that do not depend on them: beam theory for MacNeal and Harder's straight cantilever (regular,
 //! trapezoidal and parallelogram cells), the converged value of Cook's membrane, and the
 //! closed form of a neo-Hookean block under homogeneous compression.
 //!
@@ -15,6 +15,7 @@
 
 use anyhow::Result;
 use pe_firmware::image::Integration;
+use pe_firmware::physics::HourglassControl;
 
 mod cases;
 mod grid;
@@ -24,8 +25,17 @@ pub use cases::*;
 pub use grid::*;
 pub use statics::*;
 
-/// The coefficients the study sweeps.
-pub const COEFFICIENTS: [f64; 7] = [0.01, 0.03, 0.05, 0.1, 0.2, 0.3, 0.5];
+/// The forms the study compares: the physical form and the scalar one's coefficients.
+pub const COEFFICIENTS: [HourglassControl; 8] = [
+    HourglassControl::Physical,
+    HourglassControl::Scalar(0.01),
+    HourglassControl::Scalar(0.03),
+    HourglassControl::Scalar(0.05),
+    HourglassControl::Scalar(0.1),
+    HourglassControl::Scalar(0.2),
+    HourglassControl::Scalar(0.3),
+    HourglassControl::Scalar(0.5),
+];
 
 /// One row of a table: a case's name, its reference and its result at each coefficient
 /// (and with full integration, which has no hourglass control).
@@ -41,7 +51,7 @@ fn pct(v: f64, r: f64) -> String {
 }
 
 /// Markdown table of rows: error in % of the reference per coefficient.
-pub fn table(title: &str, rows: &[Row], coefficients: &[f64]) -> String {
+pub fn table(title: &str, rows: &[Row], coefficients: &[HourglassControl]) -> String {
     let mut s = format!("#### {title}\n\n| case | reference |");
     for c in coefficients {
         s += &format!(" {c} |");
@@ -62,16 +72,16 @@ pub fn table(title: &str, rows: &[Row], coefficients: &[f64]) -> String {
 }
 
 fn sweep(
-    coefficients: &[f64],
+    coefficients: &[HourglassControl],
     name: String,
     reference: f64,
-    run: impl Fn(Integration, f64) -> Result<f64>,
+    run: impl Fn(Integration, HourglassControl) -> Result<f64>,
 ) -> Result<Row> {
     let reduced = coefficients
         .iter()
         .map(|&c| run(Integration::Reduced, c))
         .collect::<Result<Vec<_>>>()?;
-    let full = run(Integration::Full, 0.0)?;
+    let full = run(Integration::Full, HourglassControl::DEFAULT)?;
     eprintln!("  {name}: done");
     Ok(Row {
         name,
@@ -82,7 +92,7 @@ fn sweep(
 }
 
 /// The whole study as markdown: error (%) of each case at each coefficient.
-pub fn study(coefficients: &[f64]) -> Result<String> {
+pub fn study(coefficients: &[HourglassControl]) -> Result<String> {
     let mut out = String::new();
     // (a) MacNeal-Harder cantilever.
     for load in [TipLoad::Shear, TipLoad::Moment] {
@@ -101,7 +111,7 @@ pub fn study(coefficients: &[f64]) -> Result<String> {
 
 /// MacNeal-Harder's cantilever under `load`: regular, trapezoidal and parallelogram cells
 /// through several depths, then cubic cells (regular and slanted).
-fn macneal_harder_table(coefficients: &[f64], load: TipLoad) -> Result<String> {
+fn macneal_harder_table(coefficients: &[HourglassControl], load: TipLoad) -> Result<String> {
     let mut rows = Vec::new();
     for cells in [Cells::Regular, Cells::Trapezoidal, Cells::Parallelogram] {
         let depths: &[usize] = if cells == Cells::Regular {
@@ -153,7 +163,7 @@ fn macneal_harder_table(coefficients: &[f64], load: TipLoad) -> Result<String> {
 }
 
 /// Soft slender cantilevers (L/h = 10, square section, cubic cells), ν = 0.3 and 0.49.
-fn slender_cantilever_table(coefficients: &[f64]) -> Result<String> {
+fn slender_cantilever_table(coefficients: &[HourglassControl]) -> Result<String> {
     let mut rows = Vec::new();
     for nu in [0.3, 0.49] {
         for n in [2, 4] {
@@ -182,7 +192,7 @@ fn slender_cantilever_table(coefficients: &[f64]) -> Result<String> {
 }
 
 /// Cook's membrane from 2x2 to 48x48 cells.
-fn cook_table(coefficients: &[f64]) -> Result<String> {
+fn cook_table(coefficients: &[HourglassControl]) -> Result<String> {
     let mut rows = Vec::new();
     for m in [2, 4, 8, 16, 32, 48] {
         rows.push(sweep(
@@ -200,7 +210,7 @@ fn cook_table(coefficients: &[f64]) -> Result<String> {
 }
 
 /// The distorted block compressed by 20%: its lateral stretch and nominal stress.
-fn block_table(coefficients: &[f64]) -> Result<String> {
+fn block_table(coefficients: &[HourglassControl]) -> Result<String> {
     let (e, nu, l) = (3000.0, 0.45, 0.8);
     let (t_ref, p_ref) = neo_hookean_uniaxial(e, nu, l);
     let mut rows_t = Vec::new();

@@ -25,6 +25,7 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use pe_firmware::image::{Integration, Precision};
+use pe_firmware::physics::HourglassControl;
 use pe_firmware::profile::BoardProfile;
 use serde::Serialize;
 
@@ -59,7 +60,8 @@ pub struct Config {
     pub precision: Precision,
     #[serde(serialize_with = "crate::scene::settings::integration_text::serialize")]
     pub integration: Integration,
-    pub hourglass: f64,
+    #[serde(serialize_with = "crate::scene::settings::hourglass_text::serialize")]
+    pub hourglass: HourglassControl,
     pub dt_safety: f64,
     pub level: String,
     pub mass_scaling: f64,
@@ -97,7 +99,8 @@ pub struct Row {
     pub precision: Precision,
     #[serde(serialize_with = "crate::scene::settings::integration_text::serialize")]
     pub integration: Integration,
-    pub hourglass: f64,
+    #[serde(serialize_with = "crate::scene::settings::hourglass_text::serialize")]
+    pub hourglass: HourglassControl,
     pub dt_safety: f64,
     pub level: String,
     pub mass_scaling: f64,
@@ -218,7 +221,13 @@ pub fn grid(base: &Scene, levels: &Levels, base_level: &str) -> Vec<Config> {
         }
     }
     if b.integration == Integration::Reduced {
-        for h in [0.05, 0.1, 0.2] {
+        let forms = [
+            HourglassControl::Physical,
+            HourglassControl::Scalar(0.05),
+            HourglassControl::Scalar(0.1),
+            HourglassControl::Scalar(0.2),
+        ];
+        for h in forms {
             push(Config {
                 varied: "hourglass".into(),
                 hourglass: h,

@@ -86,8 +86,9 @@ pub enum Command {
     /// Run the stability suite and write a readable report.
     #[command(after_help = "Example:\n  pe stability --only poisson -o out/stability.md")]
     Stability(StabilityArgs),
-    /// Calibrate the hourglass coefficient: tip errors of MacNeal-Harder's cantilever,
-    /// Cook's membrane and a compressed block against closed forms, per coefficient.
+    /// Compare the hourglass controls: tip errors of MacNeal-Harder's cantilever, Cook's
+    /// membrane and a compressed block against closed forms, for the physical form and
+    /// the scalar one per coefficient.
     #[command(
         name = "hourglass-study",
         after_help = "Example:\n  pe hourglass-study -o docs/measurements/hourglass-tables.md"
@@ -302,7 +303,8 @@ pub struct HourglassStudyArgs {
     /// Markdown tables (printed when not given).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
-    /// Coefficients to sweep (default 0.01,0.03,0.05,0.1,0.2,0.3,0.5).
-    #[arg(long, value_delimiter = ',')]
-    pub coefficients: Vec<f64>,
+    /// Hourglass controls to compare: "physical" and scalar coefficients (default
+    /// physical,0.01,0.03,0.05,0.1,0.2,0.3,0.5).
+    #[arg(long, value_delimiter = ',', value_parser = host_tools::scene::settings::hourglass_from_text)]
+    pub coefficients: Vec<pe_firmware::physics::HourglassControl>,
 }

@@ -271,8 +271,9 @@ pub(super) fn plus_identity<T: Real>(mut h: Mat3<T>) -> Mat3<T> {
 }
 
 /// [`HexElement`] of a corner-basis kernel whose `deformation` gives `F` and the hourglass
-/// displacements (`q_α` of the general kernel, the moments `c_α` of the parallelepiped and
-/// cuboid ones): the same energy and the same fused loop.
+/// displacements `q[α][i]` (`q_α` of the general kernel, the moments `c_α` of the
+/// parallelepiped and cuboid ones) and whose `hourglass_forces` their forces: the same
+/// energy and the same fused loop.
 macro_rules! corner_element {
     ($kernel:ident) => {
         impl<T: Real> HexElement<T> for $kernel<T> {
@@ -294,10 +295,10 @@ macro_rules! corner_element {
                 u: &[[T; 3]; 8],
             ) -> Result<T, NonPositiveJacobian> {
                 let mut unused = [[T::ZERO; 3]; 8];
-                let (f, hg) = self.deformation(&Global::of_element(u, &mut unused));
+                let (f, q) = self.deformation(&Global::of_element(u, &mut unused));
                 let w = law.strain_energy_density(&f)? * self.volume;
-                let qq: T = hg.iter().flatten().fold(T::ZERO, |s, v| s + *v * *v);
-                Ok(w + T::from_f64(0.5) * self.hourglass_stiffness * qq)
+                let forces = self.hourglass_forces(&q);
+                Ok(w + super::hourglass::hourglass_energy(&q, &forces))
             }
             #[inline(always)]
             fn accumulate(

@@ -8,6 +8,7 @@ use super::super::real::{array, Real};
 use super::super::tensor::Mat3;
 use super::corner::*;
 use super::hex::{cast2, ReferenceHex};
+use super::hourglass::{pack_framed, FramedStiffness};
 use super::kernel::{Connectivity, Element, HexElement, Hourglass, KernelFault, LaneKernel};
 use super::ElementKind;
 
@@ -25,17 +26,18 @@ pub struct HexBox<T> {
     /// `V₀ b_j` (m²).
     pub basis_volume: [[T; 3]; 3],
     pub volume: T,
-    pub hourglass_stiffness: T,
+    /// The hourglass stiffness with the cell's frame ([`super::hourglass`]).
+    pub hourglass: FramedStiffness<T>,
 }
 
 impl<T: Real> HexBox<T> {
-    /// `F = I + Σ_j c_j ⊗ b_j` and the hourglass moments `c_α` (`hg[i][α]`), one
+    /// `F = I + Σ_j c_j ⊗ b_j` and the hourglass moments `q_α = c_α` (`q[α][i]`), one
     /// displacement component (row of `F`) at a time.
     #[inline(always)]
-    fn deformation(&self, corners: &impl Corners<T>) -> (Mat3<T>, [[T; 4]; 3]) {
+    fn deformation(&self, corners: &impl Corners<T>) -> (Mat3<T>, [[T; 3]; 4]) {
         let b = &self.basis;
         let mut h = [[T::ZERO; 3]; 3];
-        let mut hg = [[T::ZERO; 4]; 3];
+        let mut q = [[T::ZERO; 3]; 4];
         for i in 0..3 {
             let c = moments_of(corners, i);
             let (c0, c1, c2) = (c[LINEAR[0]], c[LINEAR[1]], c[LINEAR[2]]);
@@ -43,12 +45,17 @@ impl<T: Real> HexBox<T> {
                 #[inline(always)]
                 |j| c0 * b[0][j] + c1 * b[1][j] + c2 * b[2][j],
             );
-            hg[i] = array(
-                #[inline(always)]
-                |a| c[HOURGLASS[a]],
-            );
+            for alpha in 0..4 {
+                q[alpha][i] = c[HOURGLASS[alpha]];
+            }
         }
-        (plus_identity(h), hg)
+        (plus_identity(h), q)
+    }
+
+    /// The hourglass forces `Q_α = R K Rᵀ q_α`.
+    #[inline(always)]
+    fn hourglass_forces(&self, q: &[[T; 3]; 4]) -> [[T; 3]; 4] {
+        self.hourglass.forces(q)
     }
 }
 
@@ -59,9 +66,9 @@ impl<T: Real> CornerKernel<T> for HexBox<T> {
         law: &MaterialLaw<T>,
         corners: &mut impl Corners<T>,
     ) -> Result<(), NonPositiveJacobian> {
-        let (f, hg) = self.deformation(corners);
+        let (f, q) = self.deformation(corners);
+        let khg = self.hourglass_forces(&q);
         let p = law.first_piola_kirchhoff(&f)?;
-        let k = self.hourglass_stiffness;
         // Each component's moments written out in the loop, not by a closure: a closure
         // cannot be marked `inline(always)` here, and one left out of line keeps the
         // host's SIMD lanes out of their registers (see `real::array`).
@@ -72,7 +79,7 @@ impl<T: Real> CornerKernel<T> for HexBox<T> {
                 m[LINEAR[j]] = row[0] * bv[0] + row[1] * bv[1] + row[2] * bv[2];
             }
             for alpha in 0..4 {
-                m[HOURGLASS[alpha]] = k * hg[i][alpha];
+                m[HOURGLASS[alpha]] = khg[alpha][i];
             }
             add_synthesis_of_component(corners, i, m);
         }
@@ -93,7 +100,7 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> Pack<S, L, N> for HexBox<S> {
             basis: lanes_3(&items, |e| &e.basis),
             basis_volume: lanes_3(&items, |e| &e.basis_volume),
             volume: lanes(&items, |e| e.volume),
-            hourglass_stiffness: lanes(&items, |e| e.hourglass_stiffness),
+            hourglass: pack_framed(&items.map(|e| &e.hourglass)),
         })
     }
 }
@@ -101,9 +108,9 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> Pack<S, L, N> for HexBox<S> {
 impl<T: Real> Element<T> for HexBox<T> {
     const KIND: ElementKind = ElementKind::HexBox;
     /// The parallelepiped kernel's record (meaningful when [`Self::is_parallelepiped`]):
-    /// the gradient basis `b_j`, the same scaled by `V₀`, and `k`.
+    /// the gradient basis `b_j`, the same scaled by `V₀`, and the hourglass stiffness with
+    /// the cell's frame.
     fn from_reference(r: &ReferenceHex, connectivity: Connectivity, hourglass: Hourglass) -> Self {
-        let k = r.hourglass_stiffness(hourglass.modulus_pa, hourglass.coefficient);
         let b = r.gradient_basis();
         HexBox {
             connectivity,
@@ -112,13 +119,14 @@ impl<T: Real> Element<T> for HexBox<T> {
                 core::array::from_fn(|i| T::from_f64(b[j][i] * r.volume))
             }),
             volume: T::from_f64(r.volume),
-            hourglass_stiffness: T::from_f64(k),
+            hourglass: FramedStiffness::cast(&hourglass.of_cell(r)),
         }
     }
 }
 
 impl ReferenceHex {
-    /// [`HexBox`]'s record of this cell ([`Element::from_reference`]).
+    /// [`HexBox`]'s record of this cell ([`Element::from_reference`]) with the scalar hourglass
+    /// form (`K = k I`: modulus `2μ`, coefficient `κ_hg`).
     pub fn parallelepiped<T: Real>(
         &self,
         nodes: [u32; 8],
@@ -126,10 +134,7 @@ impl ReferenceHex {
         hourglass_modulus: f64,
         hourglass_coefficient: f64,
     ) -> HexBox<T> {
-        let hourglass = Hourglass {
-            modulus_pa: hourglass_modulus,
-            coefficient: hourglass_coefficient,
-        };
+        let hourglass = Hourglass::scalar(hourglass_modulus, hourglass_coefficient);
         HexBox::from_reference(self, Connectivity { nodes, material }, hourglass)
     }
 }

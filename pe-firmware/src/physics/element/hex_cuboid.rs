@@ -8,6 +8,7 @@ use super::super::real::{array, Real};
 use super::super::tensor::Mat3;
 use super::corner::*;
 use super::hex::ReferenceHex;
+use super::hourglass::{pack_modes, ModeStiffness};
 use super::kernel::{Connectivity, Element, HexElement, Hourglass, KernelFault, LaneKernel};
 use super::ElementKind;
 
@@ -27,29 +28,35 @@ pub struct HexCuboid<T> {
     /// `V₀ d_j` (m²).
     pub scale_volume: [T; 3],
     pub volume: T,
-    pub hourglass_stiffness: T,
+    /// The hourglass stiffness in the axes ([`super::hourglass`]).
+    pub hourglass: ModeStiffness<T>,
 }
 
 impl<T: Real> HexCuboid<T> {
-    /// `F = I + [d_j c_j[i]]` and the hourglass moments `c_α` (`hg[i][α]`), one
+    /// `F = I + [d_j c_j[i]]` and the hourglass moments `q_α = c_α` (`q[α][i]`), one
     /// displacement component (row of `F`) at a time.
     #[inline(always)]
-    fn deformation(&self, corners: &impl Corners<T>) -> (Mat3<T>, [[T; 4]; 3]) {
+    fn deformation(&self, corners: &impl Corners<T>) -> (Mat3<T>, [[T; 3]; 4]) {
         let d = &self.scale;
         let mut h = [[T::ZERO; 3]; 3];
-        let mut hg = [[T::ZERO; 4]; 3];
+        let mut q = [[T::ZERO; 3]; 4];
         for i in 0..3 {
             let c = moments_of(corners, i);
             h[i] = array(
                 #[inline(always)]
                 |j| c[LINEAR[j]] * d[j],
             );
-            hg[i] = array(
-                #[inline(always)]
-                |a| c[HOURGLASS[a]],
-            );
+            for alpha in 0..4 {
+                q[alpha][i] = c[HOURGLASS[alpha]];
+            }
         }
-        (plus_identity(h), hg)
+        (plus_identity(h), q)
+    }
+
+    /// The hourglass forces `Q_α = K q_α`.
+    #[inline(always)]
+    fn hourglass_forces(&self, q: &[[T; 3]; 4]) -> [[T; 3]; 4] {
+        self.hourglass.forces(q)
     }
 }
 
@@ -60,18 +67,9 @@ impl<T: Real> CornerKernel<T> for HexCuboid<T> {
         law: &MaterialLaw<T>,
         corners: &mut impl Corners<T>,
     ) -> Result<(), NonPositiveJacobian> {
-        let (f, hg) = self.deformation(corners);
-        let k = self.hourglass_stiffness;
-        // The hourglass moments' forces `k c_α` before the law, kept (see `kept_in_memory`).
-        let khg: [[T; 4]; 3] = kept_in_memory(array(
-            #[inline(always)]
-            |i| {
-                array(
-                    #[inline(always)]
-                    |alpha| k * hg[i][alpha],
-                )
-            },
-        ));
+        let (f, q) = self.deformation(corners);
+        // The hourglass moments' forces `K c_α` before the law, kept (see `kept_in_memory`).
+        let khg: [[T; 3]; 4] = kept_in_memory(self.hourglass_forces(&q));
         let p = law.first_piola_kirchhoff(&f)?;
         // Each component's moments written out in the loop (see `HexBox`'s kernel).
         for i in 0..3 {
@@ -81,7 +79,7 @@ impl<T: Real> CornerKernel<T> for HexCuboid<T> {
                 m[LINEAR[j]] = row[j] * self.scale_volume[j];
             }
             for alpha in 0..4 {
-                m[HOURGLASS[alpha]] = khg[i][alpha];
+                m[HOURGLASS[alpha]] = khg[alpha][i];
             }
             add_synthesis_of_component(corners, i, m);
         }
@@ -102,7 +100,7 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> Pack<S, L, N> for HexCuboid<S> 
             scale: lanes_1(&items, |e| &e.scale),
             scale_volume: lanes_1(&items, |e| &e.scale_volume),
             volume: lanes(&items, |e| e.volume),
-            hourglass_stiffness: lanes(&items, |e| e.hourglass_stiffness),
+            hourglass: pack_modes(&items.map(|e| &e.hourglass)),
         })
     }
 }
@@ -110,22 +108,23 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> Pack<S, L, N> for HexCuboid<S> 
 impl<T: Real> Element<T> for HexCuboid<T> {
     const KIND: ElementKind = ElementKind::HexCuboid;
     /// The cuboid kernel's record (meaningful when [`Self::is_cuboid`]): the diagonal of
-    /// the gradient basis `d_j = b_jj`, the same scaled by `V₀`, and `k`.
+    /// the gradient basis `d_j = b_jj`, the same scaled by `V₀`, and the hourglass
+    /// stiffness in the axes.
     fn from_reference(r: &ReferenceHex, connectivity: Connectivity, hourglass: Hourglass) -> Self {
-        let k = r.hourglass_stiffness(hourglass.modulus_pa, hourglass.coefficient);
         let b = r.gradient_basis();
         HexCuboid {
             connectivity,
             scale: core::array::from_fn(|j| T::from_f64(b[j][j])),
             scale_volume: core::array::from_fn(|j| T::from_f64(b[j][j] * r.volume)),
             volume: T::from_f64(r.volume),
-            hourglass_stiffness: T::from_f64(k),
+            hourglass: ModeStiffness::cast(&hourglass.of_cuboid(r)),
         }
     }
 }
 
 impl ReferenceHex {
-    /// [`HexCuboid`]'s record of this cell ([`Element::from_reference`]).
+    /// [`HexCuboid`]'s record of this cell ([`Element::from_reference`]) with the scalar hourglass
+    /// form (`K = k I`: modulus `2μ`, coefficient `κ_hg`).
     pub fn cuboid<T: Real>(
         &self,
         nodes: [u32; 8],
@@ -133,10 +132,7 @@ impl ReferenceHex {
         hourglass_modulus: f64,
         hourglass_coefficient: f64,
     ) -> HexCuboid<T> {
-        let hourglass = Hourglass {
-            modulus_pa: hourglass_modulus,
-            coefficient: hourglass_coefficient,
-        };
+        let hourglass = Hourglass::scalar(hourglass_modulus, hourglass_coefficient);
         HexCuboid::from_reference(self, Connectivity { nodes, material }, hourglass)
     }
 }

@@ -129,10 +129,7 @@ impl<T: Real> Element<T> for HexFull<T> {
 impl ReferenceHex {
     /// [`HexFull`]'s record of this cell ([`Element::from_reference`]).
     pub fn full<T: Real>(&self, nodes: [u32; 8], material: u16) -> HexFull<T> {
-        let none = Hourglass {
-            modulus_pa: 0.0,
-            coefficient: 0.0,
-        };
+        let none = Hourglass::scalar(0.0, 0.0);
         HexFull::from_reference(self, Connectivity { nodes, material }, none)
     }
 }

@@ -8,6 +8,7 @@ use super::super::real::{array, Real};
 use super::super::tensor::Mat3;
 use super::corner::*;
 use super::hex::{cast2, ReferenceHex};
+use super::hourglass::{pack_framed, FramedStiffness};
 use super::kernel::{Connectivity, Element, HexElement, Hourglass, KernelFault, LaneKernel};
 use super::ElementKind;
 
@@ -22,7 +23,7 @@ const MASKS: [usize; 7] = [1, 2, 3, 4, 5, 6, 7];
 /// `H = Σ_a u_a ⊗ B_a = Σ_k c_k ⊗ β_k` (`F = I + H`). The hourglass displacements are
 /// `q_α = Σ_a Γ_aα u_a = c_α − H γ_α` (`c_α` the hourglass moments, `γ_α = Σ_b h_bα X_b`),
 /// and the forces `f_a = Σ_k (Π ξ_a) m_k`: the synthesis of the moments
-/// `m_k = (V₀ P − M) β_k (+ Q_α on the hourglass masks)`, with `Q_α = k q_α` and
+/// `m_k = (V₀ P − M) β_k (+ Q_α on the hourglass masks)`, with `Q_α = K q_α` and
 /// `M = Σ_α Q_α ⊗ γ_α`. Gathering, the transforms and scattering are fused
 /// ([`HexElement::accumulate`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -33,7 +34,8 @@ pub struct HexReduced<T> {
     pub gradient_moments: [[T; 3]; 7],
     /// `γ_α = Σ_b h_bα X_b` (m), see [`ReferenceHex::hourglass_geometry`].
     pub hourglass_geometry: [[T; 3]; 4],
-    pub hourglass_stiffness: T,
+    /// The hourglass stiffness with the cell's frame ([`super::hourglass`]).
+    pub hourglass: FramedStiffness<T>,
 }
 
 impl<T: Real> HexReduced<T> {
@@ -74,6 +76,12 @@ impl<T: Real> HexReduced<T> {
             );
         }
         (plus_identity(h), q)
+    }
+
+    /// The hourglass forces `Q_α = R K Rᵀ q_α`.
+    #[inline(always)]
+    fn hourglass_forces(&self, q: &[[T; 3]; 4]) -> [[T; 3]; 4] {
+        self.hourglass.forces(q)
     }
 
     /// A row of `H`: `Σ_k c_k β_k` over the displacement moments `c` of one component.
@@ -137,17 +145,7 @@ impl<T: Real> CornerKernel<T> for HexReduced<T> {
         corners: &mut impl Corners<T>,
     ) -> Result<(), NonPositiveJacobian> {
         let (f, q) = self.deformation(corners);
-        let k = self.hourglass_stiffness;
-        let big_q: [[T; 3]; 4] = array(
-            #[inline(always)]
-            |alpha| {
-                array(
-                    #[inline(always)]
-                    |i| k * q[alpha][i],
-                )
-            },
-        );
-        let big_q = kept_in_memory(big_q);
+        let big_q = kept_in_memory(self.hourglass_forces(&q));
         let p = law.first_piola_kirchhoff(&f)?;
         let rows: Mat3<T> = array(
             #[inline(always)]
@@ -181,29 +179,29 @@ impl<S: Real, L: LaneReal<S, N>, const N: usize> Pack<S, L, N> for HexReduced<S>
             volume: lanes(&items, |e| e.volume),
             gradient_moments: lanes_3(&items, |e| &e.gradient_moments),
             hourglass_geometry: lanes_3(&items, |e| &e.hourglass_geometry),
-            hourglass_stiffness: lanes(&items, |e| e.hourglass_stiffness),
+            hourglass: pack_framed(&items.map(|e| &e.hourglass)),
         })
     }
 }
 
 impl<T: Real> Element<T> for HexReduced<T> {
     const KIND: ElementKind = ElementKind::HexReduced;
-    /// One-point element with hourglass stiffness `k = κ_hg G V Σ|B_a|² / 8` (the general
+    /// One-point element with the hourglass stiffness of the cell's frame (the general
     /// kernel).
     fn from_reference(r: &ReferenceHex, connectivity: Connectivity, hourglass: Hourglass) -> Self {
-        let k = r.hourglass_stiffness(hourglass.modulus_pa, hourglass.coefficient);
         HexReduced {
             connectivity,
             volume: T::from_f64(r.volume),
             gradient_moments: cast2(&r.gradient_moments()),
             hourglass_geometry: cast2(&r.hourglass_geometry),
-            hourglass_stiffness: T::from_f64(k),
+            hourglass: FramedStiffness::cast(&hourglass.of_cell(r)),
         }
     }
 }
 
 impl ReferenceHex {
-    /// [`HexReduced`]'s record of this cell ([`Element::from_reference`]).
+    /// [`HexReduced`]'s record of this cell ([`Element::from_reference`]) with the scalar hourglass
+    /// form (`K = k I`: modulus `2μ`, coefficient `κ_hg`).
     pub fn reduced<T: Real>(
         &self,
         nodes: [u32; 8],
@@ -211,10 +209,7 @@ impl ReferenceHex {
         hourglass_modulus: f64,
         hourglass_coefficient: f64,
     ) -> HexReduced<T> {
-        let hourglass = Hourglass {
-            modulus_pa: hourglass_modulus,
-            coefficient: hourglass_coefficient,
-        };
+        let hourglass = Hourglass::scalar(hourglass_modulus, hourglass_coefficient);
         HexReduced::from_reference(self, Connectivity { nodes, material }, hourglass)
     }
 }

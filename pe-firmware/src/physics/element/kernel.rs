@@ -28,14 +28,7 @@ pub trait Element<T: Real>: HexElement<T> + Copy {
     fn from_reference(r: &ReferenceHex, connectivity: Connectivity, hourglass: Hourglass) -> Self;
 }
 
-/// What a kind with hourglass control takes besides the geometry: the material's hourglass
-/// modulus ([`crate::physics::MaterialLaw::hourglass_modulus`], Pa) and the scene's
-/// coefficient `κ_hg`. A kind without hourglass control ignores it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Hourglass {
-    pub modulus_pa: f64,
-    pub coefficient: f64,
-}
+pub use super::hourglass::Hourglass;
 
 /// An element that turns nodal displacements into internal nodal forces.
 pub trait HexElement<T: Real> {

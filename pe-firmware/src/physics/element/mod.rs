@@ -52,6 +52,7 @@ mod hex_box;
 mod hex_cuboid;
 mod hex_full;
 mod hex_reduced;
+pub mod hourglass;
 pub mod kernel;
 
 pub use hex::{
@@ -62,6 +63,7 @@ pub use hex_box::HexBox;
 pub use hex_cuboid::HexCuboid;
 pub use hex_full::{GaussPoint, HexFull};
 pub use hex_reduced::HexReduced;
+pub use hourglass::{FramedStiffness, HourglassControl, ModeStiffness};
 pub use kernel::{Connectivity, Element, HexElement, Hourglass, KernelFault, LaneKernel};
 
 /// The element choice a scene makes (`integration = "reduced" | "full"` in its solver
