@@ -21,7 +21,7 @@ impl Shelf for VecShelf {
 }
 
 /// One board's storage on the host (capacities chosen at run time).
-pub(crate) type HostStorage<T, E> = StorageBuf<VecShelf, T, E, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0>;
+pub(crate) type HostStorage<T, E> = StorageBuf<VecShelf, T, E, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0>;
 
 /// How board-sim sizes each board's storage.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -54,8 +54,13 @@ pub struct BoardProfile {
     /// materials, exchange entries (sends and receives each), path points, loads, contact
     /// candidates found at a check, contact-node displacements sent until the next check.
     /// Nodes a board holds (at most `link_proto::NODES_PER_BOARD_MAX`, which the frames
-    /// are sized for); the parallelepiped, external-force and graphics tables follow it.
+    /// are sized for); the external-force and graphics tables follow it.
     pub nodes_max: u32,
+    /// Parallelepipeds and axis-aligned cuboids a board holds with reduced integration
+    /// (none with full integration): tables of their own beside the general elements,
+    /// which take the RAM left.
+    pub boxes_max: u32,
+    pub cuboids_max: u32,
     pub materials_max: u32,
     pub exchange_max: u32,
     pub path_points_max: u32,
@@ -118,6 +123,13 @@ pub const PE_BOARD: BoardProfile = BoardProfile {
     contact_nodes_max: 384,
     contact_faces_max: 384,
     nodes_max: 512,
+    // The parallelepiped and cuboid records carry the physical hourglass form's stiffnesses
+    // (384 and 216 bytes in f64). Voxel meshes are cuboids: 256 hold a 2x2x2 array's share
+    // of the seed box (250) and half the nodes' cells; parallelepipeds (sheared grids)
+    // 128. That leaves some 250 general elements in f64 (the built-in coarse scene on two
+    // boards needs 176 each); real time binds far earlier (docs/boards.md).
+    boxes_max: 128,
+    cuboids_max: 256,
     materials_max: 8,
     exchange_max: 4096,
     path_points_max: 64,
@@ -173,6 +185,9 @@ pub const QEMU_MPS2_AN500: BoardProfile = BoardProfile {
     // The frames' node limit, and otherwise the PE board's tables (the RAM decides the
     // elements).
     nodes_max: link_proto::NODES_PER_BOARD_MAX as u32,
+    // A block of hexahedra has fewer cells than nodes: a table per node each.
+    boxes_max: link_proto::NODES_PER_BOARD_MAX as u32,
+    cuboids_max: link_proto::NODES_PER_BOARD_MAX as u32,
     ..PE_BOARD
 };
 

@@ -31,6 +31,7 @@ macro_rules! firmware {
                 { $cap.materials },
                 { $cap.elements },
                 { $cap.boxes },
+                { $cap.cuboids },
                 { $cap.nodes },
                 { $cap.exchange },
                 { $cap.path_points },

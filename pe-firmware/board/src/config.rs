@@ -62,6 +62,7 @@ pub type BoardStorage = StorageBuf<
     { CAPACITIES.materials },
     { CAPACITIES.elements },
     { CAPACITIES.boxes },
+    { CAPACITIES.cuboids },
     { CAPACITIES.nodes },
     { CAPACITIES.exchange },
     { CAPACITIES.path_points },

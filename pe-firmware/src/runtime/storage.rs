@@ -25,17 +25,6 @@ pub type LinkBuffers = link_proto::StreamLinks<(), ()>;
 /// Displacements a partner sent for one contact node, by step parity: (step + 1, u).
 pub type RemoteSlot = [(u32, [f64; 3]); 2];
 
-/// The parallelepipeds and cuboids a board's storage holds per node, as a fraction: a
-/// third of the nodes each. A block of hexahedra has fewer cells than nodes (a cube of
-/// `n³` nodes has `(n − 1)³` cells: 0.67 at 512 nodes), but the physical hourglass form's
-/// records (384 and 216 bytes in f64) left a 512-KiB board no room for general elements at
-/// a table per node, and 151 at half (too few for the built-in coarse scene on two
-/// boards, 176 each); at a third, each table holds some three times what a board runs in
-/// real time (the measured cost allows some 35 general cells, 47 parallelepipeds or 60
-/// cuboids at 10 kHz in f64). A block beyond a table is refused by the compiler, naming
-/// the board and the table. (One pool shared by the three tables would hold any mix.)
-pub const BLOCK_CELLS_PER_NODE: (usize, usize) = (1, 3);
-
 /// How many records of each kind a board's storage holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Capacities {
@@ -91,8 +80,8 @@ impl Capacities {
     }
 
     /// What a board of profile `p` holds for scalar `T` and element `E`: the profile's
-    /// table (its nodes, at most the frames' limit), parallelepipeds and cuboids for a third of
-    /// the nodes each with reduced integration ([`BLOCK_CELLS_PER_NODE`]), and as
+    /// table (its nodes, at most the frames' limit; its parallelepipeds and cuboids with
+    /// reduced integration, none with full), and as
     /// many general elements as the RAM allows after the reserve (stack, the runtime), the
     /// link buffers ([`LinkBuffers`], unless the profile gives them a region of their own)
     /// and the rest of the storage.
@@ -108,11 +97,11 @@ impl Capacities {
             materials: p.materials_max as usize,
             elements: 0,
             boxes: match E::INTEGRATION {
-                Integration::Reduced => nodes * BLOCK_CELLS_PER_NODE.0 / BLOCK_CELLS_PER_NODE.1,
+                Integration::Reduced => p.boxes_max as usize,
                 Integration::Full => 0,
             },
             cuboids: match E::INTEGRATION {
-                Integration::Reduced => nodes * BLOCK_CELLS_PER_NODE.0 / BLOCK_CELLS_PER_NODE.1,
+                Integration::Reduced => p.cuboids_max as usize,
                 Integration::Full => 0,
             },
             nodes,
@@ -305,7 +294,7 @@ impl Shelf for Heapless {
 }
 
 /// The owner of a board's arrays. Capacities: `NM` materials, `NE` elements, `NB`
-/// parallelepipeds and `NB` cuboids, `NN` nodes,
+/// parallelepipeds, `NQ` cuboids, `NN` nodes,
 /// `NX` exchange entries, `NP` path points, `NL` loads, `NC` contact nodes, `NF` contact
 /// faces, `NK` candidates, `NS` contact sends (a growable [`Shelf`] ignores them).
 pub struct StorageBuf<
@@ -315,6 +304,7 @@ pub struct StorageBuf<
     const NM: usize,
     const NE: usize,
     const NB: usize,
+    const NQ: usize,
     const NN: usize,
     const NX: usize,
     const NP: usize,
@@ -327,7 +317,7 @@ pub struct StorageBuf<
     laws: S::Of<MaterialLaw<T>, NM>,
     elements: S::Of<E, NE>,
     boxes: S::Of<HexBox<T>, NB>,
-    cuboids: S::Of<HexCuboid<T>, NB>,
+    cuboids: S::Of<HexCuboid<T>, NQ>,
     nodes: S::Of<NodeRecord<T>, NN>,
     u: S::Of<[T; 3], NN>,
     du: S::Of<[T; 3], NN>,
@@ -360,6 +350,7 @@ impl<
         const NM: usize,
         const NE: usize,
         const NB: usize,
+        const NQ: usize,
         const NN: usize,
         const NX: usize,
         const NP: usize,
@@ -368,7 +359,7 @@ impl<
         const NF: usize,
         const NK: usize,
         const NS: usize,
-    > StorageBuf<S, T, E, NM, NE, NB, NN, NX, NP, NL, NC, NF, NK, NS>
+    > StorageBuf<S, T, E, NM, NE, NB, NQ, NN, NX, NP, NL, NC, NF, NK, NS>
 {
     /// Empty storage. (The firmware's, 4 MiB of fixed-capacity vectors on the emulated
     /// board, is a zeroed static instead: an all-zero `heapless::Vec` is empty.)
@@ -417,7 +408,7 @@ impl<
         put::<S, _, NM>(&mut self.laws, caps.materials)?;
         put::<S, _, NE>(&mut self.elements, caps.elements)?;
         put::<S, _, NB>(&mut self.boxes, caps.boxes)?;
-        put::<S, _, NB>(&mut self.cuboids, caps.cuboids)?;
+        put::<S, _, NQ>(&mut self.cuboids, caps.cuboids)?;
         put::<S, _, NN>(&mut self.nodes, caps.nodes)?;
         put::<S, _, NN>(&mut self.u, caps.nodes)?;
         put::<S, _, NN>(&mut self.du, caps.nodes)?;
