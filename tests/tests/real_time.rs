@@ -147,13 +147,14 @@ fn the_verdict_waits_for_the_step_model() {
 
 /// The other half of the step model's needs: the least clock on the profile's links, and
 /// the frames' chain alone when no clock would do. The seed box in f32 on 4x4x4:
-/// - on links of 12.5 MB/s (4x the PE board's; the step needs 11.6 MB/s at 480 MHz) some
-///   clock below the PE board's fits it, and that clock is the threshold: 0.2% above it
-///   the modelled step fits dt, 1% below it does not;
+/// - on links of 25 MB/s (8x the PE board's) some clock below the PE board's fits it (356
+///   MHz with the physical hourglass form's cost; on 4x links 488 MHz, above the PE
+///   board's), and that clock is the threshold: 0.2% above it the modelled step fits dt,
+///   1% below it does not;
 /// - on the PE board's own links no clock fits it: the frames alone take more than dt, the
 ///   summary says so, and a board 1000x faster than the PE board ends the step within
 ///   0.1 us of that figure (it is the limit of the step as the clock grows: the compute of
-///   47 us at 480 MHz shrinks to 0.05 us), never below it.
+///   tens of us at 480 MHz shrinks to hundredths of a us), never below it.
 #[test]
 fn the_step_model_says_what_clock_would_do() {
     let mut p = repo_scene("seed-box.toml");
@@ -162,11 +163,11 @@ fn the_step_model_says_what_clock_would_do() {
     let images = compile_images(&p, &pl).expect("images");
     let on =
         |profile: &BoardProfile| report("seed f32", &p, &pl, &images, profile).expect("report");
-    let links_4x = BoardProfile {
-        link_bytes_per_s: 4 * PE_BOARD.link_bytes_per_s,
+    let links_8x = BoardProfile {
+        link_bytes_per_s: 8 * PE_BOARD.link_bytes_per_s,
         ..PE_BOARD
     };
-    let r = on(&links_4x);
+    let r = on(&links_8x);
     let clock = r.step_model.clock_hz_needed.expect("a clock that fits it");
     assert!(
         clock > 1e6 && clock < PE_BOARD.clock_hz as f64,
@@ -175,7 +176,7 @@ fn the_step_model_says_what_clock_would_do() {
     assert!(r.step_model.frames_alone_s < r.dt_s && r.step_model.frames_alone_s > 0.0);
     let with_clock = |hz: f64| BoardProfile {
         clock_hz: hz as u64,
-        ..links_4x
+        ..links_8x
     };
     let above = on(&with_clock(clock * 1.002)).step_model.timing;
     assert!(
