@@ -25,6 +25,11 @@ cargo test --workspace --release -q --test solver lanes_tested_and_skipped_are_n
 
 bash scripts/lanes-emulated.sh
 
+# The host on ARM (aarch64: Apple and other ARM laptops), cross-compiled and run under
+# qemu-aarch64: the batched bit tests on the portable lanes' NEON clone, and `pe solve`
+# bit-identical to this machine's run (contact, dt tracking, the subnormal flush).
+bash scripts/lanes-aarch64.sh
+
 # The host's SIMD element loops keep their lanes in registers (no kernel closure, `map` or
 # intrinsic left out of line): a speed property the bit-identity tests cannot see.
 bash scripts/check-simd-inlined.sh

@@ -98,6 +98,7 @@ impl Isa {
 
     /// Every instruction set this CPU runs, narrowest first.
     fn on_this_cpu() -> Vec<Isa> {
+        #[cfg_attr(not(target_arch = "x86_64"), allow(unused_mut))]
         let mut v = vec![Isa::Portable];
         #[cfg(target_arch = "x86_64")]
         {
