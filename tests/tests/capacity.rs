@@ -60,6 +60,7 @@ macro_rules! firmware {
 
 firmware!(qemu_f64_reduced, CAP, QEMU_MPS2_AN500, f64, HexReduced<f64>);
 firmware!(board_f64_full, CAP_FULL, PE_BOARD, f64, HexFull<f64>);
+firmware!(board_f64_reduced, CAP_BOARD, PE_BOARD, f64, HexReduced<f64>);
 
 /// A box of `cells` on one board, clamped at z = 0, with extra scene tables.
 fn scene(cells: [usize; 3], extra: &str) -> Problem {
@@ -208,6 +209,52 @@ fn blocks(cells: &[[usize; 3]]) -> String {
         })
         .collect();
     format!("blocks = [{}]", list.join(", "))
+}
+
+/// `scene_with`'s scene with every node sheared (x += 0.3 z): each cell an affine
+/// parallelepiped that is not axis-aligned (the parallelepiped kernel's).
+fn sheared(mesh: &str) -> Problem {
+    let p = scene_with(mesh, MATERIAL, "");
+    let text = format!(
+        "[mesh]\n{mesh}\n\n{MATERIAL}\n[[fixed]]\nbox = [[-1.0, -1.0, -1.0], [1.0, 1.0, 1e-9]]\n\n[solver]\nsteps = 2\n"
+    );
+    let sc = Scene::from_toml(&text).expect("scene parses");
+    let mut mesh = p.mesh.clone();
+    for x in &mut mesh.nodes {
+        x[0] += 0.3 * x[2];
+    }
+    Problem::new(&sc, mesh, p.node_sets.clone()).expect("the sheared scene resolves")
+}
+
+#[test]
+fn parallelepipeds_and_cuboids_at_their_limits_on_the_pe_board() {
+    // The PE board's own tables (f64, reduced integration): 128 parallelepipeds and 256
+    // cuboids, each bound before the nodes (512) or the general elements.
+    const { assert!(CAP_BOARD.boxes == 128 && CAP_BOARD.cuboids == 256) };
+    const { assert!(CAP_BOARD.nodes == 512 && CAP_BOARD.elements > 200) };
+    let (at, over) = (blocks(&[[8, 8, 4]]), blocks(&[[8, 8, 4], [1, 1, 1]]));
+    let (at_c, over_c) = (
+        scene_with(&at, MATERIAL, ""),
+        scene_with(&over, MATERIAL, ""),
+    );
+    assert_eq!((at_c.mesh.cells.len(), over_c.mesh.cells.len()), (256, 257));
+    assert!(
+        over_c.mesh.nodes.len() <= 512,
+        "the node table must not bind first"
+    );
+    assert_limit_on("cuboids", 256, &at_c, &over_c, PE_BOARD, board_f64_reduced);
+
+    let (at, over) = (blocks(&[[8, 4, 4]]), blocks(&[[8, 4, 4], [1, 1, 1]]));
+    let (at_b, over_b) = (sheared(&at), sheared(&over));
+    assert_eq!((at_b.mesh.cells.len(), over_b.mesh.cells.len()), (128, 129));
+    assert_limit_on(
+        "parallelepipeds",
+        128,
+        &at_b,
+        &over_b,
+        PE_BOARD,
+        board_f64_reduced,
+    );
 }
 
 #[test]

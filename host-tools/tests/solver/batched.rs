@@ -181,13 +181,17 @@ fn lanes_tested_and_skipped_are_named() {
             Some(c) if rank(isa) > rank(c) => {
                 format!("{} (capped by PE_ISA={})", isa.name(), c.name())
             }
+            _ if !cfg!(target_arch = "x86_64") => format!("{} (x86-64 only)", isa.name()),
             _ => format!("{} (this CPU lacks it)", isa.name()),
         });
     }
     if !cfg!(target_arch = "aarch64") {
         skipped.push("neon (aarch64 only: the portable lanes' NEON clone)".into());
     }
-    let names: Vec<&str> = run.iter().map(|i| i.name()).collect();
+    let mut names: Vec<&str> = run.iter().map(|i| i.name()).collect();
+    if cfg!(target_arch = "aarch64") {
+        names.push("neon (the portable lanes' NEON clone)");
+    }
     println!(
         "lanes tested: {}; skipped: {}",
         names.join(", "),
