@@ -3,6 +3,7 @@
 //! a banded Cholesky factorisation, linear and Newton solutions.
 
 use anyhow::{anyhow, bail, Result};
+use pe_firmware::physics::real::nan_max;
 use pe_firmware::physics::MaterialLaw;
 
 use crate::problem::elements::Elements;
@@ -259,16 +260,21 @@ impl<'p> Statics<'p> {
             let mut converged = false;
             for it in 0..100 {
                 let f = self.forces(&u)?;
-                let fmax = f.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+                // `nan_max`: a NaN force is never dropped (`f64::max` would drop it and
+                // let a NaN state pass for converged).
+                let fmax = f.iter().flatten().fold(0.0f64, |m, v| nan_max(m, v.abs()));
                 let mut r = vec![0.0; 3 * n];
                 let mut rmax = 0.0f64;
                 for a in 0..n {
                     for i in 0..3 {
                         if !fixed[a][i] {
                             r[3 * a + i] = -f[a][i];
-                            rmax = rmax.max(f[a][i].abs());
+                            rmax = nan_max(rmax, f[a][i].abs());
                         }
                     }
+                }
+                if rmax.is_nan() || fmax.is_nan() {
+                    bail!("Newton at load step {s}/{steps}, iteration {it}: the forces are NaN");
                 }
                 if rmax <= tol * fmax {
                     converged = true;
