@@ -77,6 +77,12 @@ const MATERIAL: &str =
 
 /// A scene of `mesh` (the `[mesh]` table's keys) with the `material` tables.
 fn scene_with(mesh: &str, material: &str, extra: &str) -> Problem {
+    let sc = scene_text(mesh, material, extra);
+    Problem::from_scene(&sc, std::path::Path::new(".")).expect("scene resolves")
+}
+
+/// [`scene_with`]'s scene, unresolved.
+fn scene_text(mesh: &str, material: &str, extra: &str) -> Scene {
     let text = format!(
         r#"
 [mesh]
@@ -92,8 +98,7 @@ steps = 2
 {extra}
 "#
     );
-    let sc = Scene::from_toml(&text).expect("scene parses");
-    Problem::from_scene(&sc, std::path::Path::new(".")).expect("scene resolves")
+    Scene::from_toml(&text).expect("scene parses")
 }
 
 /// The three verdicts on a scene compiled for one emulated board: each `None` (fits) or
@@ -214,11 +219,8 @@ fn blocks(cells: &[[usize; 3]]) -> String {
 /// `scene_with`'s scene with every node sheared (x += 0.3 z): each cell an affine
 /// parallelepiped that is not axis-aligned (the parallelepiped kernel's).
 fn sheared(mesh: &str) -> Problem {
-    let p = scene_with(mesh, MATERIAL, "");
-    let text = format!(
-        "[mesh]\n{mesh}\n\n{MATERIAL}\n[[fixed]]\nbox = [[-1.0, -1.0, -1.0], [1.0, 1.0, 1e-9]]\n\n[solver]\nsteps = 2\n"
-    );
-    let sc = Scene::from_toml(&text).expect("scene parses");
+    let sc = scene_text(mesh, MATERIAL, "");
+    let p = Problem::from_scene(&sc, std::path::Path::new(".")).expect("scene resolves");
     let mut mesh = p.mesh.clone();
     for x in &mut mesh.nodes {
         x[0] += 0.3 * x[2];
