@@ -35,12 +35,19 @@ grep -q '^file = "turned-box.vtk"' "$OUT/turned.toml"
 # writes that step into the image, so the three still agree bit for bit; the check asserts
 # that the step moved.
 cp docs/measurements/scenes/soft_cantilever_sudden_gravity.toml "$OUT/cantilever.toml"
+# The box with gravity brought in along a smooth ramp ([gravity] ramp, POLY345, from a
+# quarter to all of it by 0.05 s, half the run): every gravity record on the board scaled by
+# the ramp's factor at its stage's time, `pe solve` scaling its external forces alike; on a
+# firmware without the loads part.
+sed 's|^acceleration = .*$|&\nramp = [[0.0, 0.25], [0.05, 1.0]]\nshape = "poly345"|' "$OUT/box.toml" >"$OUT/rampedbox.toml"
+grep -q '^shape = "poly345"' "$OUT/rampedbox.toml"
 # Every scene in both precisions with reduced integration; full integration (eight Gauss
 # points, no hourglass control: another element kernel on the board) on the built-in scene
 # in f64 (general cells, contact) and the turned box in f32 (parallelepipeds).
 CASES=${CASES:-"builtin:f64:reduced builtin:f32:reduced box:f64:reduced box:f32:reduced
        turned:f64:reduced turned:f32:reduced builtin:f64:full turned:f32:full
-       cantilever:f64:reduced cantilever:f32:reduced"}
+       cantilever:f64:reduced cantilever:f32:reduced rampedbox:f64:reduced
+       rampedbox:f32:reduced"}
 for CASE in $CASES; do
     IFS=: read -r SCENE PREC INTEG <<<"$CASE"
     case $SCENE in

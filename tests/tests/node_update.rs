@@ -1,5 +1,6 @@
 //! The board's node update and external forces: free, fixed, prescribed, loaded (one load
-//! ramped along a smooth POLY345 step) and contact nodes in one scene give the serial
+//! ramped along a smooth POLY345 step, gravity along a linear ramp) and contact nodes in
+//! one scene give the serial
 //! solver's bits on one board (displacements,
 //! kinetic energy, reactions), and the external-force lists of the images hold exactly the
 //! owned nodes that have an external force, once, at the stage the exchange rounds give
@@ -36,6 +37,11 @@ fn mixed_node_kinds_equal_serial_bit_for_bit() {
             .is_some_and(|r| r.segment == pe_firmware::image::Segment::Poly345)
     };
     assert!(p.loads.iter().any(smooth), "a load ramped along POLY345");
+    let g = p.gravity_ramp.as_ref().expect("gravity ramped");
+    assert!(
+        g.at(0.0)[0] == 0.25 && g.at(0.02)[0] > 0.5 && g.at(1.0)[0] == 1.0,
+        "gravity's ramp moves during the run (700 steps of about 0.14 ms)"
+    );
     let serial = solver::run(&p, "serial", &mut ()).unwrap();
     let r = &serial.report;
     let c = r.contact.as_ref().unwrap();

@@ -25,7 +25,21 @@ pub struct BoardImage {
     pub ram_bytes: u64,
 }
 
-/// Prescribed paths first, then the distinct load ramps.
+/// The distinct ramps of the loads and gravity: users `0..loads` are the loads, user
+/// `loads` is gravity.
+fn ramp_curves(problem: &Problem) -> Curves<1> {
+    let loads = problem.loads.iter().map(|l| l.ramp.as_ref());
+    Curves::of(loads.chain([problem.gravity_ramp.as_ref()]))
+}
+
+/// The path of gravity's ramp in [`path_table`] (after the prescribed paths).
+fn gravity_ramp_path(problem: &Problem) -> Option<u16> {
+    ramp_curves(problem)
+        .index(problem.loads.len())
+        .map(|c| (problem.paths.len() + c) as u16)
+}
+
+/// Prescribed paths first, then the distinct ramps of the loads and gravity.
 fn path_table(problem: &Problem) -> (Vec<PathPoint>, Vec<Option<u16>>) {
     let mut points = Vec::new();
     for (k, p) in problem.paths.iter().enumerate() {
@@ -38,7 +52,7 @@ fn path_table(problem: &Problem) -> (Vec<PathPoint>, Vec<Option<u16>>) {
             });
         }
     }
-    let ramps = Curves::of(problem.loads.iter().map(|l| l.ramp.as_ref()));
+    let ramps = ramp_curves(problem);
     let load_ramp = (0..problem.loads.len())
         .map(|k| ramps.index(k).map(|c| (problem.paths.len() + c) as u16))
         .collect();
@@ -168,6 +182,7 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
             damping_per_s: problem.solver.damping,
             steps: problem.steps(dt),
             speed_limit_m_per_s: problem.solver.speed_limit,
+            gravity_ramp: gravity_ramp_path(problem),
             mass_scaling: problem.solver.mass_scaling,
             hourglass: problem.solver.hourglass,
         },

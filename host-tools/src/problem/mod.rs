@@ -17,6 +17,7 @@ use crate::mesh::Mesh;
 use crate::scene::{Law, MaterialSpec, RegionRef, Scene, Selector, SolverSpec};
 use batched::{Batched, Isa};
 pub use curves::Path1;
+use pe_firmware::image::Segment;
 
 /// Dilatational wave speeds of soft tissue in SI units, with a wide margin (gels to
 /// nearly incompressible stiff tissue): outside it a material is probably in other units.
@@ -57,6 +58,8 @@ pub struct Problem {
     pub paths: Vec<Path1<3>>,
     pub loads: Vec<Load>,
     pub gravity: [f64; 3],
+    /// Gravity's factor in time (`[gravity] ramp`; None: 1 throughout).
+    pub gravity_ramp: Option<Path1<1>>,
     pub solver: SolverSpec,
     /// True (gravitational) lumped mass per node, kg.
     pub mass: Vec<f64>,
@@ -359,18 +362,7 @@ fn nodal_loads(scene: &Scene, sel: &NodeSelector) -> Result<Vec<Load>> {
         let what = format!("[[load]] {k}");
         let nodes = sel.select(l.selector(), &what)?;
         let share = 1.0 / nodes.len() as f64;
-        let ramp = match &l.ramp {
-            Some(r) => {
-                if r.is_empty() || r.windows(2).any(|w| !(w[1][0] > w[0][0])) {
-                    bail!("{what}: `ramp` needs points [t, factor] with increasing t");
-                }
-                Some(Path1 {
-                    points: r.iter().map(|q| (q[0], [q[1]])).collect(),
-                    segment: l.shape.unwrap_or_default(),
-                })
-            }
-            None => None,
-        };
+        let ramp = ramp_of(l.ramp.as_deref(), l.shape, &what)?;
         for n in nodes {
             loads.push(Load {
                 node: n,
@@ -429,6 +421,35 @@ fn check_solver(s: &SolverSpec, has_contact: bool) -> Result<()> {
         bail!("[solver] steps (or --steps) must be at least 1, got 0");
     }
     Ok(())
+}
+
+/// A `ramp = [[t, factor], ...]` with its `shape` (`what` names the table in errors).
+fn ramp_of(
+    ramp: Option<&[[f64; 2]]>,
+    shape: Option<Segment>,
+    what: &str,
+) -> Result<Option<Path1<1>>> {
+    let Some(r) = ramp else {
+        if shape.is_some() {
+            bail!("{what}: `shape` without a `ramp` (give ramp = [[t, factor], ...])");
+        }
+        return Ok(None);
+    };
+    if r.is_empty() || r.windows(2).any(|w| !(w[1][0] > w[0][0])) {
+        bail!("{what}: `ramp` needs points [t, factor] with increasing t");
+    }
+    Ok(Some(Path1 {
+        points: r.iter().map(|q| (q[0], [q[1]])).collect(),
+        segment: shape.unwrap_or_default(),
+    }))
+}
+
+/// `[gravity] ramp`, checked as a load's.
+fn gravity_ramp_of(scene: &Scene) -> Result<Option<Path1<1>>> {
+    match &scene.gravity {
+        Some(g) => ramp_of(g.ramp.as_deref(), g.shape, "[gravity]"),
+        None => Ok(None),
+    }
 }
 
 /// The gravity vector, refused unless finite.
@@ -499,6 +520,7 @@ impl Problem {
             paths,
             loads,
             gravity: gravity_of(scene)?,
+            gravity_ramp: gravity_ramp_of(scene)?,
             solver: scene.solver.clone(),
             mass,
             contact,

@@ -56,6 +56,18 @@ pub fn box_cantilever(
 pub fn gravity_down() -> GravitySpec {
     GravitySpec {
         acceleration: [0.0, 0.0, -9.81],
+        ramp: None,
+        shape: None,
+    }
+}
+
+/// Standard gravity along −z brought in by NiftySim's smooth step (POLY345) from 0 at
+/// `t = 0` to 1 at `t = ramp_s`, held after.
+pub fn gravity_down_ramped(ramp_s: f64) -> GravitySpec {
+    GravitySpec {
+        ramp: Some(vec![[0.0, 0.0], [ramp_s, 1.0]]),
+        shape: Some(pe_firmware::image::Segment::Poly345),
+        ..gravity_down()
     }
 }
 

@@ -277,6 +277,16 @@ pub struct LoadSpec {
 #[serde(deny_unknown_fields)]
 pub struct GravitySpec {
     pub acceleration: [f64; 3],
+    /// Gravity scaled in time by `ramp = [[t, factor], ...]` like a `[[load]]`'s (default:
+    /// constant 1, gravity from the first step), e.g. `[[0.0, 0.0], [0.5, 1.0]]` with
+    /// `shape = "poly345"` to bring a soft organ to its sagged state without the overshoot
+    /// of sudden gravity.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ramp: Option<Vec<[f64; 2]>>,
+    /// How the ramp goes from one point to the next (`"linear"`, the default, or
+    /// `"poly345"`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shape: Option<Segment>,
 }
 
 /// `[solver]`.

@@ -61,7 +61,8 @@ pub struct Model<'p, T: Real> {
     pub f_ext: Vec<[T; 3]>,
     /// Nodes whose `f_ext` differs from gravity (loads, contact), restored each step.
     f_ext_dirty: Vec<usize>,
-    /// The loads' distinct ramps, each evaluated once per step ([`Curves`]).
+    /// The distinct ramps of the loads (users `0..loads`) and gravity (user `loads`), each
+    /// evaluated once per step ([`Curves`]).
     ramps: Curves<1>,
     /// The prescribed paths' values at the step's `t_{n+1}`, evaluated once per step.
     path_at: Vec<[T; 3]>,
@@ -264,7 +265,10 @@ impl<'p, T: Real> Model<'p, T> {
             f_ext: gravity_force.clone(),
             gravity_force,
             f_ext_dirty: Vec::new(),
-            ramps: Curves::of(problem.loads.iter().map(|l| l.ramp.as_ref())),
+            ramps: Curves::of(
+                (problem.loads.iter().map(|l| l.ramp.as_ref()))
+                    .chain([problem.gravity_ramp.as_ref()]),
+            ),
             path_at: vec![[T::ZERO; 3]; problem.paths.len()],
             step: 0,
             time_base_s: 0.0,
@@ -362,12 +366,25 @@ impl<'p, T: Real> Model<'p, T> {
     /// External forces at time `t`: gravity plus ramped loads plus contact (in that order,
     /// as the board runtime adds them).
     fn external_forces(&mut self, t: f64) -> Result<(), PhysicsError> {
-        // Gravity everywhere: only the nodes given more last step need restoring.
-        let (f_ext, dirty) = (&mut self.f_ext, &mut self.f_ext_dirty);
-        for n in dirty.drain(..) {
-            f_ext[n] = self.gravity_force[n];
-        }
         self.ramps.evaluate(t);
+        let (f_ext, dirty) = (&mut self.f_ext, &mut self.f_ext_dirty);
+        match self.ramps.value(self.problem.loads.len()) {
+            // Ramped gravity everywhere, `g · s(t)` in the nodes' precision (the boards'
+            // product).
+            Some([s]) => {
+                let s = T::from_f64(s);
+                dirty.clear();
+                for (f, g) in f_ext.iter_mut().zip(&self.gravity_force) {
+                    *f = g.map(|gi| gi * s);
+                }
+            }
+            // Gravity everywhere: only the nodes given more last step need restoring.
+            None => {
+                for n in dirty.drain(..) {
+                    f_ext[n] = self.gravity_force[n];
+                }
+            }
+        }
         for (k, l) in self.problem.loads.iter().enumerate() {
             let s = self.ramps.value(k).map_or(1.0, |v| v[0]);
             let n = l.node as usize;

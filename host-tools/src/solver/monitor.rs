@@ -242,6 +242,18 @@ impl<'p, T: Real> Model<'p, T> {
     }
 }
 
+impl<'p, T: Real> Model<'p, T> {
+    /// Gravity at the last step's external forces (`t_n`): `[gravity] acceleration` times
+    /// its ramp's factor then (m/s²).
+    pub fn gravity_m_per_s2(&self) -> [f64; 3] {
+        let s = self
+            .ramps
+            .value(self.problem.loads.len())
+            .map_or(1.0, |v| v[0]);
+        self.problem.gravity.map(|g| g * s)
+    }
+}
+
 /// Energy terms at the time of the previous state `u − du` (where the central velocity of
 /// the last step is known), J.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
@@ -268,7 +280,7 @@ impl<'p, T: Real> Model<'p, T> {
             .elements
             .stored_energy(&self.laws, &prev_t)
             .map_err(|e| anyhow!("{e}"))?;
-        let g = self.problem.gravity;
+        let g = self.gravity_m_per_s2();
         let gravity = prev
             .iter()
             .zip(&self.problem.mass)

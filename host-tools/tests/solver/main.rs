@@ -11,6 +11,7 @@ mod common;
 
 mod batched;
 mod f32_statics;
+mod gravity_ramp;
 mod hourglass;
 mod mesh_formats;
 mod serial;

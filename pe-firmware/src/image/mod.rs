@@ -33,7 +33,7 @@ pub use crate::physics::element::Integration;
 /// First four bytes of every schedule image.
 pub const MAGIC: [u8; 4] = *b"PESI";
 /// Format version; bumped whenever a record type changes.
-pub const FORMAT_VERSION: u16 = 9;
+pub const FORMAT_VERSION: u16 = 10;
 
 /// The id of the compilation an image belongs to: a 64-bit hash the compiler computes over
 /// every image of the set (with this field zero) and the scene's mesh (see `pe compile`).
@@ -268,6 +268,10 @@ pub struct SceneParams {
     pub steps: u64,
     /// A node faster than this (m/s) is reported as an instability.
     pub speed_limit_m_per_s: f64,
+    /// The path (a ramp: its first component) gravity is scaled by in time, `g · s(t)`
+    /// ([`ExternalRecord::gravity`] times the ramp's factor at the stage's time, in the
+    /// node's precision); None: gravity constant.
+    pub gravity_ramp: Option<u16>,
     /// For the record (already folded into the node gains and the element records):
     /// inertia scaling, the hourglass control.
     pub mass_scaling: f64,

@@ -310,26 +310,24 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         let points = &path_points[..c.path_points as usize];
         let loads = &loads[..c.loads as usize];
         let records = external.get(start as usize..end as usize).unwrap_or(&[]);
-        // Each load ramp once at `t`, however many records share it.
+        // Each load ramp once at `t`, however many records share it; gravity's too.
         let mut ramps = ramps::RampValues::new();
-        for x in records {
-            let Some(f) = force.get_mut(x.node as usize) else {
-                continue;
-            };
-            if x.loads == 0 && x.contact.is_none() {
-                // Both read before `f` is written (the compiler cannot tell that the
-                // record and the force array never overlap): two multiple loads, one store.
-                let (g, mut v) = (x.gravity, *f);
-                for i in 0..3 {
-                    v[i] -= g[i];
-                }
-                *f = v;
-            } else {
-                let fe = external_force(x, points, loads, contact.force, t, &mut ramps);
-                for i in 0..3 {
-                    f[i] -= fe[i];
-                }
-            }
+        let gravity_factor = self
+            .header
+            .params
+            .gravity_ramp
+            .map(|p| T::from_f64(ramps.factor(points, p, t)));
+        let ext = External {
+            points,
+            loads,
+            contact_force: contact.force,
+            t,
+            gravity_factor,
+        };
+        // One loop per case, so the records with gravity alone (most) take no branch on it.
+        match gravity_factor {
+            None => subtract_external::<T, false>(records, force, &ext, &mut ramps),
+            Some(_) => subtract_external::<T, true>(records, force, &ext, &mut ramps),
         }
     }
 
@@ -527,19 +525,69 @@ fn add_reaction<T: Real>(r: &mut [f64; 3], total: [T; 3]) {
     }
 }
 
-/// The external force of a record with loads or a contact node: gravity, then each load
-/// (ramped by its path at `t`, from `ramps`), then the contact force, in the serial
-/// solver's order.
+/// A record's gravity `g`, times gravity's ramp factor `s` when it has one (`g · s`, in
+/// the node's precision: the host's `f_ext` is the same product).
+#[inline(always)]
+fn scaled<T: Real>(g: [T; 3], factor: Option<T>) -> [T; 3] {
+    match factor {
+        Some(s) => g.map(|gi| gi * s),
+        None => g,
+    }
+}
+
+/// `f −= f_ext` for each record's node: gravity alone (most records) on the short path,
+/// `f − g` (`f − g · s` when `RAMPED`, `s` the ramp's factor), the same bits as `f − (g +
+/// nothing)`; the others through [`external_force`].
+#[inline(always)]
+fn subtract_external<T: Real, const RAMPED: bool>(
+    records: &[ExternalRecord<T>],
+    force: &mut [[T; 3]],
+    ext: &External<'_, T>,
+    ramps: &mut ramps::RampValues,
+) {
+    let s = ext.gravity_factor.unwrap_or(T::from_f64(1.0));
+    for x in records {
+        let Some(f) = force.get_mut(x.node as usize) else {
+            continue;
+        };
+        if x.loads == 0 && x.contact.is_none() {
+            // Both read before `f` is written (the compiler cannot tell that the record and
+            // the force array never overlap): two multiple loads, one store.
+            let (g, mut v) = (x.gravity, *f);
+            for i in 0..3 {
+                v[i] -= if RAMPED { g[i] * s } else { g[i] };
+            }
+            *f = v;
+        } else {
+            let fe = external_force(x, ext, ramps);
+            for i in 0..3 {
+                f[i] -= fe[i];
+            }
+        }
+    }
+}
+
+/// What the external force of a stage reads besides its records: the path table, the
+/// loads, the contact forces, the stage's time and gravity's ramp factor at it.
+struct External<'a, T> {
+    points: &'a [PathPoint],
+    loads: &'a [LoadRecord],
+    contact_force: &'a [[f64; 3]],
+    t: f64,
+    gravity_factor: Option<T>,
+}
+
+/// The external force of a record with loads or a contact node: gravity (ramped), then
+/// each load (ramped by its path at `t`, from `ramps`), then the contact force, in the
+/// serial solver's order.
 #[inline(always)]
 fn external_force<T: Real>(
     x: &ExternalRecord<T>,
-    points: &[PathPoint],
-    loads: &[LoadRecord],
-    contact_force: &[[f64; 3]],
-    t: f64,
+    e: &External<'_, T>,
     ramps: &mut ramps::RampValues,
 ) -> [T; 3] {
-    let mut fe = x.gravity;
+    let (points, loads, contact_force, t) = (e.points, e.loads, e.contact_force, e.t);
+    let mut fe = scaled(x.gravity, e.gravity_factor);
     // (A build without loads or contact loads no image that has them.)
     if cfg!(feature = "loads") {
         let first = x.first_load as usize;

@@ -188,7 +188,7 @@ fn energy_band<T: Real>(
             let stored = ev
                 .stored_energy(&m.problem.laws, &up)
                 .map_err(|e| anyhow!("{e}"))?;
-            let g = m.problem.gravity;
+            let g = m.gravity_m_per_s2();
             let gravity: f64 = up
                 .iter()
                 .zip(&m.problem.mass)
