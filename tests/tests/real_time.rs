@@ -669,6 +669,18 @@ fn a_check_step_is_in_the_verdict() {
     assert_eq!(seed.real_time.check_interval_steps, 0);
     assert_eq!(seed.capacity.search_tests, 0);
     assert!(!summary(&seed).contains("check step"));
+    // At the PE board's own clock the seed box's 250 cuboids a board do not fit dt / 2 on
+    // 2x2x2: that is said once, of the board's compute, and never as a check step "every 0
+    // steps" (a scene without contact has none).
+    let slow = compiled(&repo_scene("seed-box.toml"), "2x2x2", &PE_BOARD);
+    let v = &slow.real_time;
+    assert!(!v.compute_fits && v.check_step_fits && !v.keeps_real_time);
+    assert!(
+        v.reasons[0].starts_with("board (") && v.reasons.iter().all(|r| !r.contains("check step")),
+        "{:?}",
+        v.reasons
+    );
+    assert!(!summary(&slow).contains("check step"));
 }
 
 /// board-sim's link model replays a check step too. With the links made instant (no

@@ -119,7 +119,9 @@ pub fn verdict(
 ) -> RealTimeVerdict {
     let budget = dt_s / COMPUTE_MARGIN;
     let compute_fits = capacity.step_compute_s_max <= budget;
-    let check_step_fits = capacity.check_step_s_max <= budget;
+    // A scene without contact has no check step (the steady step is the only one: judged
+    // above, not listed twice as a check step "every 0 steps").
+    let check_step_fits = capacity.check_interval_steps == 0 || capacity.check_step_s_max <= budget;
     // Slowest first; equal times keep board and face order.
     let mut sorted: Vec<&LinkLoad> = links.iter().collect();
     sorted.sort_by(|a, b| b.time_per_step_s.total_cmp(&a.time_per_step_s));
