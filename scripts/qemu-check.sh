@@ -41,13 +41,22 @@ cp docs/measurements/scenes/soft_cantilever_sudden_gravity.toml "$OUT/cantilever
 # firmware without the loads part.
 sed 's|^acceleration = .*$|&\nramp = [[0.0, 0.25], [0.05, 1.0]]\nshape = "poly345"|' "$OUT/box.toml" >"$OUT/rampedbox.toml"
 grep -q '^shape = "poly345"' "$OUT/rampedbox.toml"
+# The box with its free end's top edge (6 nodes) moved along a three-point smooth path:
+# the board evaluates the path once per node update and holds every node of the edge on it.
+cp "$OUT/box.toml" "$OUT/pushedbox.toml"
+cat >>"$OUT/pushedbox.toml" <<'TOML'
+[[prescribed]]
+box = [[0.19999, -1.0, 0.09999], [1.0, 1.0, 1.0]]
+path = [[0.0, 0.0, 0.0, 0.0], [0.02, 0.0, 0.0, -0.002], [0.05, 0.0, 0.001, -0.004]]
+shape = "poly345"
+TOML
 # Every scene in both precisions with reduced integration; full integration (eight Gauss
 # points, no hourglass control: another element kernel on the board) on the built-in scene
 # in f64 (general cells, contact) and the turned box in f32 (parallelepipeds).
 CASES=${CASES:-"builtin:f64:reduced builtin:f32:reduced box:f64:reduced box:f32:reduced
        turned:f64:reduced turned:f32:reduced builtin:f64:full turned:f32:full
        cantilever:f64:reduced cantilever:f32:reduced rampedbox:f64:reduced
-       rampedbox:f32:reduced"}
+       rampedbox:f32:reduced pushedbox:f64:reduced pushedbox:f32:reduced"}
 for CASE in $CASES; do
     IFS=: read -r SCENE PREC INTEG <<<"$CASE"
     case $SCENE in

@@ -22,9 +22,9 @@ mod graphics;
 mod hello;
 mod load;
 mod marks;
+mod path_values;
 pub mod pose;
 pub mod program;
-mod ramps;
 pub mod storage;
 
 use link_proto::{Face, Links, Values};
@@ -311,7 +311,7 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
         let loads = &loads[..c.loads as usize];
         let records = external.get(start as usize..end as usize).unwrap_or(&[]);
         // Each load ramp once at `t`, however many records share it; gravity's too.
-        let mut ramps = ramps::RampValues::new();
+        let mut ramps = path_values::RampValues::new();
         let gravity_factor = self
             .header
             .params
@@ -471,6 +471,8 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
             ..
         } = &mut self.st;
         let points = &path_points[..c.path_points as usize];
+        // Each motion path once at `t_next`, however many held nodes follow it.
+        let paths = path_values::PathsAt::new(points, t_next);
         let n = c.nodes as usize;
         // Each array cut to the nodes (the loader checked they hold them): one count.
         let all = (nodes.get(..n).unwrap_or(&[]).iter())
@@ -498,7 +500,7 @@ impl<'a, T: WireReal, E: ElementRecord<T>> Runtime<'a, T, E> {
                 }
                 NodeMotion::Prescribed(p) => {
                     add_reaction(&mut rp, total);
-                    let mv = NodeMove::Held(prescribed(points, p, t_next));
+                    let mv = NodeMove::Held(prescribed(&paths, p));
                     update_node(&cd, u, du, mv, inv_2dt, limit, rec.global)
                 }
             };
@@ -543,7 +545,7 @@ fn subtract_external<T: Real, const RAMPED: bool>(
     records: &[ExternalRecord<T>],
     force: &mut [[T; 3]],
     ext: &External<'_, T>,
-    ramps: &mut ramps::RampValues,
+    ramps: &mut path_values::RampValues,
 ) {
     let s = ext.gravity_factor.unwrap_or(T::from_f64(1.0));
     for x in records {
@@ -584,7 +586,7 @@ struct External<'a, T> {
 fn external_force<T: Real>(
     x: &ExternalRecord<T>,
     e: &External<'_, T>,
-    ramps: &mut ramps::RampValues,
+    ramps: &mut path_values::RampValues,
 ) -> [T; 3] {
     let (points, loads, contact_force, t) = (e.points, e.loads, e.contact_force, e.t);
     let mut fe = scaled(x.gravity, e.gravity_factor);
@@ -608,10 +610,11 @@ fn external_force<T: Real>(
     fe
 }
 
-/// Prescribed path `p` at `t_next`, in the node's precision.
+/// Prescribed path `p` at the update's `t_next` (from `paths`, each path evaluated once per
+/// update), in the node's precision.
 #[inline(never)]
-fn prescribed<T: Real>(points: &[PathPoint], p: u16, t_next: f64) -> [T; 3] {
-    path_value(points, p, t_next).map(T::from_f64)
+fn prescribed<T: Real>(paths: &path_values::PathsAt<'_>, p: u16) -> [T; 3] {
+    paths.value(p).map(T::from_f64)
 }
 
 /// The two element kinds a runtime can be built for.

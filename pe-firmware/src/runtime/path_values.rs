@@ -1,14 +1,18 @@
-//! The loads' ramps at one time, each evaluated once: a `[[load]]` spreads over its nodes,
-//! each record naming the load's ramp (a path of the image); evaluated per node, a ramp of
-//! `p` points costs a search through the points table and `O(p)` per loaded node and step.
-//! [`RampValues`] keeps the value of each ramp met at this time, so a ramp is evaluated once
-//! per [`crate::runtime::Runtime`] stage however many nodes share it, as the host's
-//! `problem::curves::Curves` does once per step.
+//! The image's paths at one time, each evaluated once.
+//!
+//! A `[[load]]` spreads over its nodes, each record naming the load's ramp (a path of the
+//! image), and gravity names its ramp once; a `[[prescribed]]` motion spreads over its held
+//! nodes, each naming its path. Evaluated per node, a path of `p` points costs a search
+//! through the points table and `O(p)` per node and step. [`RampValues`] keeps the value of
+//! each ramp met at one time, so a ramp is evaluated once per [`crate::runtime::Runtime`]
+//! stage however many nodes share it; [`PathsAt`] holds every motion path's value at the
+//! node update's time, evaluated once before the nodes, as the host's `problem::curves::Curves`
+//! and its `path_at` do once per step.
 //!
 //! The value is the same pure function of the points and `t` whichever node asks first, so
 //! the bits do not change. Fixed capacity, no allocation: past [`RampValues::CACHED`]
-//! distinct ramps at one time, the others are evaluated per node (the same bits, the old
-//! cost).
+//! distinct ramps at one time, or a path numbered [`PathsAt::PATHS`] or more, the others are
+//! evaluated per node (the same bits, the old cost).
 
 use crate::image::path::path_value;
 use crate::image::PathPoint;
@@ -54,6 +58,52 @@ impl RampValues {
     #[cfg(test)]
     pub(crate) fn evaluations(&self) -> u32 {
         self.evaluations
+    }
+}
+
+/// Every path's value at one time `t` (the paths numbered below [`Self::PATHS`]), evaluated
+/// once when made; the node update reads its held nodes' targets from it. One reference in
+/// the update's loop, where the points table and `t` took three registers: the free nodes'
+/// loop keeps its values in registers.
+pub(crate) struct PathsAt<'a> {
+    points: &'a [PathPoint],
+    t: f64,
+    values: [[f64; 3]; PathsAt::PATHS],
+    /// Bit `p`: path `p` has points, its value is in `values[p]`.
+    known: u16,
+}
+
+impl<'a> PathsAt<'a> {
+    /// Paths held (prescribed motions come first in the table; scenes have a handful).
+    pub(crate) const PATHS: usize = 16;
+
+    /// Each path of `points` numbered below [`Self::PATHS`] at `t`: [`path_value`], once per
+    /// path (at the first point of the path, the run `path_value` reads).
+    pub(crate) fn new(points: &'a [PathPoint], t: f64) -> Self {
+        let mut at = PathsAt {
+            points,
+            t,
+            values: [[0.0; 3]; Self::PATHS],
+            known: 0,
+        };
+        for p in points {
+            let k = p.path as usize;
+            if k < Self::PATHS && at.known & (1 << k) == 0 {
+                at.values[k] = path_value(points, p.path, t);
+                at.known |= 1 << k;
+            }
+        }
+        at
+    }
+
+    /// Path `path`'s value at this time: [`path_value`]'s bits.
+    #[inline]
+    pub(crate) fn value(&self, path: u16) -> [f64; 3] {
+        let k = path as usize;
+        match self.values.get(k) {
+            Some(v) if self.known & (1 << k) != 0 => *v,
+            _ => path_value(self.points, path, self.t),
+        }
     }
 }
 
@@ -114,5 +164,26 @@ mod tests {
             n as u32 + 2,
             "the two past the capacity, twice"
         );
+    }
+
+    /// Motion paths of three components at one time: every value is `path_value`'s bits,
+    /// far from zero, for the paths below the capacity, past it (evaluated per call) and
+    /// for a path the table does not hold (`path_value`'s zero).
+    #[test]
+    fn paths_at_one_time_give_path_values_bits() {
+        let n = PathsAt::PATHS as u16 + 2;
+        let mut points = paths(n, 4);
+        for p in points.iter_mut() {
+            p.value = [p.value[0], 2.0 * p.value[0] + 1.0, -p.value[0] - 1.0];
+        }
+        let t = 0.15;
+        let at = PathsAt::new(&points, t);
+        assert_eq!(at.known.count_ones() as usize, PathsAt::PATHS);
+        for path in 0..n {
+            let want = path_value(&points, path, t);
+            assert!(want.iter().all(|v| v.abs() > 0.1), "{want:?}");
+            assert_eq!(at.value(path).map(f64::to_bits), want.map(f64::to_bits));
+        }
+        assert_eq!(at.value(n + 5), [0.0; 3], "no such path: path_value's zero");
     }
 }
