@@ -13,7 +13,6 @@ use pe_firmware::runtime::Capacities;
 use super::plan::{BoardPlan, Plan};
 use super::tables::ImageTables;
 use crate::problem::contact::ContactRun;
-use crate::problem::curves::Curves;
 use crate::problem::elements::{kind_of, record_of};
 use crate::problem::{NodeKind, Problem};
 
@@ -25,22 +24,18 @@ pub struct BoardImage {
     pub ram_bytes: u64,
 }
 
-/// The distinct ramps of the loads and gravity: users `0..loads` are the loads, user
-/// `loads` is gravity.
-fn ramp_curves(problem: &Problem) -> Curves<1> {
-    let loads = problem.loads.iter().map(|l| l.ramp.as_ref());
-    Curves::of(loads.chain([problem.gravity_ramp.as_ref()]))
+/// The path table every board's image holds, and where each ramp is in it.
+struct PathTable {
+    points: Vec<PathPoint>,
+    /// Each load's ramp (a path), if it has one.
+    load_ramp: Vec<Option<u16>>,
+    /// Gravity's ramp, if it has one.
+    gravity_ramp: Option<u16>,
 }
 
-/// The path of gravity's ramp in [`path_table`] (after the prescribed paths).
-fn gravity_ramp_path(problem: &Problem) -> Option<u16> {
-    ramp_curves(problem)
-        .index(problem.loads.len())
-        .map(|c| (problem.paths.len() + c) as u16)
-}
-
-/// Prescribed paths first, then the distinct ramps of the loads and gravity.
-fn path_table(problem: &Problem) -> (Vec<PathPoint>, Vec<Option<u16>>) {
+/// Prescribed paths first, then the distinct ramps of the loads and gravity
+/// ([`Problem::ramp_curves`]).
+fn path_table(problem: &Problem) -> PathTable {
     let mut points = Vec::new();
     for (k, p) in problem.paths.iter().enumerate() {
         for (t, v) in &p.points {
@@ -52,10 +47,10 @@ fn path_table(problem: &Problem) -> (Vec<PathPoint>, Vec<Option<u16>>) {
             });
         }
     }
-    let ramps = ramp_curves(problem);
-    let load_ramp = (0..problem.loads.len())
-        .map(|k| ramps.index(k).map(|c| (problem.paths.len() + c) as u16))
-        .collect();
+    let ramps = problem.ramp_curves();
+    let path_of = |user: usize| ramps.index(user).map(|c| (problem.paths.len() + c) as u16);
+    let load_ramp = (0..problem.loads.len()).map(path_of).collect();
+    let gravity_ramp = path_of(problem.gravity_ramp_user());
     for (k, r) in ramps.curves().iter().enumerate() {
         for (t, v) in &r.points {
             points.push(PathPoint {
@@ -66,13 +61,18 @@ fn path_table(problem: &Problem) -> (Vec<PathPoint>, Vec<Option<u16>>) {
             });
         }
     }
-    (points, load_ramp)
+    PathTable {
+        points,
+        load_ramp,
+        gravity_ramp,
+    }
 }
 
 /// What every board's image shares: the contact tables, which nodes are on the surface, the
 /// graphics timing (computed once per compilation).
 struct Shared {
     dt_s: f64,
+    paths: PathTable,
     contact: Option<(ContactRun, Vec<u8>)>,
     on_surface: Vec<bool>,
     graphics: GraphicsParams,
@@ -149,7 +149,7 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
     t.nodes = node_records(problem, bp, shared.dt_s);
     exchange_tables(bp, &local, &mut t)?;
     contact_tables_of_board(shared, plan, b, &local, &mut t);
-    let external_counts = external_tables(problem, bp, &mut t)?;
+    let external_counts = external_tables(problem, &shared.paths, bp, &mut t)?;
     t.graphics_nodes = bp
         .nodes
         .iter()
@@ -182,7 +182,7 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
             damping_per_s: problem.solver.damping,
             steps: problem.steps(dt),
             speed_limit_m_per_s: problem.solver.speed_limit,
-            gravity_ramp: gravity_ramp_path(problem),
+            gravity_ramp: shared.paths.gravity_ramp,
             mass_scaling: problem.solver.mass_scaling,
             hourglass: problem.solver.hourglass,
         },
@@ -262,11 +262,11 @@ fn exchange_tables<T, E>(bp: &BoardPlan, local: &Local, t: &mut ImageTables<T, E
 /// order (each node's in the scene's order). Returns the records per stage.
 fn external_tables<T: ImageReal, E>(
     problem: &Problem,
+    paths: &PathTable,
     bp: &BoardPlan,
     t: &mut ImageTables<T, E>,
 ) -> Result<[u16; STAGES]> {
-    let (points, load_ramp) = path_table(problem);
-    t.path_points = points;
+    t.path_points = paths.points.clone();
     let mut loads_of: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
     for (j, l) in problem.loads.iter().enumerate() {
         loads_of.entry(l.node).or_default().push(j);
@@ -316,7 +316,7 @@ fn external_tables<T: ImageReal, E>(
             t.loads.push(LoadRecord {
                 node,
                 force: l.force,
-                ramp: load_ramp[j],
+                ramp: paths.load_ramp[j],
             });
         }
     }
@@ -489,6 +489,7 @@ fn compile_unstamped(problem: &Problem, plan: &Plan) -> Result<Vec<BoardImage>> 
     let dt = problem.time_step.dt_s;
     let shared = Shared {
         dt_s: dt,
+        paths: path_table(problem),
         contact: contact_tables(problem, plan, dt)?,
         on_surface: problem.surface_node_mask(),
         graphics: graphics_params(problem, dt),

@@ -7,7 +7,8 @@ use std::collections::BTreeMap;
 use anyhow::{anyhow, bail, Result};
 use pe_firmware::image::Segment;
 
-use super::{Load, NodeKind, Path1};
+use super::curves::Curves;
+use super::{Load, NodeKind, Path1, Problem};
 use crate::mesh::Mesh;
 use crate::scene::{Scene, Selector};
 
@@ -163,4 +164,19 @@ pub(super) fn gravity_of(scene: &Scene) -> Result<[f64; 3]> {
         bail!("[gravity] acceleration must be finite (m/s²), got {g:?}");
     }
     Ok(g)
+}
+
+impl Problem {
+    /// The distinct ramps of the loads and gravity, one [`Curves`] for the solver and the
+    /// compiler: user `k < loads.len()` is load `k`, user [`Self::gravity_ramp_user`] is
+    /// gravity.
+    pub fn ramp_curves(&self) -> Curves<1> {
+        let loads = self.loads.iter().map(|l| l.ramp.as_ref());
+        Curves::of(loads.chain([self.gravity_ramp.as_ref()]))
+    }
+
+    /// Gravity's user in [`Self::ramp_curves`].
+    pub fn gravity_ramp_user(&self) -> usize {
+        self.loads.len()
+    }
 }

@@ -61,8 +61,8 @@ pub struct Model<'p, T: Real> {
     pub f_ext: Vec<[T; 3]>,
     /// Nodes whose `f_ext` differs from gravity (loads, contact), restored each step.
     f_ext_dirty: Vec<usize>,
-    /// The distinct ramps of the loads (users `0..loads`) and gravity (user `loads`), each
-    /// evaluated once per step ([`Curves`]).
+    /// The distinct ramps of the loads and gravity ([`Problem::ramp_curves`]), each
+    /// evaluated once per step.
     ramps: Curves<1>,
     /// The prescribed paths' values at the step's `t_{n+1}`, evaluated once per step.
     path_at: Vec<[T; 3]>,
@@ -265,10 +265,7 @@ impl<'p, T: Real> Model<'p, T> {
             f_ext: gravity_force.clone(),
             gravity_force,
             f_ext_dirty: Vec::new(),
-            ramps: Curves::of(
-                (problem.loads.iter().map(|l| l.ramp.as_ref()))
-                    .chain([problem.gravity_ramp.as_ref()]),
-            ),
+            ramps: problem.ramp_curves(),
             path_at: vec![[T::ZERO; 3]; problem.paths.len()],
             step: 0,
             time_base_s: 0.0,
@@ -368,7 +365,7 @@ impl<'p, T: Real> Model<'p, T> {
     fn external_forces(&mut self, t: f64) -> Result<(), PhysicsError> {
         self.ramps.evaluate(t);
         let (f_ext, dirty) = (&mut self.f_ext, &mut self.f_ext_dirty);
-        match self.ramps.value(self.problem.loads.len()) {
+        match self.ramps.value(self.problem.gravity_ramp_user()) {
             // Ramped gravity everywhere, `g · s(t)` in the nodes' precision (the boards'
             // product).
             Some([s]) => {

@@ -248,7 +248,7 @@ impl<'p, T: Real> Model<'p, T> {
     pub fn gravity_m_per_s2(&self) -> [f64; 3] {
         let s = self
             .ramps
-            .value(self.problem.loads.len())
+            .value(self.problem.gravity_ramp_user())
             .map_or(1.0, |v| v[0]);
         self.problem.gravity.map(|g| g * s)
     }

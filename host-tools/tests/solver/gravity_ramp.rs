@@ -116,10 +116,8 @@ fn ramped_gravity_brings_a_hanging_bar_to_its_static_sag_without_overshoot() {
 #[test]
 fn a_malformed_gravity_ramp_is_refused_naming_the_table() {
     let scene = |keys: &str| {
-        let text = format!(
-            "[mesh]\ngenerate = {{ kind = \"box\", size = [0.1, 0.01, 0.01], cells = [2, 1, 1] }}\n[material]\nlaw = \"neo-hookean\"\nyoungs_modulus = 3e3\npoisson_ratio = 0.3\ndensity = 1000.0\n[gravity]\nacceleration = [0.0, 0.0, -9.81]\n{keys}\n"
-        );
-        let sc = host_tools::scene::Scene::from_toml(&text).expect("parses");
+        let gravity = format!("[gravity]\nacceleration = [0.0, 0.0, -9.81]\n{keys}");
+        let sc = box_scene([0.1, 0.01, 0.01], [2, 1, 1], 3e3, 0.3, "", &gravity);
         Problem::from_scene(&sc, std::path::Path::new("."))
             .err()
             .map(|e| e.to_string())
