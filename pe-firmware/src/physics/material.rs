@@ -270,6 +270,82 @@ impl<T: Real> MaterialLaw<T> {
     }
 }
 
+/// The split of a law into its isochoric part and its volumetric energy `U(J)`, for
+/// elements that take the pressure from elsewhere than the element's own `J` (the
+/// tetrahedron's averaged nodal pressure, [`crate::physics::element::tet_pressure`]):
+/// `W(F) = W_iso(F) + U(J)` and `P(F) = P_iso(F) + U'(J) cof F`, where the volumetric
+/// term is the one with the bulk parameter (`λ` of the compressible neo-Hookean law,
+/// `κ` of the decoupled ones), the term that locks a linear element as `ν → 0.5`.
+impl<T: Real> MaterialLaw<T> {
+    /// The law without its volumetric term (`λ = 0` or `κ = 0`): `W_iso`, `P_iso`.
+    pub fn isochoric(&self) -> MaterialLaw<T> {
+        match *self {
+            MaterialLaw::NeoHookean(LameParameters { mu, .. }) => {
+                MaterialLaw::NeoHookean(LameParameters {
+                    mu,
+                    lambda: T::ZERO,
+                })
+            }
+            MaterialLaw::NeoHookeanDecoupled { mu, .. } => {
+                MaterialLaw::NeoHookeanDecoupled { mu, kappa: T::ZERO }
+            }
+            MaterialLaw::MooneyRivlin {
+                c10,
+                c01,
+                volumetric,
+                ..
+            } => MaterialLaw::MooneyRivlin {
+                c10,
+                c01,
+                kappa: T::ZERO,
+                volumetric,
+            },
+        }
+    }
+
+    /// The pressure-like derivative `U'(J)` (Pa): `λ ln J / J` (compressible neo-Hookean),
+    /// `κ (J − 1)` (quadratic), `κ ln J / J` (logarithmic). `J > 0` is the caller's.
+    #[inline(always)]
+    pub fn volumetric_pressure(&self, j: T) -> T {
+        match *self {
+            MaterialLaw::NeoHookean(LameParameters { lambda, .. }) => lambda * j.ln() / j,
+            MaterialLaw::NeoHookeanDecoupled { kappa, .. }
+            | MaterialLaw::MooneyRivlin {
+                kappa,
+                volumetric: Volumetric::Quadratic,
+                ..
+            } => kappa * (j - T::ONE),
+            MaterialLaw::MooneyRivlin {
+                kappa,
+                volumetric: Volumetric::Log,
+                ..
+            } => kappa * j.ln() / j,
+        }
+    }
+
+    /// The volumetric energy density `U(J)` (J/m³): `λ/2 (ln J)²`, `κ/2 (J − 1)²` or
+    /// `κ/2 (ln J)²`.
+    pub fn volumetric_energy(&self, j: T) -> T {
+        let half = T::from_f64(0.5);
+        match *self {
+            MaterialLaw::NeoHookean(LameParameters { lambda, .. }) => {
+                half * lambda * j.ln() * j.ln()
+            }
+            MaterialLaw::NeoHookeanDecoupled { kappa, .. }
+            | MaterialLaw::MooneyRivlin {
+                kappa,
+                volumetric: Volumetric::Quadratic,
+                ..
+            } => half * kappa * (j - T::ONE) * (j - T::ONE),
+            MaterialLaw::MooneyRivlin {
+                kappa,
+                volumetric: Volumetric::Log,
+                ..
+            } => half * kappa * j.ln() * j.ln(),
+        }
+    }
+}
+
 /// The cofactor matrix `cof F = J F⁻ᵀ` and `J = det F`, refused unless `J > 0`.
 #[inline(always)]
 fn positive_cofactor<T: Real>(f: &Mat3<T>) -> Result<(Mat3<T>, T), NonPositiveJacobian> {

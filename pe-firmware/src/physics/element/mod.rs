@@ -27,6 +27,9 @@
 //! (any cell), [`HexBox`] (parallelepipeds), [`HexCuboid`] (axis-aligned cuboids),
 //! [`HexFull`] (full integration), each with its lane packing ([`crate::physics::Pack`]);
 //! here the registry: the user's choice [`Integration`] and the kinds, [`ElementKind`].
+//! Tetrahedra: [`tet`] the linear tetrahedron's geometry and kernel ([`ReferenceTet`],
+//! [`Tet4`]), [`tet_pressure`] its element loop, plain or with averaged nodal pressure
+//! (T4ANP, [`TetLoop`]); they run on the host (`pe solve`), not yet on the boards.
 //!
 //! **A new element kind** is a file here plus its registrations. The file holds the record
 //! (serialised, its [`Connectivity`] first) and its four implementations: [`Element`] (its
@@ -54,6 +57,8 @@ mod hex_full;
 mod hex_reduced;
 pub mod hourglass;
 pub mod kernel;
+pub mod tet;
+pub mod tet_pressure;
 
 pub use hex::{
     corner_moments, deformation_gradient, hourglass_base, natural_gradients, GeometryError,
@@ -65,6 +70,8 @@ pub use hex_full::{GaussPoint, HexFull};
 pub use hex_reduced::HexReduced;
 pub use hourglass::{FramedStiffness, HourglassControl, ModeStiffness};
 pub use kernel::{Connectivity, Element, HexElement, Hourglass, KernelFault, LaneKernel};
+pub use tet::{ReferenceTet, Tet4, TET_FACES};
+pub use tet_pressure::{add_nodal_volumes, Scratch, TetLoop, TetPressure};
 
 /// The element choice a scene makes (`integration = "reduced" | "full"` in its solver
 /// settings) and an image's header records: which kinds ([`ElementKind::integration`]) the

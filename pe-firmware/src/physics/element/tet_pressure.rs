@@ -1,0 +1,257 @@
+//! The tetrahedra's element loop, plain (T4) or with averaged nodal pressure (T4ANP).
+//!
+//! T4ANP (Bonet and Burton 1998; Joldes, Wittek and Miller 2008 for soft tissue) takes the
+//! volumetric response from each node's patch of tetrahedra instead of each element:
+//!
+//! * the nodal volume ratio `J_n = v_n / V_n`, with `V_n = Σ_{e∋n} V_e/4` (reference) and
+//!   `v_n = Σ_{e∋n} V_e J_e/4` (current);
+//! * the nodal pressure `p_n = (1/V_n) Σ_{e∋n} (V_e/4) U_e'(J_n)` (`U_e` the volumetric
+//!   energy of element `e`'s law: [`MaterialLaw::volumetric_pressure`]; one law per patch
+//!   gives `p_n = U'(J_n)`);
+//! * each element's stress `P = P_iso(F) + p̄_e cof F` with `p̄_e` the mean of its four
+//!   nodes' pressures, and forces `f_a = V_e P B_a` ([`Tet4::forces_of_stress`]).
+//!
+//! These are the exact derivatives of the energy `Σ_e V_e W_iso(F_e) + Σ_e (V_e/4)
+//! Σ_{n∈e} U_e(J_n)` ([`stored_energy`]), so the scheme conserves energy like the
+//! element's own and a load cycle returns to rest. About one pressure per node instead
+//! of one per element: the constraint count that locks plain T4 near `ν = 0.5` falls
+//! below the degrees of freedom. Every linear displacement field gives every element the
+//! same `J`, hence `J_n = J_e` and the plain element's forces: the patch test holds.
+//!
+//! Everything here works on caller-owned slices (no allocation): `nodal_volume` from
+//! [`add_nodal_volumes`], and a [`Scratch`] as long as the displacements.
+
+use super::super::explicit::PhysicsError;
+use super::super::material::MaterialLaw;
+use super::super::real::Real;
+use super::super::tensor;
+use super::kernel::KernelFault;
+use super::tet::Tet4;
+
+/// How the tetrahedra take their volumetric response.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TetPressure {
+    /// Each element's own `J` (plain T4: locks as `ν → 0.5`).
+    Element,
+    /// The nodal average (T4ANP).
+    Nodal,
+}
+
+/// Per-node work arrays of the nodal pass, each at least as long as the displacements.
+pub struct Scratch<'a, T> {
+    /// `J_n` (after the first pass).
+    pub ratio: &'a mut [T],
+    /// `p_n` (Pa).
+    pub pressure: &'a mut [T],
+}
+
+/// Adds each tetrahedron's quarter volume `V_e/4` to its nodes: `V_n` (m³).
+pub fn add_nodal_volumes<T: Real>(tets: &[Tet4<T>], nodal_volume: &mut [T]) {
+    let quarter = T::from_f64(0.25);
+    for t in tets {
+        for &n in &t.nodes {
+            if let Some(v) = nodal_volume.get_mut(n as usize) {
+                *v += quarter * t.volume;
+            }
+        }
+    }
+}
+
+fn fault(k: usize, first: u32, e: KernelFault) -> PhysicsError {
+    let element = first + k as u32;
+    match e {
+        KernelFault::Inverted(j) => PhysicsError::InvertedElement {
+            element,
+            jacobian: j.jacobian,
+        },
+        KernelFault::BadIndex => PhysicsError::BadIndex { element },
+    }
+}
+
+/// The law of element `t`, or [`PhysicsError::BadIndex`].
+#[inline(always)]
+fn law_of<'l, T: Real>(
+    laws: &'l [MaterialLaw<T>],
+    t: &Tet4<T>,
+    k: usize,
+    first: u32,
+) -> Result<&'l MaterialLaw<T>, PhysicsError> {
+    laws.get(t.material as usize)
+        .ok_or(fault(k, first, KernelFault::BadIndex))
+}
+
+/// The tetrahedra of a model (or a board) as the loop takes them: the records, the
+/// number of the first in errors, the laws, the form, and `V_n` ([`add_nodal_volumes`]
+/// over the same tetrahedra; only read by [`TetPressure::Nodal`]).
+#[derive(Clone, Copy)]
+pub struct TetLoop<'a, T> {
+    pub tets: &'a [Tet4<T>],
+    pub first: u32,
+    pub laws: &'a [MaterialLaw<T>],
+    pub form: TetPressure,
+    pub nodal_volume: &'a [T],
+}
+
+impl<T: Real> TetLoop<'_, T> {
+    /// Adds the tetrahedra's internal forces at `u` into `f` (`scratch` is overwritten).
+    pub fn accumulate(
+        &self,
+        scratch: Scratch<'_, T>,
+        u: &[[T; 3]],
+        f: &mut [[T; 3]],
+    ) -> Result<(), PhysicsError> {
+        let TetLoop {
+            tets,
+            first,
+            laws,
+            form,
+            nodal_volume,
+        } = *self;
+        let len = u.len().min(f.len());
+        if form == TetPressure::Element {
+            for (k, t) in tets.iter().enumerate() {
+                let nodes = t.checked_nodes(len).map_err(|e| fault(k, first, e))?;
+                let law = law_of(laws, t, k, first)?;
+                let fe = t
+                    .internal_forces(law, &Tet4::gather(&nodes, u))
+                    .map_err(|j| fault(k, first, KernelFault::Inverted(j)))?;
+                scatter(&nodes, &fe, f);
+            }
+            return Ok(());
+        }
+        let Scratch { ratio, pressure } = scratch;
+        nodal_pressures(tets, first, laws, nodal_volume, ratio, &mut *pressure, u)?;
+        let quarter = T::from_f64(0.25);
+        for (k, t) in tets.iter().enumerate() {
+            let nodes = t.checked_nodes(len).map_err(|e| fault(k, first, e))?;
+            let law = law_of(laws, t, k, first)?;
+            let p = &*pressure;
+            let mean = quarter * (p[nodes[0]] + p[nodes[1]] + p[nodes[2]] + p[nodes[3]]);
+            let fm = t.deformation_gradient(&Tet4::gather(&nodes, u));
+            let mut stress = law
+                .isochoric()
+                .first_piola_kirchhoff(&fm)
+                .map_err(|j| fault(k, first, KernelFault::Inverted(j)))?;
+            let cof = tensor::cofactor(&fm);
+            for (row, c) in stress.iter_mut().zip(&cof) {
+                for (s, &c) in row.iter_mut().zip(c) {
+                    *s += mean * c;
+                }
+            }
+            scatter(&nodes, &t.forces_of_stress(&stress), f);
+        }
+        Ok(())
+    }
+}
+
+#[inline(always)]
+fn scatter<T: Real>(nodes: &[usize; 4], fe: &[[T; 3]; 4], f: &mut [[T; 3]]) {
+    for (&n, fa) in nodes.iter().zip(fe) {
+        for i in 0..3 {
+            f[n][i] += fa[i];
+        }
+    }
+}
+
+/// The first passes of T4ANP: `ratio[n] = J_n` and `pressure[n] = p_n` for every node
+/// with `V_n > 0` (the others' entries are left zero).
+fn nodal_pressures<T: Real>(
+    tets: &[Tet4<T>],
+    first: u32,
+    laws: &[MaterialLaw<T>],
+    nodal_volume: &[T],
+    ratio: &mut [T],
+    pressure: &mut [T],
+    u: &[[T; 3]],
+) -> Result<(), PhysicsError> {
+    let len = u
+        .len()
+        .min(ratio.len())
+        .min(pressure.len())
+        .min(nodal_volume.len());
+    let quarter = T::from_f64(0.25);
+    ratio.fill(T::ZERO);
+    pressure.fill(T::ZERO);
+    for (k, t) in tets.iter().enumerate() {
+        let nodes = t.checked_nodes(len).map_err(|e| fault(k, first, e))?;
+        let j = t.volume_ratio(&Tet4::gather(&nodes, u));
+        if !(j > T::ZERO) {
+            return Err(PhysicsError::InvertedElement {
+                element: first + k as u32,
+                jacobian: j.to_f64(),
+            });
+        }
+        let w = quarter * t.volume * j;
+        for &n in &nodes {
+            ratio[n] += w;
+        }
+    }
+    for (r, &v) in ratio.iter_mut().zip(nodal_volume) {
+        if v > T::ZERO {
+            *r = *r / v;
+        }
+    }
+    for (k, t) in tets.iter().enumerate() {
+        let law = law_of(laws, t, k, first)?;
+        let w = quarter * t.volume;
+        for &n in &t.nodes {
+            let n = n as usize;
+            pressure[n] += w * law.volumetric_pressure(ratio[n]);
+        }
+    }
+    for (p, &v) in pressure.iter_mut().zip(nodal_volume) {
+        if v > T::ZERO {
+            *p = *p / v;
+        }
+    }
+    Ok(())
+}
+
+impl<T: Real> TetLoop<'_, T> {
+    /// Stored energy (J) of the tetrahedra at `u`: `Σ_e V_e W(F_e)` (plain) or
+    /// `Σ_e V_e W_iso(F_e) + Σ_e (V_e/4) Σ_{n∈e} U_e(J_n)` (nodal), the energy whose
+    /// derivatives [`Self::accumulate`] returns. Accumulated in `f64`.
+    pub fn stored_energy(
+        &self,
+        scratch: Scratch<'_, T>,
+        u: &[[T; 3]],
+    ) -> Result<f64, PhysicsError> {
+        let TetLoop {
+            tets,
+            first,
+            laws,
+            form,
+            nodal_volume,
+        } = *self;
+        let len = u.len();
+        if form == TetPressure::Nodal {
+            let Scratch { ratio, pressure } = scratch;
+            nodal_pressures(tets, first, laws, nodal_volume, &mut *ratio, pressure, u)?;
+            let mut sum = 0.0;
+            for (k, t) in tets.iter().enumerate() {
+                let nodes = t.checked_nodes(len).map_err(|e| fault(k, first, e))?;
+                let law = law_of(laws, t, k, first)?;
+                let iso = t
+                    .energy(&law.isochoric(), &Tet4::gather(&nodes, u))
+                    .map_err(|j| fault(k, first, KernelFault::Inverted(j)))?;
+                let quarter = 0.25 * t.volume.to_f64();
+                let vol: f64 = nodes
+                    .iter()
+                    .map(|&n| law.volumetric_energy(ratio[n]).to_f64())
+                    .sum();
+                sum += iso.to_f64() + quarter * vol;
+            }
+            return Ok(sum);
+        }
+        let mut sum = 0.0;
+        for (k, t) in tets.iter().enumerate() {
+            let nodes = t.checked_nodes(len).map_err(|e| fault(k, first, e))?;
+            let law = law_of(laws, t, k, first)?;
+            let w = t
+                .energy(law, &Tet4::gather(&nodes, u))
+                .map_err(|j| fault(k, first, KernelFault::Inverted(j)))?;
+            sum += w.to_f64();
+        }
+        Ok(sum)
+    }
+}
