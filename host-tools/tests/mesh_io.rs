@@ -542,22 +542,44 @@ fn error_garbage_number() {
     assert!(e.contains("\"zero\"") && e.contains("node 6"), "{e}");
 }
 
-/// A tetrahedral mesh is refused naming the type and the count; a file with only
-/// lower-dimensional elements has no volume cells: say so and list what it has.
+/// A one-tetrahedron mesh loads as one tetrahedron (listed the wrong way round, turned
+/// over, said in a note); a pyramid is refused naming the type and the count; a file with
+/// only lower-dimensional elements has no volume cells: say so and list what it has.
 #[test]
 fn error_no_hexahedra() {
     let text = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n\
-                0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 1 1 1\n3 1 4 1\n1 1 2 3 4\n\
+                0 0 0\n1 0 0\n0 1 0\n0 0 1\n$EndNodes\n$Elements\n1 1 1 1\n3 1 4 1\n1 1 3 2 4\n\
                 $EndElements\n";
     let (_tmp, path) = write_temp("tet", "tet.msh", text);
+    let m = load_mesh(&path).expect("a tetrahedron loads");
+    assert_eq!(
+        m.cells,
+        vec![[0, 1, 2, 2, 3, 3, 3, 3]],
+        "turned over, stored degenerate"
+    );
+    assert!(
+        m.notes
+            .iter()
+            .any(|n| n.contains("1 tetrahedra") && n.contains("1 given in the other orientation")),
+        "{:?}",
+        m.notes
+    );
+    let pyramid = text
+        .replace(
+            "$Nodes\n1 4 1 4\n3 1 0 4\n1\n2\n3\n4\n",
+            "$Nodes\n1 5 1 5\n3 1 0 5\n1\n2\n3\n4\n5\n",
+        )
+        .replace("0 0 1\n$EndNodes", "1 1 0\n0.5 0.5 1\n$EndNodes")
+        .replace("3 1 4 1\n1 1 3 2 4", "3 1 7 1\n1 1 2 4 3 5");
+    let (_tmp, path) = write_temp("pyr", "pyr.msh", &pyramid);
     let e = load_mesh(&path).unwrap_err();
     assert!(matches!(e, MeshError::UnsupportedCells { .. }), "{e}");
     let e = e.to_string();
     assert!(
-        e.contains("tet.msh") && e.contains("1 tetrahedra (Gmsh type 4)"),
+        e.contains("pyr.msh") && e.contains("1 pyramids (Gmsh type 7)"),
         "{e}"
     );
-    let tri = text.replace("3 1 4 1\n1 1 2 3 4", "2 1 2 1\n1 1 2 3");
+    let tri = text.replace("3 1 4 1\n1 1 3 2 4", "2 1 2 1\n1 1 2 3");
     let (_tmp, path) = write_temp("tri", "tri.msh", &tri);
     let e = load_mesh(&path).unwrap_err();
     assert!(matches!(e, MeshError::NoHexahedra { .. }), "{e}");

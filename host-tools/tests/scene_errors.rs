@@ -159,7 +159,7 @@ fn real_liver_mesh_resolves_with_consistent_mass() {
     );
     let scene = Scene::from_file(&dir.join("liver.toml")).unwrap();
     let p = Problem::from_scene(&scene, &dir).unwrap();
-    let volume: f64 = p.reference.iter().map(|r| r.volume).sum();
+    let volume: f64 = p.reference.iter().map(|r| r.volume()).sum();
     let mass: f64 = p.mass.iter().sum();
     assert!(p.mass.iter().all(|m| *m > 0.0));
     assert!(

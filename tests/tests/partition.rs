@@ -275,7 +275,7 @@ fn balancing_cost_keeps_every_boards_cost_within_the_bound() {
             .iter()
             .enumerate()
             .map(|(e, c)| {
-                let r = &p.reference[e];
+                let r = p.reference[e].hex().expect("a hexahedral mesh");
                 let k = if !r.is_parallelepiped() {
                     cost.per_element_step
                 } else if r.is_cuboid() {

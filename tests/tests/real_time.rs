@@ -285,7 +285,7 @@ fn verdict_matches_an_independent_computation() {
                     .elements
                     .iter()
                     .map(|&e| {
-                        let r = &p.reference[e as usize];
+                        let r = p.reference[e as usize].hex().expect("a hexahedral mesh");
                         if !r.is_parallelepiped() {
                             cost.per_element_step as f64
                         } else if r.is_cuboid() {

@@ -13,7 +13,7 @@ use pe_firmware::runtime::Capacities;
 use super::plan::{BoardPlan, Plan};
 use super::tables::ImageTables;
 use crate::problem::contact::ContactRun;
-use crate::problem::elements::{kind_of, record_of};
+use crate::problem::elements::record_of;
 use crate::problem::{NodeKind, Problem};
 
 /// A compiled image with its figures.
@@ -129,12 +129,16 @@ fn write_image<T: ImageReal, E: ElementRecord<T>>(
     for (k, &end) in bp.batch_ends.iter().enumerate() {
         for &e in &bp.elements[start..end] {
             let (e, nodes) = (e as usize, local_nodes(e));
-            match kind_of(problem, e) {
-                k if k == E::KIND => t.elements.push(record_of(problem, e, nodes)),
-                ElementKind::HexBox => t.boxes.push(record_of::<T, HexBox<T>>(problem, e, nodes)),
+            let r = crate::problem::elements::hex_of(problem, e)
+                .ok_or_else(|| anyhow!("cell {e} is a tetrahedron: the boards have none"))?;
+            match ElementKind::of(r, problem.solver.integration) {
+                k if k == E::KIND => t.elements.push(record_of(problem, e, r, nodes)),
+                ElementKind::HexBox => t
+                    .boxes
+                    .push(record_of::<T, HexBox<T>>(problem, e, r, nodes)),
                 ElementKind::HexCuboid => t
                     .cuboids
-                    .push(record_of::<T, HexCuboid<T>>(problem, e, nodes)),
+                    .push(record_of::<T, HexCuboid<T>>(problem, e, r, nodes)),
                 k => bail!(
                     "internal: cell {e} is a {k}, which an image of {} holds no table for",
                     E::KIND

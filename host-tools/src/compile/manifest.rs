@@ -64,6 +64,7 @@ pub fn compile_to_dir(
 ) -> Result<CompileReport> {
     // The manifest names a registered profile (the figures may be a variant of it).
     let registered = BoardProfile::by_name(profile.name)?;
+    super::plan::refuse_tetrahedra(problem)?;
     // One step for the boards and `pe solve`: where tracking would lower dt, the smallest
     // step it reaches, settled as `pe solve` settles it.
     let (settled, dt_settled) = crate::solver::settle::settled_problem(problem, scene)?;

@@ -58,6 +58,7 @@ pub use manifest::{
 };
 pub use output_mesh::{OutputMesh, ToolTrack, OUTPUT_MESH_FILE};
 pub use parts::{feature_names, parts_needed, parts_of};
+pub use plan::refuse_tetrahedra;
 pub use plan::{plan, plan_balanced, Balance, BoardPlan, Plan, RoundPlan, FACE_NAMES};
 pub use report::{
     plan_for_real_time, real_time_of, report, summary, verdict, BalanceTried, BoardSummary,

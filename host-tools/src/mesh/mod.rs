@@ -1,4 +1,4 @@
-//! Hexahedral volume meshes on the host: the common in-memory form every importer and
+//! Volume meshes (hexahedra, prisms, tetrahedra) on the host: the common in-memory form every importer and
 //! generator produces.
 
 pub mod builtin;
@@ -46,11 +46,11 @@ pub enum MeshError {
         node: u64,
     },
     /// The file holds no volume cell at all (no hexahedron, no prism).
-    #[error("{}: no volume cells (hexahedra or prisms) found: {detail}", .path.display())]
+    #[error("{}: no volume cells (hexahedra, prisms or tetrahedra) found: {detail}", .path.display())]
     NoHexahedra { path: PathBuf, detail: String },
-    /// Volume cells the solver has no element for (tetrahedra, pyramids, quadratic cells):
+    /// Volume cells the solver has no element for (pyramids, quadratic cells):
     /// their types and counts.
-    #[error("{}: the mesh has volume cells the solver cannot run: {detail} (only hexahedra and prisms (wedges) are supported; convert or remesh with hexahedra, e.g. gmsh -3 with Mesh.RecombineAll = 1 and Mesh.SubdivisionAlgorithm = 2)", .path.display())]
+    #[error("{}: the mesh has volume cells the solver cannot run: {detail} (hexahedra, prisms (wedges) and linear tetrahedra are supported; convert quadratic cells to linear ones, e.g. gmsh -3 with Mesh.ElementOrder = 1, and pyramids to tetrahedra or hexahedra)", .path.display())]
     UnsupportedCells { path: PathBuf, detail: String },
     /// A cell uses the same node twice (a collapsed hexahedron). `item` is
     /// "element <tag> (line <n>)" for Gmsh files and "cell <0-based index>" otherwise;
@@ -143,6 +143,28 @@ pub fn is_prism(c: &[u32; 8]) -> bool {
     c[3] == c[2] && c[7] == c[6] && (1..6).all(|a| !six[..a].contains(&six[a]))
 }
 
+/// A tetrahedron `t` (Gmsh/VTK order: `t0 t1 t2` counter-clockwise seen from `t3`) as a
+/// degenerate hexahedron `[t0, t1, t2, t2, t3, t3, t3, t3]`: its hexahedral faces are the
+/// tetrahedron's four triangles (outward) and two faces without area, so every tool that
+/// reads cells' faces reads a tetrahedron's. It runs as a tetrahedron
+/// ([`pe_firmware::physics::Tet4`]), never as a hexahedron.
+pub fn tetrahedron_as_hexahedron(t: [u32; 4]) -> [u32; 8] {
+    [t[0], t[1], t[2], t[2], t[3], t[3], t[3], t[3]]
+}
+
+/// Whether `c` is a tetrahedron stored by [`tetrahedron_as_hexahedron`], and its nodes.
+pub fn as_tetrahedron(c: &[u32; 8]) -> Option<[u32; 4]> {
+    let t = [c[0], c[1], c[2], c[4]];
+    let pattern = c[3] == c[2] && c[5] == c[4] && c[6] == c[4] && c[7] == c[4];
+    let distinct = (1..4).all(|a| !t[..a].contains(&t[a]));
+    (pattern && distinct).then_some(t)
+}
+
+/// Whether `c` is a tetrahedron stored by [`tetrahedron_as_hexahedron`].
+pub fn is_tetrahedron(c: &[u32; 8]) -> bool {
+    as_tetrahedron(c).is_some()
+}
+
 /// The key under which two cells' faces are the same face: the face's distinct nodes,
 /// sorted, padded with `u32::MAX` (so a prism's triangle matches its neighbour's whichever
 /// node repeats), and how many distinct nodes it has (fewer than 3: no area, not a face).
@@ -180,7 +202,8 @@ impl Mesh {
     }
 
     /// Topological sanity: node indices in range, no node repeated within a cell (except a
-    /// prism's collapsed corners, see [`prism_as_hexahedron`]), one region per cell, one tag
+    /// prism's collapsed corners, see [`prism_as_hexahedron`], and a tetrahedron's, see
+    /// [`tetrahedron_as_hexahedron`]), one region per cell, one tag
     /// per node, finite coordinates and node sets within the nodes. Geometry (inverted cells) is not
     /// checked here; see [`Mesh::min_scaled_jacobian`].
     pub fn validate(&self) -> Result<(), MeshError> {
@@ -221,7 +244,7 @@ impl Mesh {
                         nodes: n,
                     });
                 }
-                if cell[..a].contains(&idx) && !is_prism(cell) {
+                if cell[..a].contains(&idx) && !is_prism(cell) && !is_tetrahedron(cell) {
                     return Err(MeshError::RepeatedNode {
                         path,
                         item: format!("cell {ci}"),

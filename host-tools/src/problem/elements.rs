@@ -6,20 +6,31 @@
 //! ([`HexReduced`]) for the rest. The serial solver runs the general elements, then the
 //! parallelepipeds, then the cuboids (the image's element tables, [`ElementKind::table`]),
 //! each in mesh order: the order a one-board machine runs them in (see `compile::image`),
-//! so the two compute the same bits.
+//! so the two compute the same bits. Tetrahedra ([`Tetrahedra`]) run after every
+//! hexahedron, in mesh order, plain or with averaged nodal pressure (`[solver]
+//! tetrahedron`); they run on the host only.
 
 use pe_firmware::image::Integration;
 use pe_firmware::physics::explicit::{accumulate_internal_forces, stored_energy};
 pub use pe_firmware::physics::ElementKind;
 use pe_firmware::physics::{
     Connectivity, Element, HexBox, HexCuboid, HexFull, HexReduced, Hourglass, MaterialLaw,
-    PhysicsError, Real,
+    PhysicsError, Real, ReferenceHex,
 };
 
 use crate::problem::Problem;
 
-/// Elements of one integration kind.
-pub enum Elements<T> {
+mod tetrahedra;
+pub use tetrahedra::Tetrahedra;
+
+/// A problem's elements: its hexahedra (prisms included) and its tetrahedra.
+pub struct Elements<T> {
+    pub hexes: Hexahedra<T>,
+    pub tets: Tetrahedra<T>,
+}
+
+/// Hexahedra of one integration kind.
+pub enum Hexahedra<T> {
     Reduced {
         general: Vec<HexReduced<T>>,
         boxes: Vec<HexBox<T>>,
@@ -28,38 +39,112 @@ pub enum Elements<T> {
         /// then the cuboids.
         cells: Vec<u32>,
     },
-    Full(Vec<HexFull<T>>),
+    Full {
+        records: Vec<HexFull<T>>,
+        /// Mesh cell of each element.
+        cells: Vec<u32>,
+    },
 }
 
-/// The kind mesh cell `e` of `p` takes ([`ElementKind::of`] under the scene's integration).
-pub fn kind_of(p: &Problem, e: usize) -> ElementKind {
-    ElementKind::of(&p.reference[e], p.solver.integration)
+/// Mesh cell `e` of `p` as a hexahedron (None: a tetrahedron).
+pub fn hex_of(p: &Problem, e: usize) -> Option<&ReferenceHex> {
+    p.reference.get(e).and_then(|r| r.hex())
 }
 
-/// The record of kind `E` of mesh cell `e` of `p`, its nodes numbered by `nodes`: the one
-/// place the problem's cells become element records (the serial solver's and every image's).
-pub fn record_of<T: Real, E: Element<T>>(p: &Problem, e: usize, nodes: [u32; 8]) -> E {
+/// The kind hexahedral mesh cell `e` of `p` takes ([`ElementKind::of`] under the scene's
+/// integration); None for a tetrahedron.
+pub fn kind_of(p: &Problem, e: usize) -> Option<ElementKind> {
+    hex_of(p, e).map(|r| ElementKind::of(r, p.solver.integration))
+}
+
+/// The record of kind `E` of hexahedral mesh cell `r` (cell `e` of `p`), its nodes
+/// numbered by `nodes`: the one place the problem's cells become hexahedral element records
+/// (the serial solver's and every image's).
+pub fn record_of<T: Real, E: Element<T>>(
+    p: &Problem,
+    e: usize,
+    r: &ReferenceHex,
+    nodes: [u32; 8],
+) -> E {
     let material = p.cell_material[e];
     let hourglass = Hourglass::of_law(&p.laws[material as usize], p.solver.hourglass);
-    E::from_reference(&p.reference[e], Connectivity { nodes, material }, hourglass)
+    E::from_reference(r, Connectivity { nodes, material }, hourglass)
 }
 
 impl<T: Real> Elements<T> {
     pub fn build(p: &Problem) -> Self {
+        Elements {
+            hexes: Hexahedra::build(p),
+            tets: Tetrahedra::build(p),
+        }
+    }
+
+    /// Elements of both kinds.
+    pub fn len(&self) -> usize {
+        self.hexes.len() + self.tets.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Adds the internal forces at `u` into `f`: the hexahedra's, then the tetrahedra's.
+    pub fn internal_forces(
+        &self,
+        laws: &[MaterialLaw<T>],
+        u: &[[T; 3]],
+        f: &mut [[T; 3]],
+    ) -> Result<(), PhysicsError> {
+        self.hexes.internal_forces(laws, u, f)?;
+        self.tets.add_forces(laws, u, f)
+    }
+
+    /// Stored energy (J) of every element.
+    pub fn stored_energy(
+        &self,
+        laws: &[MaterialLaw<T>],
+        u: &[[T; 3]],
+    ) -> Result<f64, PhysicsError> {
+        Ok(self.hexes.stored_energy(laws, u)? + self.tets.stored_energy(laws, u)?)
+    }
+
+    /// Stored energy of each mesh cell (J), in mesh order.
+    pub fn cell_energies(
+        &self,
+        laws: &[MaterialLaw<T>],
+        u: &[[T; 3]],
+    ) -> Result<Vec<f64>, PhysicsError> {
+        let mut out = vec![0.0; self.len()];
+        self.hexes.cell_energies(laws, u, &mut out)?;
+        self.tets.cell_energies(laws, u, &mut out)?;
+        Ok(out)
+    }
+}
+
+impl<T: Real> Hexahedra<T> {
+    pub fn build(p: &Problem) -> Self {
         // Each element table's cells, in mesh order.
         let mut cells = [const { Vec::new() }; ElementKind::TABLES];
         for e in 0..p.mesh.cells.len() {
-            cells[kind_of(p, e).table()].push(e as u32);
+            if let Some(kind) = kind_of(p, e) {
+                cells[kind.table()].push(e as u32);
+            }
         }
         fn table<T: Real, E: Element<T>>(p: &Problem, cells: &[u32]) -> Vec<E> {
             cells
                 .iter()
-                .map(|&e| record_of(p, e as usize, p.mesh.cells[e as usize]))
+                .filter_map(|&e| {
+                    let e = e as usize;
+                    hex_of(p, e).map(|r| record_of(p, e, r, p.mesh.cells[e]))
+                })
                 .collect()
         }
         match p.solver.integration {
-            Integration::Full => Elements::Full(table(p, &cells[0])),
-            Integration::Reduced => Elements::Reduced {
+            Integration::Full => Hexahedra::Full {
+                records: table(p, &cells[0]),
+                cells: cells[0].clone(),
+            },
+            Integration::Reduced => Hexahedra::Reduced {
                 general: table(p, &cells[0]),
                 boxes: table(p, &cells[1]),
                 cuboids: table(p, &cells[2]),
@@ -70,8 +155,8 @@ impl<T: Real> Elements<T> {
 
     pub fn len(&self) -> usize {
         match self {
-            Elements::Reduced { cells, .. } => cells.len(),
-            Elements::Full(v) => v.len(),
+            Hexahedra::Reduced { cells, .. } => cells.len(),
+            Hexahedra::Full { records, .. } => records.len(),
         }
     }
 
@@ -82,21 +167,19 @@ impl<T: Real> Elements<T> {
     /// Elements of each kernel ([`Kernel`] order).
     pub fn per_kernel(&self) -> [usize; 3] {
         match self {
-            Elements::Reduced {
+            Hexahedra::Reduced {
                 general,
                 boxes,
                 cuboids,
                 ..
             } => [general.len(), boxes.len(), cuboids.len()],
-            Elements::Full(v) => [v.len(), 0, 0],
+            Hexahedra::Full { records, .. } => [records.len(), 0, 0],
         }
     }
 
     /// An error naming an element in kernel order, renamed to its mesh cell.
     pub(crate) fn in_mesh(&self, e: PhysicsError) -> PhysicsError {
-        let Elements::Reduced { cells, .. } = self else {
-            return e;
-        };
+        let (Hexahedra::Reduced { cells, .. } | Hexahedra::Full { cells, .. }) = self;
         let cell = |k: u32| cells.get(k as usize).copied().unwrap_or(k);
         match e {
             PhysicsError::InvertedElement { element, jacobian } => PhysicsError::InvertedElement {
@@ -117,7 +200,7 @@ impl<T: Real> Elements<T> {
         f: &mut [[T; 3]],
     ) -> Result<(), PhysicsError> {
         match self {
-            Elements::Reduced {
+            Hexahedra::Reduced {
                 general,
                 boxes,
                 cuboids,
@@ -131,7 +214,9 @@ impl<T: Real> Elements<T> {
                     .and_then(|()| accumulate_internal_forces(cuboids, first_cuboid, laws, u, f))
                     .map_err(|e| self.in_mesh(e))
             }
-            Elements::Full(v) => accumulate_internal_forces(v, 0, laws, u, f),
+            Hexahedra::Full { records, .. } => {
+                accumulate_internal_forces(records, 0, laws, u, f).map_err(|e| self.in_mesh(e))
+            }
         }
     }
 
@@ -141,7 +226,7 @@ impl<T: Real> Elements<T> {
         u: &[[T; 3]],
     ) -> Result<f64, PhysicsError> {
         match self {
-            Elements::Reduced {
+            Hexahedra::Reduced {
                 general,
                 boxes,
                 cuboids,
@@ -163,20 +248,22 @@ impl<T: Real> Elements<T> {
                     + stored_energy(cuboids, laws, u)
                         .map_err(shifted(general.len() + boxes.len()))?)
             }
-            Elements::Full(v) => stored_energy(v, laws, u),
+            Hexahedra::Full { records, .. } => {
+                stored_energy(records, laws, u).map_err(|e| self.in_mesh(e))
+            }
         }
     }
 
-    /// Stored energy of each mesh cell (J), in mesh order: [`Self::stored_energy`] cell by
-    /// cell.
+    /// Stored energy of each hexahedral mesh cell (J) into `out` (indexed by mesh cell):
+    /// [`Self::stored_energy`] cell by cell.
     pub fn cell_energies(
         &self,
         laws: &[MaterialLaw<T>],
         u: &[[T; 3]],
-    ) -> Result<Vec<f64>, PhysicsError> {
-        let mut out = vec![0.0; self.len()];
+        out: &mut [f64],
+    ) -> Result<(), PhysicsError> {
         match self {
-            Elements::Reduced {
+            Hexahedra::Reduced {
                 general,
                 boxes,
                 cuboids,
@@ -191,12 +278,13 @@ impl<T: Real> Elements<T> {
                     out[cells[k] as usize] = w.map_err(|e| self.in_mesh(e))?;
                 }
             }
-            Elements::Full(v) => {
-                for (k, e) in v.chunks(1).enumerate() {
-                    out[k] = stored_energy(e, laws, u)?;
+            Hexahedra::Full { records, cells } => {
+                for (k, e) in records.chunks(1).enumerate() {
+                    out[cells[k] as usize] =
+                        stored_energy(e, laws, u).map_err(|e| self.in_mesh(e))?;
                 }
             }
         }
-        Ok(out)
+        Ok(())
     }
 }

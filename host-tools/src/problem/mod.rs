@@ -7,18 +7,20 @@ pub mod contact;
 pub mod curves;
 pub mod elements;
 pub mod frequency;
+pub mod reference;
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
-use pe_firmware::physics::{LameParameters, MaterialLaw, ReferenceHex, Volumetric};
+use pe_firmware::physics::{LameParameters, MaterialLaw, ReferenceHex, ReferenceTet, Volumetric};
 
-use crate::mesh::Mesh;
+use crate::mesh::{as_tetrahedron, Mesh};
 use crate::scene::{Law, MaterialSpec, RegionRef, Scene, Selector, SolverSpec};
 use batched::{Batched, Isa};
 use conditions::{constraints, gravity_of, gravity_ramp_of, nodal_loads, NodeSelector};
 pub use curves::Path1;
+pub use reference::CellReference;
 
 /// Dilatational wave speeds of soft tissue in SI units, with a wide margin (gels to
 /// nearly incompressible stiff tissue): outside it a material is probably in other units.
@@ -54,7 +56,7 @@ pub struct Problem {
     pub densities: Vec<f64>,
     /// Material index of every cell.
     pub cell_material: Vec<u16>,
-    pub reference: Vec<ReferenceHex>,
+    pub reference: Vec<CellReference>,
     pub node_kind: Vec<NodeKind>,
     pub paths: Vec<Path1<3>>,
     pub loads: Vec<Load>,
@@ -239,10 +241,18 @@ fn assign_materials(scene: &Scene, mesh: &Mesh) -> Result<Materials> {
 }
 
 /// Reference geometry of every cell: refuses inverted/degenerate cells by name.
-fn reference_geometry(mesh: &Mesh) -> Result<Vec<ReferenceHex>> {
+fn reference_geometry(mesh: &Mesh) -> Result<Vec<CellReference>> {
     let mut reference = Vec::with_capacity(mesh.cells.len());
     for c in 0..mesh.cells.len() {
-        let r = ReferenceHex::new(&mesh.cell_coords(c)).map_err(|e| {
+        let r = match as_tetrahedron(&mesh.cells[c]) {
+            Some(t) => {
+                ReferenceTet::new(&t.map(|n| mesh.nodes[n as usize])).map(CellReference::Tet)
+            }
+            None => {
+                ReferenceHex::new(&mesh.cell_coords(c)).map(|r| CellReference::Hex(Box::new(r)))
+            }
+        };
+        let r = r.map_err(|e| {
             anyhow!(
                 "mesh {}: cell {c} (nodes {:?}): {e}",
                 mesh.source,
@@ -254,13 +264,14 @@ fn reference_geometry(mesh: &Mesh) -> Result<Vec<ReferenceHex>> {
     Ok(reference)
 }
 
-/// Lumped mass per node: an eighth of each cell's mass on each of its nodes.
-fn lumped_mass(mesh: &Mesh, reference: &[ReferenceHex], m: &Materials) -> Vec<f64> {
+/// Lumped mass per node: an eighth of each hexahedron's mass on each of its corners, a
+/// quarter of each tetrahedron's on each of its nodes ([`CellReference::mass_shares`]).
+fn lumped_mass(mesh: &Mesh, reference: &[CellReference], m: &Materials) -> Vec<f64> {
     let mut mass = vec![0.0; mesh.nodes.len()];
     for (c, r) in reference.iter().enumerate() {
-        let cm = m.densities[m.cell_material[c] as usize] * r.volume / 8.0;
-        for &n in &mesh.cells[c] {
-            mass[n as usize] += cm;
+        let cm = m.densities[m.cell_material[c] as usize] * r.volume();
+        for (&n, share) in mesh.cells[c].iter().zip(r.mass_shares()) {
+            mass[n as usize] += cm * share;
         }
     }
     mass
@@ -351,7 +362,7 @@ impl Problem {
             &|sp| sel.surface(sp),
             &|r| region_tag(&mesh, r),
             &mut add_path,
-            &|c| reference[c as usize].characteristic_length,
+            &|c| reference[c as usize].characteristic_length(),
         )?;
         check_solver(&scene.solver, contact.is_some())?;
         let Materials {
@@ -442,7 +453,7 @@ impl Problem {
     pub fn element_dt_estimate(&self) -> (f64, usize) {
         let mut best = (f64::INFINITY, 0);
         for (c, r) in self.reference.iter().enumerate() {
-            let dt = r.characteristic_length / self.wave_speed(c);
+            let dt = r.characteristic_length() / self.wave_speed(c);
             if dt < best.0 {
                 best = (dt, c);
             }
@@ -506,7 +517,7 @@ impl Problem {
                 if dt > dt_crit && !self.solver.force_dt {
                     bail!(
                         "[solver] dt = {dt:.4e} s exceeds the critical step {dt_crit:.4e} s (set by cell {cell}, L_e = {:.3e} m): the explicit scheme would be unstable; lower dt or set force_dt = true",
-                        self.reference[cell].characteristic_length
+                        self.reference[cell].characteristic_length()
                     );
                 }
                 dt

@@ -304,6 +304,10 @@ pub struct SolverSpec {
     /// κ_hg of the seed's scalar form (`pe_firmware::physics::element::hourglass`).
     #[serde(with = "settings::hourglass_text")]
     pub hourglass: HourglassControl,
+    /// How tetrahedra take their volumetric response: `"nodal-pressure"` (the default:
+    /// averaged over each node's tetrahedra, T4ANP, which does not lock as ν → 0.5) or
+    /// `"plain"` (each element's own, T4).
+    pub tetrahedron: pe_firmware::physics::TetPressure,
     /// Mass-proportional damping α (1/s).
     pub damping: f64,
     /// dt = dt_safety × dt_critical, unless `dt` is given.
@@ -353,6 +357,7 @@ impl Default for SolverSpec {
             precision: Precision::F64,
             integration: Integration::Reduced,
             hourglass: HourglassControl::DEFAULT,
+            tetrahedron: pe_firmware::physics::TetPressure::Nodal,
             damping: 0.0,
             dt_safety: 0.9,
             dt: None,

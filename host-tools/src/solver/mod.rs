@@ -320,7 +320,11 @@ impl<'p, T: Real> Model<'p, T> {
         if let (Some(team), Some(b), Some(plan)) = (team, &self.batched, &self.plan) {
             let el = b.element_loop();
             if el.parallel_forces(plan, &mut self.kept, team, &self.u, &mut self.f_int) {
-                return Ok(());
+                // The tetrahedra after every hexahedron, on this thread.
+                return self
+                    .elements
+                    .tets
+                    .add_forces(&self.laws, &self.u, &mut self.f_int);
             }
             // A pack failed: the one-thread loop names the element.
             self.f_int.iter_mut().for_each(|f| *f = [T::ZERO; 3]);

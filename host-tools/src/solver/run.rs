@@ -23,8 +23,12 @@ pub struct RunReport {
     pub dt_critical_s: f64,
     pub simulated_s: f64,
     pub elements: usize,
-    /// Fraction of the elements that take each kernel (general, parallelepiped, cuboid).
+    /// Fraction of the elements that take each hexahedral kernel (general,
+    /// parallelepiped, cuboid); the rest are tetrahedra.
     pub kernel_mix: [f64; 3],
+    /// Tetrahedra among the elements (`[solver] tetrahedron` chooses their form).
+    #[serde(default)]
+    pub tetrahedra: usize,
     pub nodes: usize,
     /// Nodes on a contact surface.
     pub contact_nodes: usize,
@@ -359,8 +363,10 @@ pub fn run_typed_with<T: Real>(
         elements,
         kernel_mix: model
             .elements
+            .hexes
             .per_kernel()
             .map(|n| n as f64 / elements.max(1) as f64),
+        tetrahedra: model.elements.tets.len(),
         nodes: problem.mesh.nodes.len(),
         contact_nodes: problem.contact.as_ref().map_or(0, |c| c.node_globals.len()),
         wall_s,

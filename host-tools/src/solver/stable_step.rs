@@ -64,9 +64,11 @@ pub struct StableStepTracker<'p> {
 /// What the tracker keeps of a cell.
 #[derive(Clone, Copy, Debug)]
 struct TrackedCell {
-    /// The uniform gradients `B_a` (1/m), the reference cell's.
+    /// The uniform gradients `B_a` (1/m), the reference cell's, in its eight slots
+    /// ([`crate::problem::CellReference::slot_gradients`]).
     gradients: [[f64; 3]; 8],
-    /// `G = Σ_a B_a B_aᵀ`.
+    /// `G = Σ_a B_a B_aᵀ` (a tetrahedron's halved for its quarter masses:
+    /// [`crate::problem::CellReference::frequency_products`]).
     products: [[f64; 3]; 3],
 }
 
@@ -92,12 +94,8 @@ impl<'p> StableStepTracker<'p> {
                 .reference
                 .iter()
                 .map(|r| TrackedCell {
-                    gradients: r.mean_gradients,
-                    products: core::array::from_fn(|i| {
-                        core::array::from_fn(|j| {
-                            r.mean_gradients.iter().map(|b| b[i] * b[j]).sum::<f64>()
-                        })
-                    }),
+                    gradients: r.slot_gradients(),
+                    products: r.frequency_products(),
                 })
                 .collect(),
             inverse_density: problem.densities.iter().map(|r| 1.0 / (r * ms)).collect(),

@@ -10,7 +10,7 @@
 
 use host_tools::compare::nan_max;
 use host_tools::problem::batched::{Batched, Isa};
-use host_tools::problem::elements::Elements;
+use host_tools::problem::elements::{Elements, Hexahedra, Tetrahedra};
 use host_tools::problem::Problem;
 use pe_firmware::physics::{
     LameParameters, MaterialLaw, PhysicsError, Real, ReferenceHex, Volumetric,
@@ -110,13 +110,18 @@ fn case<T: Real>(general: usize, boxes: usize, full: bool, seed: u64) -> Case<T>
         .map(|c| ReferenceHex::new(&c.map(|n| nodes[n as usize])).expect("valid cell"))
         .collect();
     let elements = if full {
-        Elements::Full(
-            refs.iter()
-                .zip(&cells)
-                .enumerate()
-                .map(|(e, (r, c))| r.full(*c, material(e)))
-                .collect(),
-        )
+        Elements {
+            hexes: Hexahedra::Full {
+                records: refs
+                    .iter()
+                    .zip(&cells)
+                    .enumerate()
+                    .map(|(e, (r, c))| r.full(*c, material(e)))
+                    .collect(),
+                cells: (0..cells.len() as u32).collect(),
+            },
+            tets: Tetrahedra::default(),
+        }
     } else {
         let k = |e: usize| laws64[material(e) as usize].hourglass_modulus();
         let g: Vec<_> = (0..general)
@@ -135,11 +140,14 @@ fn case<T: Real>(general: usize, boxes: usize, full: bool, seed: u64) -> Case<T>
                 refs[e].cuboid(cells[e], material(e), k(e), 0.1)
             })
             .collect();
-        Elements::Reduced {
-            general: g,
-            boxes: b,
-            cuboids: q,
-            cells: (0..(general + boxes) as u32).collect(),
+        Elements {
+            hexes: Hexahedra::Reduced {
+                general: g,
+                boxes: b,
+                cuboids: q,
+                cells: (0..(general + boxes) as u32).collect(),
+            },
+            tets: Tetrahedra::default(),
         }
     };
     let u = (0..nodes.len())
@@ -290,9 +298,9 @@ fn batched_loop_gives_the_scalar_loops_bits_f32() {
 /// through its bottom.
 fn folded_case<T: Real>(full: bool) -> Case<T> {
     let mut c = case::<T>(13, 11, full, 3);
-    let cell6 = match &c.elements {
-        Elements::Reduced { general, .. } => general[6].connectivity.nodes,
-        Elements::Full(v) => v[6].connectivity.nodes,
+    let cell6 = match &c.elements.hexes {
+        Hexahedra::Reduced { general, .. } => general[6].connectivity.nodes,
+        Hexahedra::Full { records: v, .. } => v[6].connectivity.nodes,
     };
     for &n in &cell6[4..] {
         c.u[n as usize][2] = T::from_f64(-0.03);
@@ -436,14 +444,14 @@ fn board_both<T: Real>(
         );
         (run(&ScalarBatches, &board, c), run(&packed, &board, c))
     }
-    match &c.elements {
-        Elements::Reduced {
+    match &c.elements.hexes {
+        Hexahedra::Reduced {
             general,
             boxes,
             cuboids,
             ..
         } => both_of(general, boxes, cuboids, c, isa, cuts),
-        Elements::Full(v) => both_of::<T, _>(v, &[], &[], c, isa, cuts),
+        Hexahedra::Full { records: v, .. } => both_of::<T, _>(v, &[], &[], c, isa, cuts),
     }
 }
 

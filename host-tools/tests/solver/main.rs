@@ -16,3 +16,4 @@ mod hourglass;
 mod mesh_formats;
 mod serial;
 mod stability;
+mod tetrahedra;

@@ -17,6 +17,7 @@ pub mod vec3;
 pub use element::{
     Connectivity, Element, ElementKind, GaussPoint, GeometryError, HexBox, HexCuboid, HexElement,
     HexFull, HexReduced, Hourglass, HourglassControl, Integration, LaneKernel, ReferenceHex,
+    ReferenceTet, Tet4, TetLoop, TetPressure,
 };
 pub use explicit::{accumulate_internal_forces, CentralDifference, PhysicsError};
 pub use lanes::{LaneReal, Lanes, Pack};

@@ -1,10 +1,14 @@
 //! The static equilibrium of a problem's elements: the tangent stiffness by central
 //! differences of the internal forces (a distance-2 colouring probes many nodes at once),
-//! a banded Cholesky factorisation, linear and Newton solutions.
+//! a banded Cholesky factorisation over the nodes in reverse Cuthill-McKee order (Gmsh
+//! numbers a tetrahedral mesh's nodes by entity, which leaves the band the whole matrix),
+//! linear and Newton solutions. A node's force depends on the nodes of its cells, and with
+//! the tetrahedra's averaged nodal pressure on those of its neighbours' cells too (two
+//! rings): the colouring and the band follow what the forces depend on.
 
 use anyhow::{anyhow, bail, Result};
 use pe_firmware::physics::real::nan_max;
-use pe_firmware::physics::MaterialLaw;
+use pe_firmware::physics::{MaterialLaw, TetPressure};
 
 use crate::problem::elements::Elements;
 use crate::problem::Problem;
@@ -85,8 +89,11 @@ pub struct Statics<'p> {
     problem: &'p Problem,
     elements: Elements<f64>,
     laws: Vec<MaterialLaw<f64>>,
-    /// Nodes sharing a cell with each node (itself included).
+    /// The nodes whose displacements each node's force depends on (itself included): the
+    /// nodes of its cells, or two rings of them with nodal-pressure tetrahedra.
     neighbours: Vec<Vec<usize>>,
+    /// Each node's place in the band (reverse Cuthill-McKee).
+    order: Vec<usize>,
     colour: Vec<usize>,
     colours: usize,
     /// Half-bandwidth in dofs.
@@ -95,18 +102,15 @@ pub struct Statics<'p> {
 
 impl<'p> Statics<'p> {
     pub fn new(problem: &'p Problem) -> Statics<'p> {
-        let n = problem.mesh.nodes.len();
-        let mut neighbours: Vec<Vec<usize>> = (0..n).map(|a| vec![a]).collect();
+        let elements = Elements::build(problem);
+        let two_rings = !elements.tets.is_empty() && elements.tets.form == TetPressure::Nodal;
+        let neighbours = dependencies(&problem.mesh.cells, problem.mesh.nodes.len(), two_rings);
+        let n = neighbours.len();
+        let order = reverse_cuthill_mckee(&neighbours);
         let mut w = 0;
-        for c in &problem.mesh.cells {
-            for &a in c {
-                for &b in c {
-                    let (a, b) = (a as usize, b as usize);
-                    if !neighbours[a].contains(&b) {
-                        neighbours[a].push(b);
-                    }
-                    w = w.max(3 * a.abs_diff(b) + 2);
-                }
+        for (a, around) in neighbours.iter().enumerate() {
+            for &b in around {
+                w = w.max(3 * order[a].abs_diff(order[b]) + 2);
             }
         }
         // Distance-2 colouring: two nodes of one colour share no neighbour, so a probe of
@@ -129,9 +133,10 @@ impl<'p> Statics<'p> {
         }
         Statics {
             problem,
-            elements: Elements::build(problem),
+            elements,
             laws: problem.laws.clone(),
             neighbours,
+            order,
             colour,
             colours,
             w,
@@ -155,7 +160,7 @@ impl<'p> Statics<'p> {
             .problem
             .reference
             .iter()
-            .map(|r| r.characteristic_length)
+            .map(|r| r.characteristic_length())
             .fold(f64::INFINITY, f64::min);
         let eps = 1e-6 * scale;
         let mut k = Band::new(3 * n, self.w);
@@ -175,9 +180,9 @@ impl<'p> Statics<'p> {
                     let Some(&a) = self.neighbours[b].iter().find(|&&a| self.colour[a] == c) else {
                         continue;
                     };
-                    let col = 3 * a + i;
+                    let col = 3 * self.order[a] + i;
                     for j in 0..3 {
-                        let row = 3 * b + j;
+                        let row = 3 * self.order[b] + j;
                         if row >= col {
                             let kv = (fp[b][j] - fm[b][j]) / (2.0 * eps);
                             // Symmetrise: half from each triangle.
@@ -196,7 +201,7 @@ impl<'p> Statics<'p> {
         for (a, fx) in fixed.iter().enumerate() {
             for i in 0..3 {
                 if fx[i] {
-                    let d = 3 * a + i;
+                    let d = 3 * self.order[a] + i;
                     for c in d.saturating_sub(self.w)..d {
                         *k.at(d, c) = 0.0;
                     }
@@ -216,18 +221,17 @@ impl<'p> Statics<'p> {
         let u0 = vec![[0.0; 3]; n];
         let mut k = self.tangent(&u0, fixed)?;
         k.factorise()?;
-        let mut b: Vec<f64> = (0..3 * n)
-            .map(|d| {
-                if fixed[d / 3][d % 3] {
-                    0.0
-                } else {
-                    f[d / 3][d % 3]
+        let mut b = vec![0.0; 3 * n];
+        for a in 0..n {
+            for i in 0..3 {
+                if !fixed[a][i] {
+                    b[3 * self.order[a] + i] = f[a][i];
                 }
-            })
-            .collect();
+            }
+        }
         k.solve(&mut b);
         Ok((0..n)
-            .map(|a| [b[3 * a], b[3 * a + 1], b[3 * a + 2]])
+            .map(|a| core::array::from_fn(|i| b[3 * self.order[a] + i]))
             .collect())
     }
 
@@ -268,7 +272,7 @@ impl<'p> Statics<'p> {
                 for a in 0..n {
                     for i in 0..3 {
                         if !fixed[a][i] {
-                            r[3 * a + i] = -f[a][i];
+                            r[3 * self.order[a] + i] = -f[a][i];
                             rmax = nan_max(rmax, f[a][i].abs());
                         }
                     }
@@ -289,7 +293,7 @@ impl<'p> Statics<'p> {
                 good.solve(&mut r);
                 for a in 0..n {
                     for i in 0..3 {
-                        u[a][i] += r[3 * a + i];
+                        u[a][i] += r[3 * self.order[a] + i];
                     }
                 }
             }
@@ -303,4 +307,71 @@ impl<'p> Statics<'p> {
         }
         Ok(u)
     }
+}
+
+/// For each of `n` nodes, the nodes sharing a cell with it (itself included), sorted; with
+/// `two_rings`, also the nodes sharing a cell with those.
+fn dependencies(cells: &[[u32; 8]], n: usize, two_rings: bool) -> Vec<Vec<usize>> {
+    let mut ring: Vec<Vec<usize>> = (0..n).map(|a| vec![a]).collect();
+    for c in cells {
+        for &a in c {
+            ring[a as usize].extend(c.iter().map(|&b| b as usize));
+        }
+    }
+    for r in &mut ring {
+        r.sort_unstable();
+        r.dedup();
+    }
+    if !two_rings {
+        return ring;
+    }
+    (0..n)
+        .map(|a| {
+            let mut v: Vec<usize> = ring[a]
+                .iter()
+                .flat_map(|&b| ring[b].iter().copied())
+                .collect();
+            v.sort_unstable();
+            v.dedup();
+            v
+        })
+        .collect()
+}
+
+/// Each node's position in the reverse Cuthill-McKee order of the graph `adjacent` (each
+/// component from a node of least degree, neighbours in increasing degree): a narrow band.
+fn reverse_cuthill_mckee(adjacent: &[Vec<usize>]) -> Vec<usize> {
+    let n = adjacent.len();
+    let degree = |a: usize| adjacent[a].len();
+    let mut visited = vec![false; n];
+    let mut sequence = Vec::with_capacity(n);
+    let mut by_degree: Vec<usize> = (0..n).collect();
+    by_degree.sort_by_key(|&a| (degree(a), a));
+    for &start in &by_degree {
+        if visited[start] {
+            continue;
+        }
+        visited[start] = true;
+        let mut head = sequence.len();
+        sequence.push(start);
+        while head < sequence.len() {
+            let a = sequence[head];
+            head += 1;
+            let mut next: Vec<usize> = adjacent[a]
+                .iter()
+                .copied()
+                .filter(|&b| !visited[b])
+                .collect();
+            next.sort_by_key(|&b| (degree(b), b));
+            for b in next {
+                visited[b] = true;
+                sequence.push(b);
+            }
+        }
+    }
+    let mut order = vec![0; n];
+    for (place, &a) in sequence.iter().rev().enumerate() {
+        order[a] = place;
+    }
+    order
 }

@@ -231,7 +231,7 @@ fn mu(p: &Problem) -> f64 {
 }
 
 fn total_volume(p: &Problem) -> f64 {
-    p.reference.iter().map(|r| r.volume).sum()
+    p.reference.iter().map(|r| r.volume()).sum()
 }
 
 fn timed(name: &str, f: impl FnOnce(&mut Case) -> Result<()>, expected: &str) -> Result<Case> {

@@ -110,7 +110,10 @@ pub fn cost_weights(problem: &Problem) -> Vec<u64> {
         .iter()
         .enumerate()
         .map(|(e, cell)| {
-            let kernel = cost.element_step(kind_of(problem, e));
+            // Tetrahedra never get here (`plan::refuse_tetrahedra`); costed as general cells.
+            let kernel = cost.element_step(
+                kind_of(problem, e).unwrap_or(crate::problem::elements::ElementKind::HexReduced),
+            );
             let contact: f64 = cell
                 .iter()
                 .filter(|&&n| on_contact[n as usize])

@@ -96,9 +96,30 @@ pub fn plan(problem: &Problem, machine: Machine) -> Result<Plan> {
     plan_balanced(problem, machine, Balance::Elements)
 }
 
+/// Refuses a problem the boards cannot run yet: tetrahedra run on the host only (`pe
+/// solve`, `pe live`); the boards have no tetrahedron kernel, image record or nodal
+/// pressure exchange. Names the count and the first cell.
+pub fn refuse_tetrahedra(problem: &Problem) -> Result<()> {
+    let mut tets = problem
+        .mesh
+        .cells
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| crate::mesh::is_tetrahedron(c));
+    if let Some((first, _)) = tets.next() {
+        anyhow::bail!(
+            "mesh {}: {} tetrahedra (the first is cell {first}): the boards have no tetrahedron kernel yet; tetrahedral and mixed meshes run on the host (pe solve, pe live), or remesh with hexahedra to compile",
+            problem.mesh.source,
+            tets.count() + 1
+        );
+    }
+    Ok(())
+}
+
 /// The whole machine's schedule for `problem` on `machine`, the partition balancing
 /// `balance`.
 pub fn plan_balanced(problem: &Problem, machine: Machine, balance: Balance) -> Result<Plan> {
+    refuse_tetrahedra(problem)?;
     let mesh = &problem.mesh;
     let weight = match balance {
         Balance::Elements => vec![1; mesh.cells.len()],

@@ -62,7 +62,10 @@ pub(super) fn capacity_report(
     let per_kernel = |elements: &mut dyn Iterator<Item = usize>| {
         let mut n = [0usize; 3];
         for e in elements {
-            n[kind_of(problem, e).table()] += 1;
+            // Tetrahedra never get here (`plan::refuse_tetrahedra`).
+            if let Some(k) = kind_of(problem, e) {
+                n[k.table()] += 1;
+            }
         }
         n
     };

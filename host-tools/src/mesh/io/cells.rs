@@ -1,5 +1,6 @@
 //! What every reader does with a file's cells, whatever the format: hexahedra are cells,
-//! prisms (wedges) become degenerate hexahedra, boundary cells (points, lines, triangles,
+//! prisms (wedges) become degenerate hexahedra, tetrahedra are stored as degenerate
+//! hexahedra and run as tetrahedra, boundary cells (points, lines, triangles,
 //! quadrilaterals) give the node sets of the groups they are tagged with, and any other
 //! volume cell is refused, naming its type and count. Nothing is dropped without a note.
 
@@ -7,7 +8,7 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use super::*;
 use crate::geom::{cross, dot, sub};
-use crate::mesh::prism_as_hexahedron;
+use crate::mesh::{prism_as_hexahedron, tetrahedron_as_hexahedron};
 
 /// What a cell type of a file is to the importer.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -16,6 +17,8 @@ pub(super) enum CellKind {
     Hexahedron,
     /// The 6-node prism (wedge), run as a degenerate hexahedron.
     Prism,
+    /// The 4-node tetrahedron, stored by [`tetrahedron_as_hexahedron`].
+    Tetrahedron,
     /// A cell of dimension 0, 1 or 2: its nodes join node sets.
     Boundary { dim: i32 },
     /// A volume cell the solver has no element for (tetrahedra, pyramids, quadratic cells).
@@ -29,6 +32,9 @@ pub(super) struct CellCollector {
     pub cells: Vec<[u32; 8]>,
     pub cell_regions: Vec<i32>,
     prisms: usize,
+    tetrahedra: usize,
+    /// Tetrahedra given in the other orientation, turned over.
+    tetrahedra_turned: usize,
     /// Prisms whose nodes came in the other orientation (VTK's wedge order), turned over.
     prisms_turned: usize,
     node_sets: BTreeMap<String, BTreeSet<u32>>,
@@ -70,7 +76,23 @@ impl CellCollector {
         self.hexahedron(prism_as_hexahedron(q), region);
     }
 
-    /// A volume cell of `kind` (hexahedron: 8 nodes, prism: 6) in region `region`;
+    /// A tetrahedron `t` in region `region`, stored by [`tetrahedron_as_hexahedron`]: one
+    /// whose volume comes out negative is turned over (`t0 t2 t1 t3`); a flat one is left
+    /// for the geometry check to name.
+    pub fn tetrahedron(&mut self, t: [u32; 4], region: i32, nodes: &[[f64; 3]]) {
+        let x = t.map(|n| nodes.get(n as usize).copied().unwrap_or([0.0; 3]));
+        let signed = dot(sub(x[1], x[0]), cross(sub(x[2], x[0]), sub(x[3], x[0])));
+        let t = if signed < 0.0 {
+            self.tetrahedra_turned += 1;
+            [t[0], t[2], t[1], t[3]]
+        } else {
+            t
+        };
+        self.tetrahedra += 1;
+        self.hexahedron(tetrahedron_as_hexahedron(t), region);
+    }
+
+    /// A volume cell of `kind` (hexahedron: 8 nodes, prism: 6, tetrahedron: 4) in region `region`;
     /// `coords` the mesh's node coordinates.
     pub fn volume(&mut self, kind: CellKind, nodes: &[u32], region: i32, coords: &[[f64; 3]]) {
         match (kind, nodes.len()) {
@@ -78,6 +100,9 @@ impl CellCollector {
                 self.hexahedron(core::array::from_fn(|a| nodes[a]), region)
             }
             (CellKind::Prism, 6) => self.prism(core::array::from_fn(|a| nodes[a]), region, coords),
+            (CellKind::Tetrahedron, 4) => {
+                self.tetrahedron(core::array::from_fn(|a| nodes[a]), region, coords)
+            }
             _ => self.unsupported(format!("{kind:?} cells of {} nodes", nodes.len()), 1),
         }
     }
@@ -157,6 +182,20 @@ impl CellCollector {
                 self.prisms
             ));
         }
+        if self.tetrahedra > 0 {
+            let turned = if self.tetrahedra_turned > 0 {
+                format!(
+                    "; {} given in the other orientation were turned over",
+                    self.tetrahedra_turned
+                )
+            } else {
+                String::new()
+            };
+            mesh.notes.push(format!(
+                "{} tetrahedra run as linear tetrahedra (T4; [solver] tetrahedron chooses the nodal-pressure or plain form){turned}",
+                self.tetrahedra
+            ));
+        }
         if !self.boundary_used.is_empty() {
             mesh.notes.push(format!(
                 "boundary cells ({}) give the node sets {:?}",
@@ -204,7 +243,7 @@ pub(super) fn gmsh_type(t: i32) -> Option<(CellKind, usize, &'static str)> {
         25 => (b(2), 21, "quintic triangles (Gmsh type 25)"),
         5 => (Hexahedron, 8, "hexahedra (Gmsh type 5)"),
         6 => (Prism, 6, "prisms (Gmsh type 6)"),
-        4 => (Unsupported, 4, "tetrahedra (Gmsh type 4)"),
+        4 => (Tetrahedron, 4, "tetrahedra (Gmsh type 4)"),
         7 => (Unsupported, 5, "pyramids (Gmsh type 7)"),
         11 => (Unsupported, 10, "10-node tetrahedra (Gmsh type 11)"),
         12 => (Unsupported, 27, "27-node hexahedra (Gmsh type 12)"),
@@ -243,7 +282,7 @@ pub(super) fn vtk_type(t: u8) -> (CellKind, Option<usize>, String) {
         28 => (b(2), Some(9), "VTK_BIQUADRATIC_QUAD"),
         12 => (Hexahedron, Some(8), "VTK_HEXAHEDRON"),
         13 => (Prism, Some(6), "VTK_WEDGE"),
-        10 => (Unsupported, Some(4), "VTK_TETRA"),
+        10 => (Tetrahedron, Some(4), "VTK_TETRA"),
         11 => (Unsupported, Some(8), "VTK_VOXEL"),
         14 => (Unsupported, Some(5), "VTK_PYRAMID"),
         24 => (Unsupported, Some(10), "VTK_QUADRATIC_TETRA"),

@@ -1,6 +1,6 @@
 //! Writing a [`Mesh`] as Gmsh MSH 2.2 ASCII, the form [`super::parse_msh`] reads back into
-//! the same mesh: nodes in order (tags 1..N), hexahedra (type 5) and prisms (type 6, from
-//! their degenerate-hexahedron form) in order with their region as the physical tag, the
+//! the same mesh: nodes in order (tags 1..N), hexahedra (type 5), prisms (type 6) and
+//! tetrahedra (type 4, both from their degenerate-hexahedron forms) in order with their region as the physical tag, the
 //! regions' names as dimension-3 `$PhysicalNames`, and every node set as points (type 15)
 //! of a named dimension-0 physical group. Coordinates are written in Rust's shortest
 //! round-trip form, so they read back bit for bit.
@@ -8,7 +8,7 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use crate::mesh::{is_prism, Mesh};
+use crate::mesh::{as_tetrahedron, is_prism, Mesh};
 
 /// The MSH 2.2 text of `mesh` with the node sets `node_sets` (names must not contain `"`).
 pub fn to_msh22(mesh: &Mesh, node_sets: &BTreeMap<String, Vec<u32>>) -> String {
@@ -36,7 +36,12 @@ pub fn to_msh22(mesh: &Mesh, node_sets: &BTreeMap<String, Vec<u32>>) -> String {
     for (c, &region) in mesh.cells.iter().zip(&mesh.cell_regions) {
         tag += 1;
         // Elementary entity = the region (one volume per region).
-        if is_prism(c) {
+        if let Some(t) = as_tetrahedron(c) {
+            let _ = write!(s, "{tag} 4 2 {region} {region}");
+            for n in t {
+                let _ = write!(s, " {}", n + 1);
+            }
+        } else if is_prism(c) {
             let p = [c[0], c[1], c[2], c[4], c[5], c[6]];
             let _ = write!(s, "{tag} 6 2 {region} {region}");
             for n in p {

@@ -22,7 +22,8 @@ pub(super) fn xml_attr(s: &str) -> String {
         .replace('"', "&quot;")
 }
 
-/// A mesh cell as VTK writes it: a hexahedron (`VTK_HEXAHEDRON`, 12), a prism stored as a
+/// A mesh cell as VTK writes it: a hexahedron (`VTK_HEXAHEDRON`, 12), a tetrahedron stored as
+/// a degenerate hexahedron as a `VTK_TETRA` (10), a prism stored as a
 /// degenerate hexahedron as a `VTK_WEDGE` (13) in VTK's order (the first triangle's normal
 /// pointing away from the second); a surface quadrilateral (`VTK_QUAD`, 9), or a prism's
 /// triangle (a quadrilateral with one node repeated) as a `VTK_TRIANGLE` (5).
@@ -30,7 +31,9 @@ pub(super) fn vtk_cell(nodes: &[u32]) -> (Vec<u32>, u8) {
     match nodes {
         [c0, c1, c2, c3, c4, c5, c6, c7] => {
             let c = [*c0, *c1, *c2, *c3, *c4, *c5, *c6, *c7];
-            if crate::mesh::is_prism(&c) {
+            if let Some(t) = crate::mesh::as_tetrahedron(&c) {
+                (t.to_vec(), 10)
+            } else if crate::mesh::is_prism(&c) {
                 (vec![c[0], c[2], c[1], c[4], c[6], c[5]], 13)
             } else {
                 (c.to_vec(), 12)

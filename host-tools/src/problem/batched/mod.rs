@@ -23,7 +23,7 @@ use std::any::Any;
 
 use pe_firmware::physics::{LaneReal, Lanes, MaterialLaw, PhysicsError, Real};
 
-use crate::problem::elements::Elements;
+use crate::problem::elements::{Elements, Hexahedra};
 use crate::team::Team;
 
 #[cfg(target_arch = "x86_64")]
@@ -175,14 +175,14 @@ impl<S: Real, L: HostLanes<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> 
         u: &[[S; 3]],
         f: &mut [[S; 3]],
     ) -> Result<(), PhysicsError> {
-        let r = match (&self.packs, elements) {
+        let r = match (&self.packs, &elements.hexes) {
             (
                 Packs::Reduced {
                     general,
                     boxes,
                     cuboids,
                 },
-                Elements::Reduced {
+                Hexahedra::Reduced {
                     general: g,
                     boxes: b,
                     cuboids: c,
@@ -191,10 +191,12 @@ impl<S: Real, L: HostLanes<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> 
             ) => run(general, g, 0, laws, u, f)
                 .and_then(|()| run(boxes, b, g.len(), laws, u, f))
                 .and_then(|()| run(cuboids, c, g.len() + b.len(), laws, u, f)),
-            (Packs::Full(p), Elements::Full(v)) => run(p, v, 0, laws, u, f),
+            (Packs::Full(p), Hexahedra::Full { records: v, .. }) => run(p, v, 0, laws, u, f),
             _ => return elements.internal_forces(laws, u, f),
         };
-        r.map_err(|e| elements.in_mesh(e))
+        r.map_err(|e| elements.hexes.in_mesh(e))?;
+        // The tetrahedra after every hexahedron, as the scalar loop runs them.
+        elements.tets.add_forces(laws, u, f)
     }
     fn describe(&self) -> String {
         L::ISA.describe_lanes::<S, N>()

@@ -5,7 +5,7 @@ use pe_firmware::physics::{
     Real,
 };
 
-use crate::problem::elements::Elements;
+use crate::problem::elements::{Elements, Hexahedra};
 
 /// Up to `N` consecutive elements of one kernel, packed.
 pub struct Batch<K, L, const N: usize> {
@@ -88,8 +88,8 @@ impl<L, const N: usize> Packs<L, N> {
     where
         L: LaneReal<S, N>,
     {
-        Ok(match elements {
-            Elements::Reduced {
+        Ok(match &elements.hexes {
+            Hexahedra::Reduced {
                 general,
                 boxes,
                 cuboids,
@@ -99,7 +99,7 @@ impl<L, const N: usize> Packs<L, N> {
                 boxes: pack(boxes, laws)?,
                 cuboids: pack(cuboids, laws)?,
             },
-            Elements::Full(v) => Packs::Full(pack(v, laws)?),
+            Hexahedra::Full { records: v, .. } => Packs::Full(pack(v, laws)?),
         })
     }
 }

@@ -21,6 +21,8 @@
 //! Everything here works on caller-owned slices (no allocation): `nodal_volume` from
 //! [`add_nodal_volumes`], and a [`Scratch`] as long as the displacements.
 
+use serde::{Deserialize, Serialize};
+
 use super::super::explicit::PhysicsError;
 use super::super::material::MaterialLaw;
 use super::super::real::Real;
@@ -28,13 +30,27 @@ use super::super::tensor;
 use super::kernel::KernelFault;
 use super::tet::Tet4;
 
-/// How the tetrahedra take their volumetric response.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// How the tetrahedra take their volumetric response (a scene's `[solver] tetrahedron`:
+/// `"nodal-pressure"`, the default, or `"plain"`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum TetPressure {
     /// Each element's own `J` (plain T4: locks as `ν → 0.5`).
+    #[serde(rename = "plain")]
     Element,
     /// The nodal average (T4ANP).
+    #[default]
+    #[serde(rename = "nodal-pressure")]
     Nodal,
+}
+
+impl TetPressure {
+    /// The name scenes and reports use.
+    pub const fn name(self) -> &'static str {
+        match self {
+            TetPressure::Element => "plain",
+            TetPressure::Nodal => "nodal-pressure",
+        }
+    }
 }
 
 /// Per-node work arrays of the nodal pass, each at least as long as the displacements.
@@ -216,6 +232,19 @@ impl<T: Real> TetLoop<'_, T> {
         scratch: Scratch<'_, T>,
         u: &[[T; 3]],
     ) -> Result<f64, PhysicsError> {
+        let mut sum = 0.0;
+        self.for_each_energy(scratch, u, |_, w| sum += w)?;
+        Ok(sum)
+    }
+
+    /// Each tetrahedron's share of [`Self::stored_energy`] (J), in order, to `each(k, w)`:
+    /// its own `V_e W(F_e)` (plain), or `V_e W_iso(F_e) + (V_e/4) Σ_{n∈e} U_e(J_n)` (nodal).
+    pub fn for_each_energy(
+        &self,
+        scratch: Scratch<'_, T>,
+        u: &[[T; 3]],
+        mut each: impl FnMut(usize, f64),
+    ) -> Result<(), PhysicsError> {
         let TetLoop {
             tets,
             first,
@@ -224,34 +253,27 @@ impl<T: Real> TetLoop<'_, T> {
             nodal_volume,
         } = *self;
         let len = u.len();
+        let Scratch { ratio, pressure } = scratch;
         if form == TetPressure::Nodal {
-            let Scratch { ratio, pressure } = scratch;
             nodal_pressures(tets, first, laws, nodal_volume, &mut *ratio, pressure, u)?;
-            let mut sum = 0.0;
-            for (k, t) in tets.iter().enumerate() {
-                let nodes = t.checked_nodes(len).map_err(|e| fault(k, first, e))?;
-                let law = law_of(laws, t, k, first)?;
-                let iso = t
-                    .energy(&law.isochoric(), &Tet4::gather(&nodes, u))
-                    .map_err(|j| fault(k, first, KernelFault::Inverted(j)))?;
-                let quarter = 0.25 * t.volume.to_f64();
+        }
+        for (k, t) in tets.iter().enumerate() {
+            let nodes = t.checked_nodes(len).map_err(|e| fault(k, first, e))?;
+            let law = law_of(laws, t, k, first)?;
+            let ue = Tet4::gather(&nodes, u);
+            let inverted = |j| fault(k, first, KernelFault::Inverted(j));
+            let w = if form == TetPressure::Nodal {
+                let iso = t.energy(&law.isochoric(), &ue).map_err(inverted)?;
                 let vol: f64 = nodes
                     .iter()
                     .map(|&n| law.volumetric_energy(ratio[n]).to_f64())
                     .sum();
-                sum += iso.to_f64() + quarter * vol;
-            }
-            return Ok(sum);
+                iso.to_f64() + 0.25 * t.volume.to_f64() * vol
+            } else {
+                t.energy(law, &ue).map_err(inverted)?.to_f64()
+            };
+            each(k, w);
         }
-        let mut sum = 0.0;
-        for (k, t) in tets.iter().enumerate() {
-            let nodes = t.checked_nodes(len).map_err(|e| fault(k, first, e))?;
-            let law = law_of(laws, t, k, first)?;
-            let w = t
-                .energy(law, &Tet4::gather(&nodes, u))
-                .map_err(|j| fault(k, first, KernelFault::Inverted(j)))?;
-            sum += w.to_f64();
-        }
-        Ok(sum)
+        Ok(())
     }
 }

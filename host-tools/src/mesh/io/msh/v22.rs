@@ -108,7 +108,10 @@ pub(super) fn read_elements(
                 }
             }
             nodes.clear();
-            let distinct = matches!(kind, CellKind::Hexahedron | CellKind::Prism);
+            let distinct = matches!(
+                kind,
+                CellKind::Hexahedron | CellKind::Prism | CellKind::Tetrahedron
+            );
             read_element_nodes(r, path, &m.node_index, etag, nn, distinct, true, &mut nodes)?;
             match kind {
                 CellKind::Unsupported => m.cells.unsupported(name.to_string(), 1),
@@ -120,7 +123,7 @@ pub(super) fn read_elements(
                     };
                     m.cells.boundary(name, &nodes, &groups);
                 }
-                CellKind::Hexahedron | CellKind::Prism => {
+                CellKind::Hexahedron | CellKind::Prism | CellKind::Tetrahedron => {
                     m.cells.volume(kind, &nodes, physical.max(0), &m.nodes)
                 }
             }

@@ -127,7 +127,7 @@ pub(super) fn read_elements(
                     m.cells.boundary(name, &nodes, &groups);
                 }
             }
-            CellKind::Hexahedron | CellKind::Prism => {
+            CellKind::Hexahedron | CellKind::Prism | CellKind::Tetrahedron => {
                 // Without $Entities there is no physical group information: region 0.
                 // With it, a block on an unlisted volume is an inconsistent file (meshio 5
                 // writes such files) and guessing would mislabel tissue.

@@ -223,7 +223,7 @@ fn collect_cells(
                 };
                 out.boundary(&name, &verts32, &groups);
             }
-            CellKind::Hexahedron | CellKind::Prism => {
+            CellKind::Hexahedron | CellKind::Prism | CellKind::Tetrahedron => {
                 // A hexahedron written as a degenerate prism (corner 3 on 2, 7 on 6) is one.
                 let degenerate_prism = verts32.len() == 8
                     && crate::mesh::is_prism(&core::array::from_fn(|a| verts32[a]));
