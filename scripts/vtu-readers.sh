@@ -2,7 +2,8 @@
 # The result frames in the readers users have (tests/vtu/readers.py says what it asserts):
 # meshio 5.3.5, which refused the frames' String field array before, and pyvista (VTK's XML
 # reader, as ParaView). The volume frames of `pe solve` and board-sim's surface frames, on
-# the built-in scene (coarse), long enough for the probe to move the tissue.
+# the built-in scene (coarse), long enough for the probe to move the tissue; and `pe solve`'s
+# frames of a tetrahedral and a hexahedron-and-prism beam.
 #
 # Installs what it needs: meshio, pyvista, vtk and numpy (pinned) in a virtual environment
 # under the target dir, only if missing.
@@ -32,4 +33,7 @@ source scripts/host-bins.sh
 # output interval (pe solve) and the graphics frames the host received (board-sim).
 "$PE" solve --builtin --level coarse --steps 1200 --vtk "$OUT/solve" >/dev/null
 "$SIM" builtin --level coarse --steps 1200 --quiet --out "$OUT/sim" >/dev/null
-"$VENV/bin/python" tests/vtu/readers.py "$OUT/solve" "$OUT/sim/frames"
+# Tetrahedra (VTK_TETRA) and hexahedra with prisms (VTK_WEDGE), as pe solve writes them.
+"$PE" solve tests/scenes/beam_tet.toml --vtk "$OUT/tet" >/dev/null
+"$PE" solve tests/scenes/beam_mixed.toml --vtk "$OUT/mixed" >/dev/null
+"$VENV/bin/python" tests/vtu/readers.py "$OUT/solve" "$OUT/sim/frames" "$OUT/tet:tetra" "$OUT/mixed:hexahedron,wedge"

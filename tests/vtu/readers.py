@@ -7,7 +7,8 @@ both see the point and cell counts the file declares (read here with xml.etree, 
 reader); the cell data `region` and the point vector `displacement_m` are the same values in
 both (exactly: ASCII numbers parsed twice); the region names are in both readers' field data
 as `region:NAME` arrays whose tags occur in `region`; pyvista's PVD reader gives the frames'
-times in order. The last frame must have moved (max |u| > 1e-6 m), so the comparison is not
+times in order. A directory given as `DIR:TYPE,...` must hold exactly those meshio cell
+types (e.g. `tetra`, `hexahedron,wedge`) in every frame. The last frame must have moved (max |u| > 1e-6 m), so the comparison is not
 of zero fields. Exits non-zero with the file and the property on the first failure.
 """
 import sys
@@ -30,10 +31,13 @@ def declared_counts(path):
     return int(piece.get("NumberOfPoints")), int(piece.get("NumberOfCells"))
 
 
-def check_frame(path):
+def check_frame(path, types):
     n_points, n_cells = declared_counts(path)
     m = meshio.read(path)
     g = pv.read(path)
+    seen = sorted({b.type for b in m.cells})
+    if types and seen != sorted(types):
+        fail(path, f"cell types {seen}, expected {sorted(types)}")
     if len(m.points) != n_points or g.n_points != n_points:
         fail(path, f"points: file {n_points}, meshio {len(m.points)}, pyvista {g.n_points}")
     m_cells = sum(len(b.data) for b in m.cells)
@@ -57,7 +61,9 @@ def check_frame(path):
     return np.abs(m_u).max(), m_names
 
 
-def check_series(directory):
+def check_series(arg):
+    directory, _, kinds = arg.partition(":")
+    types = [t for t in kinds.split(",") if t]
     pvd = Path(directory) / "series.pvd"
     frames = [Path(directory) / d.get("file") for d in ET.parse(pvd).getroot().iter("DataSet")]
     times = [float(d.get("timestep")) for d in ET.parse(pvd).getroot().iter("DataSet")]
@@ -68,12 +74,12 @@ def check_series(directory):
         fail(pvd, f"pyvista's PVD times {reader.time_values[:3]}... differ from the file's")
     moved = 0.0
     for f in frames:
-        moved, names = check_frame(f)
+        moved, names = check_frame(f, types)
     if not moved > 1e-6:
         fail(frames[-1], f"max |u| = {moved}: nothing moved, the comparison is of zeros")
     print(f"vtu-readers: {directory}: {len(frames)} frames load in meshio {meshio.__version__} "
           f"and pyvista {pv.__version__} (VTK {pv.vtk_version_info}); regions {sorted(names)}; "
-          f"last max |u| {moved:.3e} m")
+          f"last max |u| {moved:.3e} m; cell types {types or 'any'}")
 
 
 if __name__ == "__main__":
