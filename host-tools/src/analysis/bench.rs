@@ -389,6 +389,67 @@ fn anatomy_rows(thread_counts: &[usize], seconds: f64, runs: usize, only: Only) 
     Ok(())
 }
 
+/// Times whole steps of the bench box ([`bench_scene`] with about `elements / 6` cells)
+/// split into about `elements` tetrahedra ([`crate::mesh::grid::split_into_tetrahedra`]),
+/// in `form` and `precision`.
+pub fn time_tetrahedra(
+    elements: usize,
+    form: pe_firmware::physics::TetPressure,
+    precision: Precision,
+    threads: usize,
+    seconds: f64,
+    runs: usize,
+) -> Result<Timing> {
+    let mut scene = bench_scene(elements.div_ceil(6), Integration::Reduced, precision)?;
+    scene.solver.tetrahedron = form;
+    let (mesh, sets) = crate::scene::mesh_source::load(&scene.mesh, std::path::Path::new("."))?;
+    let p = Problem::new(
+        &scene,
+        crate::mesh::grid::split_into_tetrahedra(&mesh),
+        sets,
+    )?;
+    let timed = timed_runs(&p, threads, seconds, runs)?;
+    let ns = timed.iter().map(|r| r.ns_per_element_step(&p)).collect();
+    let steps_per_run = timed.last().map_or(0, |r| r.steps);
+    Ok(Timing::of(&p, threads, steps_per_run, ns))
+}
+
+/// The tetrahedra's rows: the bench box split into about `elements` tetrahedra, both forms,
+/// whole steps (the tetrahedra run scalar, on one thread, after the hexahedra).
+fn tetrahedra_rows(
+    elements: usize,
+    thread_counts: &[usize],
+    seconds: f64,
+    runs: usize,
+    only: Only,
+) -> Result<()> {
+    if only.integration.is_some_and(|i| i != Integration::Reduced) {
+        return Ok(());
+    }
+    println!("
+the seed's box split into tetrahedra (six per cell), whole steps from rest, median of {runs} runs of >= {seconds} s (ns per tetrahedron-step):");
+    println!("{:<16} {}", "form", columns_head());
+    for form in [
+        pe_firmware::physics::TetPressure::Nodal,
+        pe_firmware::physics::TetPressure::Element,
+    ] {
+        for prec in [Precision::F64, Precision::F32] {
+            if only.precision.is_some_and(|p| p != prec) {
+                continue;
+            }
+            for &threads in thread_counts {
+                let t = time_tetrahedra(elements, form, prec, threads, seconds, runs)?;
+                println!(
+                    "{:<16} {}",
+                    form.name(),
+                    t.columns(Integration::Reduced, prec)
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The CPU's clock (GHz) as the kernel reports it, if it does.
 fn clock_ghz() -> Option<f64> {
     let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
@@ -479,6 +540,7 @@ pub fn run_cli(elements: usize, seconds: f64, runs: usize, only: Only) -> Result
         }
     }
     anatomy_rows(&thread_counts, seconds, runs, only)?;
+    tetrahedra_rows(elements, &thread_counts, seconds, runs, only)?;
     match ghz {
         Some(g) => println!(
             "% peak: flops per element-step (below) over {g:.2} GHz x 16 (f64) or 32 (f32) flops per cycle per thread (two 256-bit FMA units); the kernels use no FMA (the board's bits), so half of it is their ceiling"

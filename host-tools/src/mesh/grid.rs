@@ -99,3 +99,44 @@ pub fn generate_box(size: [f64; 3], cells: [usize; 3]) -> Mesh {
     mesh.region_names.insert(1, "box".to_string());
     mesh
 }
+
+/// The Kuhn (Freudenthal) split of a structured grid's hexahedra into tetrahedra: each cell
+/// into the six around its diagonal from corner 0 to corner 6, one per order of the three
+/// axes, each oriented positively (stored by [`crate::mesh::tetrahedron_as_hexahedron`]).
+/// Neighbouring cells of one grid cut their shared face along the same diagonal, so the
+/// tetrahedra are conforming; the nodes, regions and node sets are the grid's.
+pub fn split_into_tetrahedra(mesh: &Mesh) -> Mesh {
+    // Corner index of each lattice offset (CORNERS' inverse).
+    let corner = |d: [usize; 3]| CORNERS.iter().position(|c| *c == d).unwrap_or_default();
+    let mut out = Mesh {
+        cells: Vec::with_capacity(6 * mesh.cells.len()),
+        cell_regions: Vec::with_capacity(6 * mesh.cells.len()),
+        source: format!("{} split into tetrahedra", mesh.source),
+        ..mesh.clone()
+    };
+    for (c, &region) in mesh.cells.iter().zip(&mesh.cell_regions) {
+        for axes in [
+            [0, 1, 2],
+            [0, 2, 1],
+            [1, 0, 2],
+            [1, 2, 0],
+            [2, 0, 1],
+            [2, 1, 0],
+        ] {
+            let mut d = [0; 3];
+            let mut t = [c[0]; 4];
+            for (s, &axis) in axes.iter().enumerate() {
+                d[axis] = 1;
+                t[s + 1] = c[corner(d)];
+            }
+            let x = t.map(|n| mesh.nodes[n as usize]);
+            let e = [1, 2, 3].map(|a| crate::geom::sub(x[a], x[0]));
+            if crate::geom::dot(e[0], crate::geom::cross(e[1], e[2])) < 0.0 {
+                t.swap(1, 2);
+            }
+            out.cells.push(super::tetrahedron_as_hexahedron(t));
+            out.cell_regions.push(region);
+        }
+    }
+    out
+}

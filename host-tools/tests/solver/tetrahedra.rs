@@ -281,3 +281,22 @@ fn compiling_tetrahedra_is_refused_naming_them() {
     let hexes = problem(&box_scene([L, H, H], [4, 2, 2], E_PA, 0.49, "", ""));
     assert!(host_tools::compile::refuse_tetrahedra(&hexes).is_ok());
 }
+
+/// The Kuhn split of a generated box (what `pe bench` times) is conforming: six positive
+/// tetrahedra per cell filling the box's volume, whose surface is the box's (to 1e-12).
+#[test]
+fn the_kuhn_split_of_a_box_is_conforming() {
+    let s = box_scene([L, H, H], [5, 2, 3], E_PA, 0.3, "", "");
+    let hexes = host_tools::mesh::grid::generate_box([L, H, H], [5, 2, 3]);
+    let tets = host_tools::mesh::grid::split_into_tetrahedra(&hexes);
+    assert_eq!(tets.cells.len(), 6 * 30);
+    let p = Problem::new(&s, tets, Default::default()).expect("the split box resolves");
+    let volume: f64 = p.reference.iter().map(|r| r.volume()).sum();
+    assert!((volume / (L * H * H) - 1.0).abs() < 1e-12, "{volume}");
+    let area = surface_area(&p);
+    let box_area = 2.0 * (L * H + L * H + H * H);
+    assert!(
+        (area / box_area - 1.0).abs() < 1e-12,
+        "{area} against {box_area}"
+    );
+}
