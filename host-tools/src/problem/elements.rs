@@ -121,6 +121,22 @@ impl<T: Real> Elements<T> {
     }
 }
 
+/// An error naming element `k` of a table renamed to its mesh cell `cells[k]` (errors that
+/// name no element pass unchanged).
+pub(crate) fn renamed_to_cells(cells: &[u32], e: PhysicsError) -> PhysicsError {
+    let cell = |k: u32| cells.get(k as usize).copied().unwrap_or(k);
+    match e {
+        PhysicsError::InvertedElement { element, jacobian } => PhysicsError::InvertedElement {
+            element: cell(element),
+            jacobian,
+        },
+        PhysicsError::BadIndex { element } => PhysicsError::BadIndex {
+            element: cell(element),
+        },
+        e => e,
+    }
+}
+
 impl<T: Real> Hexahedra<T> {
     pub fn build(p: &Problem) -> Self {
         // Each element table's cells, in mesh order.
@@ -180,17 +196,7 @@ impl<T: Real> Hexahedra<T> {
     /// An error naming an element in kernel order, renamed to its mesh cell.
     pub(crate) fn in_mesh(&self, e: PhysicsError) -> PhysicsError {
         let (Hexahedra::Reduced { cells, .. } | Hexahedra::Full { cells, .. }) = self;
-        let cell = |k: u32| cells.get(k as usize).copied().unwrap_or(k);
-        match e {
-            PhysicsError::InvertedElement { element, jacobian } => PhysicsError::InvertedElement {
-                element: cell(element),
-                jacobian,
-            },
-            PhysicsError::BadIndex { element } => PhysicsError::BadIndex {
-                element: cell(element),
-            },
-            e => e,
-        }
+        renamed_to_cells(cells, e)
     }
 
     pub fn internal_forces(

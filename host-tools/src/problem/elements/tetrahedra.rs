@@ -135,16 +135,6 @@ impl<T: Real> Tetrahedra<T> {
 
     /// An error naming a tetrahedron by its index here, renamed to its mesh cell.
     fn in_mesh(&self, e: PhysicsError) -> PhysicsError {
-        let cell = |k: u32| self.cells.get(k as usize).copied().unwrap_or(k);
-        match e {
-            PhysicsError::InvertedElement { element, jacobian } => PhysicsError::InvertedElement {
-                element: cell(element),
-                jacobian,
-            },
-            PhysicsError::BadIndex { element } => PhysicsError::BadIndex {
-                element: cell(element),
-            },
-            e => e,
-        }
+        super::renamed_to_cells(&self.cells, e)
     }
 }

@@ -70,7 +70,7 @@ pub use hex_full::{GaussPoint, HexFull};
 pub use hex_reduced::HexReduced;
 pub use hourglass::{FramedStiffness, HourglassControl, ModeStiffness};
 pub use kernel::{Connectivity, Element, HexElement, Hourglass, KernelFault, LaneKernel};
-pub use tet::{ReferenceTet, Tet4, TET_FACES};
+pub use tet::{ReferenceTet, Tet4};
 pub use tet_pressure::{add_nodal_volumes, Scratch, TetLoop, TetPressure};
 
 /// The element choice a scene makes (`integration = "reduced" | "full"` in its solver

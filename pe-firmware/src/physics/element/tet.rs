@@ -30,9 +30,6 @@ use super::hex::GeometryError;
 use super::kernel::KernelFault;
 use super::MIN_SCALED_JACOBIAN;
 
-/// The four faces as node triples, each counter-clockwise seen from outside (normal out).
-pub const TET_FACES: [[usize; 3]; 4] = [[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]];
-
 /// Reference-configuration data of one tetrahedron, computed in `f64`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReferenceTet {
