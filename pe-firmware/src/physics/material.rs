@@ -303,6 +303,46 @@ impl<T: Real> MaterialLaw<T> {
         }
     }
 
+    /// `P = P_iso(F) + p cof F`: the isochoric part's first Piola-Kirchhoff stress and a
+    /// given pressure `p` (Pa; T4ANP's mean nodal pressure), with one cofactor and no
+    /// logarithm: `P = μ F + (p − μ/J) cof F` (compressible neo-Hookean at `λ = 0`),
+    /// `P = a F + (p − a I₁/(3J)) cof F` with `a = μ J^(−2/3)` (decoupled), `F S_iso +
+    /// p cof F` (Mooney-Rivlin). Refused unless `J > 0`.
+    #[inline(always)]
+    pub fn isochoric_stress_with_pressure(
+        &self,
+        f: &Mat3<T>,
+        p: T,
+    ) -> Result<Mat3<T>, NonPositiveJacobian> {
+        let (a, b_over_j, cof) = match *self {
+            MaterialLaw::MooneyRivlin { .. } => {
+                let s = self.isochoric().second_piola_kirchhoff(f)?;
+                let fs = tensor::mul(f, &s);
+                let cof = tensor::cofactor(f);
+                return Ok(array(|i| array(|k| fs[i][k] + p * cof[i][k])));
+            }
+            MaterialLaw::NeoHookean(LameParameters { mu, .. }) => {
+                let (cof, j) = positive_cofactor(f)?;
+                (mu, p - mu / j, cof)
+            }
+            MaterialLaw::NeoHookeanDecoupled { mu, .. } => {
+                let (cof, j) = positive_cofactor(f)?;
+                let a = mu * inv_j_two_thirds(j);
+                let i1 = tensor::ddot(f, f);
+                (a, p - a * i1 / T::from_i32(3) / j, cof)
+            }
+        };
+        Ok(array(
+            #[inline(always)]
+            |i| {
+                array(
+                    #[inline(always)]
+                    |k| a * f[i][k] + b_over_j * cof[i][k],
+                )
+            },
+        ))
+    }
+
     /// The pressure-like derivative `U'(J)` (Pa): `λ ln J / J` (compressible neo-Hookean),
     /// `κ (J − 1)` (quadratic), `κ ln J / J` (logarithmic). `J > 0` is the caller's.
     #[inline(always)]

@@ -187,5 +187,6 @@ impl<T: Real> Tet4<T> {
     }
 }
 
+pub mod kuhn;
 #[cfg(test)]
 mod tests;

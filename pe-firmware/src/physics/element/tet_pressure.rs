@@ -26,7 +26,6 @@ use serde::{Deserialize, Serialize};
 use super::super::explicit::PhysicsError;
 use super::super::material::MaterialLaw;
 use super::super::real::Real;
-use super::super::tensor;
 use super::kernel::KernelFault;
 use super::tet::Tet4;
 
@@ -144,16 +143,9 @@ impl<T: Real> TetLoop<'_, T> {
             let p = &*pressure;
             let mean = quarter * (p[nodes[0]] + p[nodes[1]] + p[nodes[2]] + p[nodes[3]]);
             let fm = t.deformation_gradient(&Tet4::gather(&nodes, u));
-            let mut stress = law
-                .isochoric()
-                .first_piola_kirchhoff(&fm)
+            let stress = law
+                .isochoric_stress_with_pressure(&fm, mean)
                 .map_err(|j| fault(k, first, KernelFault::Inverted(j)))?;
-            let cof = tensor::cofactor(&fm);
-            for (row, c) in stress.iter_mut().zip(&cof) {
-                for (s, &c) in row.iter_mut().zip(c) {
-                    *s += mean * c;
-                }
-            }
             scatter(&nodes, &t.forces_of_stress(&stress), f);
         }
         Ok(())
@@ -166,6 +158,19 @@ fn scatter<T: Real>(nodes: &[usize; 4], fe: &[[T; 3]; 4], f: &mut [[T; 3]]) {
         for i in 0..3 {
             f[n][i] += fa[i];
         }
+    }
+}
+
+/// The law of every tetrahedron when they share one (`None`: several, or none).
+fn single_law<'l, T: Real>(
+    tets: &[Tet4<T>],
+    laws: &'l [MaterialLaw<T>],
+) -> Option<&'l MaterialLaw<T>> {
+    let m = tets.first()?.material;
+    if tets.iter().all(|t| t.material == m) {
+        laws.get(m as usize)
+    } else {
+        None
     }
 }
 
@@ -206,6 +211,15 @@ fn nodal_pressures<T: Real>(
         if v > T::ZERO {
             *r = *r / v;
         }
+    }
+    // One law over every tetrahedron (the usual case): `p_n = U'(J_n)`, once per node.
+    if let Some(law) = single_law(tets, laws) {
+        for ((p, &r), &v) in pressure.iter_mut().zip(&*ratio).zip(nodal_volume) {
+            if v > T::ZERO {
+                *p = law.volumetric_pressure(r);
+            }
+        }
+        return Ok(());
     }
     for (k, t) in tets.iter().enumerate() {
         let law = law_of(laws, t, k, first)?;

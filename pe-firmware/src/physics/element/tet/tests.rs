@@ -130,57 +130,13 @@ fn characteristic_length_bounds_the_critical_step() {
     }
 }
 
-/// A unit cube cut into `6 n³` Kuhn tetrahedra (each cell's six around its main
-/// diagonal), nodes on the `(n+1)³` grid, the inner ones moved by `jitter` (a distorted
-/// patch).
+/// A unit cube cut into `6 n³` Kuhn tetrahedra ([`super::kuhn`]), the inner nodes moved by
+/// `jitter` (a distorted patch).
 fn kuhn_cube(n: usize, jitter: f64) -> (Vec<[f64; 3]>, Vec<[u32; 4]>) {
-    let id = |i: usize, j: usize, k: usize| (i + (n + 1) * (j + (n + 1) * k)) as u32;
-    let mut x = Vec::new();
-    for k in 0..=n {
-        for j in 0..=n {
-            for i in 0..=n {
-                let inner = [i, j, k].iter().all(|&c| c > 0 && c < n);
-                let wiggle = |s: f64| if inner { jitter * s } else { 0.0 };
-                let h = 1.0 / n as f64;
-                x.push([
-                    i as f64 * h + wiggle(0.31 * h),
-                    j as f64 * h + wiggle(-0.23 * h),
-                    k as f64 * h + wiggle(0.17 * h),
-                ]);
-            }
-        }
-    }
-    // The six paths from corner 000 to 111 through the cube's vertices.
-    const PATHS: [[usize; 3]; 6] = [
-        [0, 1, 2],
-        [0, 2, 1],
-        [1, 0, 2],
-        [1, 2, 0],
-        [2, 0, 1],
-        [2, 1, 0],
-    ];
-    let mut tets = Vec::new();
-    for k in 0..n {
-        for j in 0..n {
-            for i in 0..n {
-                for p in PATHS {
-                    let mut c = [i, j, k];
-                    let mut t = [id(i, j, k); 4];
-                    for (s, &axis) in p.iter().enumerate() {
-                        c[axis] += 1;
-                        t[s + 1] = id(c[0], c[1], c[2]);
-                    }
-                    // Orient positively.
-                    let xs = t.map(|a| x[a as usize]);
-                    let e = [1, 2, 3].map(|a| vec3::sub(xs[a], xs[0]));
-                    if vec3::dot(e[0], vec3::cross(e[1], e[2])) < 0.0 {
-                        t.swap(1, 2);
-                    }
-                    tets.push(t);
-                }
-            }
-        }
-    }
+    let mut x = vec![[0.0; 3]; super::kuhn::node_count(n)];
+    let mut tets = vec![[0; 4]; super::kuhn::tet_count(n)];
+    super::kuhn::nodes(n, 1.0 / n as f64, jitter, &mut x).unwrap();
+    super::kuhn::tetrahedra(n, &x, &mut tets).unwrap();
     (x, tets)
 }
 
@@ -308,8 +264,10 @@ fn patch_test_is_exact_for_t4_and_t4anp() {
 }
 
 /// Both forms' forces are the derivatives of their energies (central differences,
-/// step 1e-7, relative 1e-6) at a random large deformation of a distorted patch of two
-/// materials: the nodal averaging is consistent, so energy is conserved.
+/// step 1e-7, relative 1e-6) at a random large deformation of a distorted patch: of two
+/// materials, and of each of the three laws alone (the nodal pressures' one-law path,
+/// and each law's isochoric stress with the pressure): the nodal averaging is
+/// consistent, so energy is conserved.
 #[test]
 fn forces_are_the_energy_gradient() {
     let (x, t) = kuhn_cube(2, 1.0);
@@ -319,8 +277,13 @@ fn forces_are_the_energy_gradient() {
             mu: 1500.0,
             kappa: 2.0e5,
         },
+        MaterialLaw::MooneyRivlin {
+            c10: 500.0,
+            c01: 250.0,
+            kappa: 1.0e5,
+            volumetric: crate::physics::Volumetric::Log,
+        },
     ];
-    let tets = records(&x, &t, |e| (e % 3 == 0) as u16);
     let mut seed = 0x2545_f491_u64;
     let mut rand = || {
         seed ^= seed << 13;
@@ -332,10 +295,29 @@ fn forces_are_the_energy_gradient() {
         .iter()
         .map(|_| [0.06 * rand(), 0.06 * rand(), 0.06 * rand()])
         .collect();
+    let patches = [
+        ("two laws", records(&x, &t, |e| (e % 3 == 0) as u16)),
+        ("neo-Hookean alone", records(&x, &t, |_| 0)),
+        ("decoupled alone", records(&x, &t, |_| 1)),
+        ("Mooney-Rivlin alone", records(&x, &t, |_| 2)),
+    ];
+    for (patch, tets) in &patches {
+        gradient_check(patch, tets, &laws, &x, &u);
+    }
+}
+
+fn gradient_check(
+    patch: &str,
+    tets: &[Tet4<f64>],
+    laws: &[MaterialLaw<f64>],
+    x: &[[f64; 3]],
+    u: &[[f64; 3]],
+) {
+    let (tets, laws, u) = (tets.to_vec(), laws.to_vec(), u.to_vec());
     for form in [TetPressure::Element, TetPressure::Nodal] {
         let f = forces(&tets, &laws, form, &u);
         let scale = f.iter().flatten().map(|v| v.abs()).fold(0.0, f64::max);
-        assert!(scale > 10.0, "{form:?}: trivial forces {scale}");
+        assert!(scale > 10.0, "{patch}, {form:?}: trivial forces {scale}");
         for a in 0..x.len() {
             for i in 0..3 {
                 let h = 1e-7;
@@ -346,7 +328,7 @@ fn forces_are_the_energy_gradient() {
                     / (2.0 * h);
                 assert!(
                     (d - f[a][i]).abs() < 1e-6 * scale,
-                    "{form:?}: node {a} component {i}: dE/du {d} against f {}",
+                    "{patch}, {form:?}: node {a} component {i}: dE/du {d} against f {}",
                     f[a][i]
                 );
             }
