@@ -128,8 +128,44 @@ awk '
     END { printf "Seed: 700 flops per element-step on 300 MFLOPS processors -> %.1f elements per processor at 10 kHz; 2000 elements need %d processors\n", seed, int(2000 / seed) + 1 }
 ' "$OUT/table.txt"
 
+# The tetrahedra (not yet loaded by the boards: their kernels, the shared code, on the
+# deformed Kuhn patch of pe_firmware::profile::tet_cost::TetSample; marks in
+# pe-firmware/board/src/bin/tet_bench.rs): instructions per tetrahedron of the plain kernel,
+# the plain loop and the T4ANP loop, and the digests of the two loops' forces, which the
+# test below recomputes on the host (the same bits).
+echo
+echo "Tetrahedra (their kernels on a deformed patch; the boards do not load tetrahedra yet):"
+echo "precision,tets,nodes,kernel_plain,plain_step,nodal_step,digest_plain,digest_nodal" >"$OUT/tet-cost.csv"
+for PREC in f64 f32; do
+    FEATURES=qemu
+    [ "$PREC" = f32 ] && FEATURES=$FEATURES,f32
+    D=$OUT/tet-$PREC
+    mkdir -p "$D"
+    cargo build --release -q --target thumbv7em-none-eabihf \
+        --manifest-path pe-firmware/board/Cargo.toml --target-dir "$TARGET_DIR" \
+        --bin pe-board-tet-bench --no-default-features --features "$FEATURES"
+    ELF=$D/tet-bench.elf
+    cp "$TARGET_DIR/thumbv7em-none-eabihf/release/pe-board-tet-bench" "$ELF"
+    MARK=0x$( (command -v llvm-nm >/dev/null && llvm-nm "$ELF" || nm "$ELF") | awk '$3=="bench_mark"{print $1}')
+    timeout 120 qemu-system-arm -cpu cortex-m7 -machine mps2-an500 -nographic \
+        -semihosting-config enable=on,target=native -icount shift=0 \
+        -plugin "$OUT/libinsncount.so,mark=$MARK" -d plugin -D "$D/insn.log" \
+        -kernel "$ELF" >"$D/bench.txt"
+    # tet-bench,PRECISION,TETS,NODES,DIGEST_PLAIN,DIGEST_NODAL
+    awk -F, '/^tet-bench,/ { print $2, $3, $4, $5, $6 }' "$D/bench.txt" >"$D/meta"
+    read -r P NT NN DP DN <"$D/meta"
+    [ "$P" = "$PREC" ] || { echo "board-cost: the $PREC tetrahedron bench printed '${P:-nothing}'" >&2; exit 1; }
+    awk -v p="$P" -v nt="$NT" -v nn="$NN" -v dp="$DP" -v dn="$DN" '
+        /insncount: mark/ { d[$3] = substr($7, 1, length($7) - 1) + 0 }
+        END {
+            o = d[1]
+            printf "%s,%d,%d,%.1f,%.1f,%.1f,%s,%s\n", p, nt, nn, (d[3] - o) / nt, (d[5] - o) / nt, (d[7] - o) / nt, dp, dn >>csv
+            printf "  %s: %d tetrahedra, %d nodes: plain kernel %.0f, plain loop %.0f, T4ANP loop %.0f instructions per tetrahedron-step\n", p, nt, nn, (d[3] - o) / nt, (d[5] - o) / nt, (d[7] - o) / nt
+        }' csv="$OUT/tet-cost.csv" "$D/insn.log"
+done
+
 # The table the code relies on must match what was just measured.
 # (--workspace: the test build's features, so nothing is compiled again; `-p system-tests`
 # would resolve them without the other members' dev-dependencies and rebuild host-tools.)
-PE_BOARD_COST_CSV="$OUT/board-cost.csv" cargo test --workspace --release -q --test board_cost \
+PE_BOARD_COST_CSV="$OUT/board-cost.csv" PE_TET_COST_CSV="$OUT/tet-cost.csv" cargo test --workspace --release -q --test board_cost \
     -- --ignored

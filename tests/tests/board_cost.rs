@@ -159,3 +159,121 @@ fn measured_cost_table_matches_the_firmware() {
         stale.join("\n  ")
     );
 }
+
+/// The tetrahedra's measured cost (`pe_firmware::profile::MEASURED_TET_COST`) against a fresh
+/// measurement of `pe-board-tet-bench` (`scripts/board-cost.sh` writes `PE_TET_COST_CSV`),
+/// and the board's forces the host's, bit for bit: the digests of the plain and the T4ANP
+/// loops' forces on the sample patch (`TetSample`), recomputed here. Before comparing,
+/// the host's forces are checked to be far from trivial (largest component above 1 mN
+/// where the patch's stresses of some hundred Pa on 1 cm² faces give tens of mN), to sum to
+/// zero (internal forces: to 1e-9 of the largest in f64, 1e-4 in f32, a sum's rounding), and
+/// the two forms to differ (ν = 0.49: the nodal pressure is not the element's).
+#[test]
+#[ignore = "needs a measurement: run scripts/board-cost.sh"]
+fn measured_tet_cost_and_bits_match_the_firmware() {
+    use pe_firmware::physics::{Real, TetPressure};
+    use pe_firmware::profile::measured_tet_cost;
+    use pe_firmware::profile::tet_cost::{digest, TetSample, SAMPLE_NODES, SAMPLE_TETS};
+
+    fn host<T: Real>(sum_tolerance: f64) -> (u64, u64) {
+        let sample = TetSample::<T>::new().expect("the sample patch");
+        let mut out = [0u64; 2];
+        let mut forces = Vec::new();
+        for (k, form) in [TetPressure::Element, TetPressure::Nodal]
+            .into_iter()
+            .enumerate()
+        {
+            let mut f = [[T::ZERO; 3]; SAMPLE_NODES];
+            sample.forces(form, &mut f).expect("the sample's forces");
+            let largest = f.iter().flatten().fold(0.0f64, |m, v| {
+                pe_firmware::physics::real::nan_max(m, v.to_f64().abs())
+            });
+            assert!(
+                largest > 1e-3,
+                "{form:?}: trivial forces, largest {largest} N"
+            );
+            for i in 0..3 {
+                let sum: f64 = f.iter().map(|v| v[i].to_f64()).sum();
+                assert!(
+                    sum.abs() < sum_tolerance * largest,
+                    "{form:?}: component {i} sums to {sum} N (largest {largest})"
+                );
+            }
+            out[k] = digest(&f);
+            forces.push(f.map(|v| v.map(T::to_f64)));
+        }
+        let apart = forces[0]
+            .iter()
+            .flatten()
+            .zip(forces[1].iter().flatten())
+            .fold(0.0f64, |m, (a, b)| {
+                pe_firmware::physics::real::nan_max(m, (a - b).abs())
+            });
+        assert!(
+            apart > 1e-4,
+            "plain and T4ANP forces differ by only {apart} N"
+        );
+        (out[0], out[1])
+    }
+
+    let path = std::env::var("PE_TET_COST_CSV")
+        .expect("PE_TET_COST_CSV: the measurement of scripts/board-cost.sh");
+    let text = std::fs::read_to_string(&path).expect("the measurement file");
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("precision,tets,nodes,kernel_plain,plain_step,nodal_step,digest_plain,digest_nodal"),
+        "{path}: header"
+    );
+    let mut seen = Vec::new();
+    let mut stale = Vec::new();
+    for line in lines {
+        let f: Vec<&str> = line.split(',').collect();
+        assert_eq!(f.len(), 8, "{path}: {line}");
+        let (precision, digests) = match f[0] {
+            "f64" => (pe_firmware::image::Precision::F64, host::<f64>(1e-9)),
+            "f32" => (pe_firmware::image::Precision::F32, host::<f32>(1e-4)),
+            p => panic!("{path}: unknown precision {p}"),
+        };
+        assert_eq!(f[1], SAMPLE_TETS.to_string(), "{path}: {line}");
+        assert_eq!(f[2], SAMPLE_NODES.to_string(), "{path}: {line}");
+        assert!(
+            [f[6], f[7]]
+                .iter()
+                .all(|d| u64::from_str_radix(d, 16).is_ok() && d.len() == 16),
+            "{path}: digests {line}"
+        );
+        assert_eq!(
+            [f[6].to_string(), f[7].to_string()],
+            [digests.0, digests.1].map(|d| format!("{d:016x}")),
+            "{path}: {} forces on the board differ from the host's (plain, T4ANP)",
+            f[0]
+        );
+        let table = measured_tet_cost(precision);
+        let n: Vec<f64> = f[3..6]
+            .iter()
+            .map(|v| v.parse().expect("a number"))
+            .collect();
+        for (what, measured, held) in [
+            ("kernel_per_tet", n[0], table.kernel_per_tet),
+            ("plain_per_tet_step", n[1], table.plain_per_tet_step),
+            ("nodal_per_tet_step", n[2], table.nodal_per_tet_step),
+        ] {
+            assert!(measured > 50.0, "{path}: {what} of {} is {measured}", f[0]);
+            if (held as f64 - measured).abs() > STALE * measured {
+                stale.push(format!(
+                    "{} {what}: table {held}, measured {measured:.0}",
+                    f[0]
+                ));
+            }
+        }
+        seen.push(f[0].to_string());
+    }
+    seen.sort();
+    assert_eq!(seen, ["f32", "f64"], "{path}: both precisions measured");
+    assert!(
+        stale.is_empty(),
+        "MEASURED_TET_COST is stale (update pe-firmware/src/profile/tet_cost.rs):\n{}",
+        stale.join("\n")
+    );
+}

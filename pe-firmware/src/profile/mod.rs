@@ -399,6 +399,8 @@ pub mod by_name {
 
 mod cost;
 pub use cost::{measured_cost, FirmwareCost, StepCost, MEASURED_COST};
+pub mod tet_cost;
+pub use tet_cost::{measured_tet_cost, TetCost, MEASURED_TET_COST};
 
 #[cfg(test)]
 mod tests {
