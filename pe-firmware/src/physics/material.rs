@@ -319,7 +319,15 @@ impl<T: Real> MaterialLaw<T> {
                 let s = self.isochoric().second_piola_kirchhoff(f)?;
                 let fs = tensor::mul(f, &s);
                 let cof = tensor::cofactor(f);
-                return Ok(array(|i| array(|k| fs[i][k] + p * cof[i][k])));
+                return Ok(array(
+                    #[inline(always)]
+                    |i| {
+                        array(
+                            #[inline(always)]
+                            |k| fs[i][k] + p * cof[i][k],
+                        )
+                    },
+                ));
             }
             MaterialLaw::NeoHookean(LameParameters { mu, .. }) => {
                 let (cof, j) = positive_cofactor(f)?;

@@ -145,15 +145,15 @@ pub struct TetCost {
 pub const MEASURED_TET_COST: [TetCost; 2] = [
     TetCost {
         precision: Precision::F64,
-        kernel_per_tet: 273,
-        plain_per_tet_step: 335,
-        nodal_per_tet_step: 494,
+        kernel_per_tet: 285,
+        plain_per_tet_step: 340,
+        nodal_per_tet_step: 475,
     },
     TetCost {
         precision: Precision::F32,
-        kernel_per_tet: 220,
-        plain_per_tet_step: 289,
-        nodal_per_tet_step: 429,
+        kernel_per_tet: 221,
+        plain_per_tet_step: 278,
+        nodal_per_tet_step: 423,
     },
 ];
 

@@ -121,9 +121,22 @@ impl<T: Real> Tet4<T> {
     /// `F = I + Σ_{a=1..3} (u_a − u_0) ⊗ B_a`.
     #[inline(always)]
     pub fn deformation_gradient(&self, u: &[[T; 3]; 4]) -> Mat3<T> {
-        let d = [1, 2, 3].map(|a| vec3::sub(u[a], u[0]));
+        // Plain loops and always-inlined closures (not `map`), so the lanes' operations
+        // stay inline in the host's batched loop (see `real::array`).
+        let d: [[T; 3]; 3] = array(
+            #[inline(always)]
+            |a| vec3::sub(u[a + 1], u[0]),
+        );
         let b = &self.gradients;
-        let mut f: Mat3<T> = array(|i| array(|j| d[0][i] * b[0][j] + d[1][i] * b[1][j]));
+        let mut f: Mat3<T> = array(
+            #[inline(always)]
+            |i| {
+                array(
+                    #[inline(always)]
+                    |j| d[0][i] * b[0][j] + d[1][i] * b[1][j],
+                )
+            },
+        );
         for (i, row) in f.iter_mut().enumerate() {
             for (j, v) in row.iter_mut().enumerate() {
                 *v += d[2][i] * b[2][j];
@@ -137,11 +150,20 @@ impl<T: Real> Tet4<T> {
     #[inline(always)]
     pub fn forces_of_stress(&self, p: &Mat3<T>) -> [[T; 3]; 4] {
         let v = self.volume;
-        let g: [[T; 3]; 3] = array(|a| {
-            let b = &self.gradients[a];
-            array(|i| v * (p[i][0] * b[0] + p[i][1] * b[1] + p[i][2] * b[2]))
-        });
-        let f0 = array(|i| -(g[0][i] + g[1][i] + g[2][i]));
+        let g: [[T; 3]; 3] = array(
+            #[inline(always)]
+            |a| {
+                let b = &self.gradients[a];
+                array(
+                    #[inline(always)]
+                    |i| v * (p[i][0] * b[0] + p[i][1] * b[1] + p[i][2] * b[2]),
+                )
+            },
+        );
+        let f0 = array(
+            #[inline(always)]
+            |i| -(g[0][i] + g[1][i] + g[2][i]),
+        );
         [f0, g[0], g[1], g[2]]
     }
 
@@ -184,6 +206,19 @@ impl<T: Real> Tet4<T> {
     #[inline(always)]
     pub fn volume_ratio(&self, ue: &[[T; 3]; 4]) -> T {
         tensor::det(&self.deformation_gradient(ue))
+    }
+
+    /// T4ANP's share of the element's current volume for each of its nodes, `V J / 4`
+    /// (m³), refused unless `J > 0`.
+    #[inline(always)]
+    pub fn volume_weight(&self, ue: &[[T; 3]; 4]) -> Result<T, NonPositiveJacobian> {
+        let j = self.volume_ratio(ue);
+        if !(j > T::ZERO) {
+            return Err(NonPositiveJacobian {
+                jacobian: j.to_f64(),
+            });
+        }
+        Ok(T::from_f64(0.25) * self.volume * j)
     }
 }
 

@@ -108,45 +108,153 @@ pub struct TetLoop<'a, T> {
 }
 
 impl<T: Real> TetLoop<'_, T> {
-    /// Adds the tetrahedra's internal forces at `u` into `f` (`scratch` is overwritten).
+    /// Adds the tetrahedra's internal forces at `u` into `f` (`scratch` is overwritten):
+    /// with the nodal form, [`Self::nodal_pressures`] first; then each tetrahedron's
+    /// [`Self::element_forces`], in order.
     pub fn accumulate(
         &self,
         scratch: Scratch<'_, T>,
         u: &[[T; 3]],
         f: &mut [[T; 3]],
     ) -> Result<(), PhysicsError> {
+        let Scratch { ratio, pressure } = scratch;
+        let pressure = match self.form {
+            TetPressure::Element => None,
+            TetPressure::Nodal => {
+                self.nodal_pressures(ratio, &mut *pressure, u)?;
+                Some(&*pressure)
+            }
+        };
+        let len = forces_len(pressure, u, f);
+        // One loop per form, so neither tests the form per element.
+        match pressure {
+            None => {
+                for (k, t) in self.tets.iter().enumerate() {
+                    self.forces_of(k, t, len, None, u, f)?;
+                }
+            }
+            Some(p) => {
+                for (k, t) in self.tets.iter().enumerate() {
+                    self.forces_of(k, t, len, Some(p), u, f)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds tetrahedron `k`'s forces `f_a = V P B_a` into `f`: `P = P(F)` of its law
+    /// (`pressure` None: plain), or `P = P_iso(F) + p̄ cof F` with `p̄` the mean of its
+    /// nodes' `pressure` (T4ANP). Its nodes are checked against `u`, `f` and `pressure`.
+    #[inline(always)]
+    pub fn element_forces(
+        &self,
+        k: usize,
+        pressure: Option<&[T]>,
+        u: &[[T; 3]],
+        f: &mut [[T; 3]],
+    ) -> Result<(), PhysicsError> {
+        let t = self
+            .tets
+            .get(k)
+            .ok_or(fault(k, self.first, KernelFault::BadIndex))?;
+        self.forces_of(k, t, forces_len(pressure, u, f), pressure, u, f)
+    }
+
+    /// [`Self::element_forces`] of `t` (number `k`), its nodes checked against `len`.
+    #[inline(always)]
+    fn forces_of(
+        &self,
+        k: usize,
+        t: &Tet4<T>,
+        len: usize,
+        pressure: Option<&[T]>,
+        u: &[[T; 3]],
+        f: &mut [[T; 3]],
+    ) -> Result<(), PhysicsError> {
+        let first = self.first;
+        let nodes = t.checked_nodes(len).map_err(|e| fault(k, first, e))?;
+        let law = law_of(self.laws, t, k, first)?;
+        let fm = t.deformation_gradient(&Tet4::gather(&nodes, u));
+        let stress = match pressure {
+            None => law.first_piola_kirchhoff(&fm),
+            Some(p) => {
+                let sum = p[nodes[0]] + p[nodes[1]] + p[nodes[2]] + p[nodes[3]];
+                law.isochoric_stress_with_pressure(&fm, T::from_f64(0.25) * sum)
+            }
+        }
+        .map_err(|j| fault(k, first, KernelFault::Inverted(j)))?;
+        scatter(&nodes, &t.forces_of_stress(&stress), f);
+        Ok(())
+    }
+
+    /// The first passes of T4ANP: `ratio[n] = J_n` and `pressure[n] = p_n` for every node
+    /// with `V_n > 0` (the others' entries are left zero): each tetrahedron's `V_e J_e / 4`
+    /// added to its nodes in order ([`Tet4::volume_weight`]), then
+    /// [`Self::finish_nodal_pressures`].
+    pub fn nodal_pressures(
+        &self,
+        ratio: &mut [T],
+        pressure: &mut [T],
+        u: &[[T; 3]],
+    ) -> Result<(), PhysicsError> {
+        let first = self.first;
+        let len = u.len().min(ratio.len());
+        ratio.fill(T::ZERO);
+        for (k, t) in self.tets.iter().enumerate() {
+            let nodes = t.checked_nodes(len).map_err(|e| fault(k, first, e))?;
+            let w = t
+                .volume_weight(&Tet4::gather(&nodes, u))
+                .map_err(|j| fault(k, first, KernelFault::Inverted(j)))?;
+            for &n in &nodes {
+                ratio[n] += w;
+            }
+        }
+        self.finish_nodal_pressures(ratio, pressure)
+    }
+
+    /// From `ratio[n] = Σ_{e∋n} V_e J_e / 4` (summed in element order), `ratio[n] = J_n`
+    /// and `pressure[n] = p_n`: with one law over the tetrahedra (the usual case)
+    /// `p_n = U'(J_n)` once per node, else `Σ_{e∋n} (V_e/4) U_e'(J_n) / V_n`.
+    pub fn finish_nodal_pressures(
+        &self,
+        ratio: &mut [T],
+        pressure: &mut [T],
+    ) -> Result<(), PhysicsError> {
         let TetLoop {
             tets,
             first,
             laws,
-            form,
             nodal_volume,
+            ..
         } = *self;
-        let len = u.len().min(f.len());
-        if form == TetPressure::Element {
-            for (k, t) in tets.iter().enumerate() {
-                let nodes = t.checked_nodes(len).map_err(|e| fault(k, first, e))?;
-                let law = law_of(laws, t, k, first)?;
-                let fe = t
-                    .internal_forces(law, &Tet4::gather(&nodes, u))
-                    .map_err(|j| fault(k, first, KernelFault::Inverted(j)))?;
-                scatter(&nodes, &fe, f);
+        for (r, &v) in ratio.iter_mut().zip(nodal_volume) {
+            if v > T::ZERO {
+                *r = *r / v;
+            }
+        }
+        pressure.fill(T::ZERO);
+        if let Some(law) = single_law(tets, laws) {
+            for ((p, &r), &v) in pressure.iter_mut().zip(&*ratio).zip(nodal_volume) {
+                if v > T::ZERO {
+                    *p = law.volumetric_pressure(r);
+                }
             }
             return Ok(());
         }
-        let Scratch { ratio, pressure } = scratch;
-        nodal_pressures(tets, first, laws, nodal_volume, ratio, &mut *pressure, u)?;
+        let len = ratio.len().min(pressure.len());
         let quarter = T::from_f64(0.25);
         for (k, t) in tets.iter().enumerate() {
             let nodes = t.checked_nodes(len).map_err(|e| fault(k, first, e))?;
             let law = law_of(laws, t, k, first)?;
-            let p = &*pressure;
-            let mean = quarter * (p[nodes[0]] + p[nodes[1]] + p[nodes[2]] + p[nodes[3]]);
-            let fm = t.deformation_gradient(&Tet4::gather(&nodes, u));
-            let stress = law
-                .isochoric_stress_with_pressure(&fm, mean)
-                .map_err(|j| fault(k, first, KernelFault::Inverted(j)))?;
-            scatter(&nodes, &t.forces_of_stress(&stress), f);
+            let w = quarter * t.volume;
+            for n in nodes {
+                pressure[n] += w * law.volumetric_pressure(ratio[n]);
+            }
+        }
+        for (p, &v) in pressure.iter_mut().zip(nodal_volume) {
+            if v > T::ZERO {
+                *p = *p / v;
+            }
         }
         Ok(())
     }
@@ -161,6 +269,22 @@ fn scatter<T: Real>(nodes: &[usize; 4], fe: &[[T; 3]; 4], f: &mut [[T; 3]]) {
     }
 }
 
+/// How far the stress pass may index: `u`, `f` and the nodal pressures.
+#[inline(always)]
+fn forces_len<T>(pressure: Option<&[T]>, u: &[[T; 3]], f: &[[T; 3]]) -> usize {
+    u.len()
+        .min(f.len())
+        .min(pressure.map_or(usize::MAX, <[T]>::len))
+}
+
+/// How far the nodal form's energy may index the ratios (no bound for the plain form).
+fn ratio_len<T>(scratch: &Scratch<'_, T>, form: TetPressure) -> usize {
+    match form {
+        TetPressure::Element => usize::MAX,
+        TetPressure::Nodal => scratch.ratio.len(),
+    }
+}
+
 /// The law of every tetrahedron when they share one (`None`: several, or none).
 fn single_law<'l, T: Real>(
     tets: &[Tet4<T>],
@@ -172,69 +296,6 @@ fn single_law<'l, T: Real>(
     } else {
         None
     }
-}
-
-/// The first passes of T4ANP: `ratio[n] = J_n` and `pressure[n] = p_n` for every node
-/// with `V_n > 0` (the others' entries are left zero).
-fn nodal_pressures<T: Real>(
-    tets: &[Tet4<T>],
-    first: u32,
-    laws: &[MaterialLaw<T>],
-    nodal_volume: &[T],
-    ratio: &mut [T],
-    pressure: &mut [T],
-    u: &[[T; 3]],
-) -> Result<(), PhysicsError> {
-    let len = u
-        .len()
-        .min(ratio.len())
-        .min(pressure.len())
-        .min(nodal_volume.len());
-    let quarter = T::from_f64(0.25);
-    ratio.fill(T::ZERO);
-    pressure.fill(T::ZERO);
-    for (k, t) in tets.iter().enumerate() {
-        let nodes = t.checked_nodes(len).map_err(|e| fault(k, first, e))?;
-        let j = t.volume_ratio(&Tet4::gather(&nodes, u));
-        if !(j > T::ZERO) {
-            return Err(PhysicsError::InvertedElement {
-                element: first + k as u32,
-                jacobian: j.to_f64(),
-            });
-        }
-        let w = quarter * t.volume * j;
-        for &n in &nodes {
-            ratio[n] += w;
-        }
-    }
-    for (r, &v) in ratio.iter_mut().zip(nodal_volume) {
-        if v > T::ZERO {
-            *r = *r / v;
-        }
-    }
-    // One law over every tetrahedron (the usual case): `p_n = U'(J_n)`, once per node.
-    if let Some(law) = single_law(tets, laws) {
-        for ((p, &r), &v) in pressure.iter_mut().zip(&*ratio).zip(nodal_volume) {
-            if v > T::ZERO {
-                *p = law.volumetric_pressure(r);
-            }
-        }
-        return Ok(());
-    }
-    for (k, t) in tets.iter().enumerate() {
-        let law = law_of(laws, t, k, first)?;
-        let w = quarter * t.volume;
-        for &n in &t.nodes {
-            let n = n as usize;
-            pressure[n] += w * law.volumetric_pressure(ratio[n]);
-        }
-    }
-    for (p, &v) in pressure.iter_mut().zip(nodal_volume) {
-        if v > T::ZERO {
-            *p = *p / v;
-        }
-    }
-    Ok(())
 }
 
 impl<T: Real> TetLoop<'_, T> {
@@ -264,12 +325,12 @@ impl<T: Real> TetLoop<'_, T> {
             first,
             laws,
             form,
-            nodal_volume,
+            ..
         } = *self;
-        let len = u.len();
+        let len = u.len().min(ratio_len(&scratch, form));
         let Scratch { ratio, pressure } = scratch;
         if form == TetPressure::Nodal {
-            nodal_pressures(tets, first, laws, nodal_volume, &mut *ratio, pressure, u)?;
+            self.nodal_pressures(&mut *ratio, pressure, u)?;
         }
         for (k, t) in tets.iter().enumerate() {
             let nodes = t.checked_nodes(len).map_err(|e| fault(k, first, e))?;
