@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # The host's SIMD element loops keep their lanes in registers: in every function compiled
-# for a SIMD instruction set (`run_packs_avx`, and `run_packs`'s multiversion clones, whose
-# names hold `run_packs_avx`), no instruction calls or loads an out-of-line `core::arch`
+# for a SIMD instruction set (`run_packs_avx` and `run_tet_packs_avx`, and the multiversion
+# clones of `run_packs` and `run_tet_packs`, whose names hold those), no instruction calls or loads an out-of-line `core::arch`
 # intrinsic, a kernel closure, or core's `array::map` machinery (`try_map`, `try_from_fn`).
 # A closure or `map` left out of line in a kernel is compiled without the SIMD features,
 # so every lane operation inside it becomes a call: that happened once (the parallelepiped
-# and cuboid kernels' force-moment closures), and `pe bench` ran 2x slower with the same
-# bits, which no test saw. Usage: bash scripts/check-simd-inlined.sh [PE_BINARY]
+# and cuboid kernels' force-moment closures; then the tetrahedron's `map` of edge
+# differences), and `pe bench` ran 2x slower with the same bits, which no test saw. Usage: bash scripts/check-simd-inlined.sh [PE_BINARY]
 # (default: the release `pe` the README's test command builds). x86-64 only.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -24,7 +24,7 @@ command -v objdump >/dev/null || { echo "check-simd-inlined: objdump not found (
 dis=$(mktemp)
 trap 'rm -f "$dis"' EXIT
 objdump -d --no-show-raw-insn -C "$bin" > "$dis"
-functions=$(grep -cE '^[0-9a-f]+ <.*run_packs_avx.*>:$' "$dis" || true)
+functions=$(grep -cE '^[0-9a-f]+ <.*run_(tet_)?packs_avx.*>:$' "$dis" || true)
 if [ "$functions" -lt 2 ]; then
     echo "check-simd-inlined: FAIL: only $functions SIMD element loops found in $bin (renamed?)"
     exit 1
@@ -36,7 +36,7 @@ fi
 # jump inside a loop whose closure parameter is `...{closure#0}` ends in `}>+0x...>`, not
 # a call, and is not flagged.
 out_of_line() {
-    awk '/^[0-9a-f]+ <.*>:$/ { inside = ($0 ~ /run_packs_avx/) }
+    awk '/^[0-9a-f]+ <.*>:$/ { inside = ($0 ~ /run_(tet_)?packs_avx/) }
         inside && /core::core_arch|9core_arch|\{\{closure\}\}>$|\{closure#[0-9]+\}>$|<_RNC|try_map|try_from_fn/'
 }
 # The pattern itself is checked first, on a made-up disassembly: five calls it must flag

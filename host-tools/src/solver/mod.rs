@@ -321,10 +321,7 @@ impl<'p, T: Real> Model<'p, T> {
             let el = b.element_loop();
             if el.parallel_forces(plan, &mut self.kept, team, &self.u, &mut self.f_int) {
                 // The tetrahedra after every hexahedron, on this thread.
-                return self
-                    .elements
-                    .tets
-                    .add_forces(&self.laws, &self.u, &mut self.f_int);
+                return el.tet_forces(&self.elements, &self.laws, &self.u, &mut self.f_int);
             }
             // A pack failed: the one-thread loop names the element.
             self.f_int.iter_mut().for_each(|f| *f = [T::ZERO; 3]);

@@ -10,6 +10,7 @@
 mod common;
 
 mod batched;
+mod batched_tets;
 mod f32_statics;
 mod gravity_ramp;
 mod hourglass;

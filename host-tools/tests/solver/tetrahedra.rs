@@ -27,7 +27,7 @@ const E_PA: f64 = 3.0e6;
 const RHO: f64 = 1000.0;
 const G: f64 = 9.81;
 
-fn fixture(name: &str) -> String {
+pub(crate) fn fixture(name: &str) -> String {
     let p = PathBuf::from(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/tests/fixtures/meshes"
@@ -44,7 +44,7 @@ fn tet_beam(form: &str, nu: f64, solver: &str) -> Problem {
 }
 
 /// The beam of fixture `mesh`.
-fn beam(mesh: &str, form: &str, nu: f64, solver: &str) -> Problem {
+pub(crate) fn beam(mesh: &str, form: &str, nu: f64, solver: &str) -> Problem {
     let text = format!(
         r#"
 [mesh]

@@ -10,7 +10,9 @@ use pe_firmware::physics::{
 
 #[cfg(target_arch = "x86_64")]
 use super::avx;
+use super::tets::{run_tet_packs_body, TetPass};
 use super::{Batch, Isa};
+use pe_firmware::physics::element::tet_lanes::TetPack;
 
 /// [`run_packs_body`] on the lane type's instruction set ([`HostLanes::run_packs`]).
 #[inline(always)]
@@ -39,6 +41,12 @@ pub trait HostLanes<S: Real, const N: usize>: LaneReal<S, N> {
         u: &[[S; 3]],
         scatter: &mut impl FnMut(usize, [S; 3]),
     ) -> Option<usize>;
+    /// [`run_tet_packs_body`] on [`Self::ISA`].
+    fn run_tet_packs(
+        packs: &[TetPack<Self, N>],
+        pass: &mut TetPass<'_, S>,
+        u: &[[S; 3]],
+    ) -> Option<usize>;
 }
 
 impl<S: Real, const N: usize> HostLanes<S, N> for Lanes<S, N>
@@ -54,12 +62,20 @@ where
     ) -> Option<usize> {
         run_packs(packs, u, scatter)
     }
+    #[inline(always)]
+    fn run_tet_packs(
+        packs: &[TetPack<Self, N>],
+        pass: &mut TetPass<'_, S>,
+        u: &[[S; 3]],
+    ) -> Option<usize> {
+        run_tet_packs(packs, pass, u)
+    }
 }
 
 /// The AVX (`avx`) and AVX-512 (`avx512`) lane types on their functions.
 #[cfg(target_arch = "x86_64")]
 macro_rules! host_lanes {
-    ($lanes:ty, $s:ty, $n:expr, $isa:expr, $run:ident, $why:literal) => {
+    ($lanes:ty, $s:ty, $n:expr, $isa:expr, $run:ident, $run_tets:ident, $why:literal) => {
         impl HostLanes<$s, $n> for $lanes {
             const ISA: Isa = $isa;
             #[inline(always)]
@@ -72,13 +88,38 @@ macro_rules! host_lanes {
                 // the instruction set (the `avx` module doc): $why.
                 unsafe { $run(packs, u, scatter) }
             }
+            #[inline(always)]
+            fn run_tet_packs(
+                packs: &[TetPack<Self, $n>],
+                pass: &mut TetPass<'_, $s>,
+                u: &[[$s; 3]],
+            ) -> Option<usize> {
+                // SAFETY: as above: $why.
+                unsafe { $run_tets(packs, pass, u) }
+            }
         }
     };
 }
 #[cfg(target_arch = "x86_64")]
-host_lanes!(avx::F64x4, f64, 4, Isa::Avx, run_packs_avx, "AVX");
+host_lanes!(
+    avx::F64x4,
+    f64,
+    4,
+    Isa::Avx,
+    run_packs_avx,
+    run_tet_packs_avx,
+    "AVX"
+);
 #[cfg(target_arch = "x86_64")]
-host_lanes!(avx::F32x8, f32, 8, Isa::Avx, run_packs_avx, "AVX");
+host_lanes!(
+    avx::F32x8,
+    f32,
+    8,
+    Isa::Avx,
+    run_packs_avx,
+    run_tet_packs_avx,
+    "AVX"
+);
 #[cfg(target_arch = "x86_64")]
 host_lanes!(
     avx::F64x8,
@@ -86,6 +127,7 @@ host_lanes!(
     8,
     Isa::Avx512,
     run_packs_avx512,
+    run_tet_packs_avx512,
     "AVX-512F and DQ"
 );
 #[cfg(target_arch = "x86_64")]
@@ -95,6 +137,7 @@ host_lanes!(
     16,
     Isa::Avx512,
     run_packs_avx512,
+    run_tet_packs_avx512,
     "AVX-512F and DQ"
 );
 
@@ -227,4 +270,47 @@ where
     L: LaneReal<S, N>,
 {
     run_packs_body(packs, u, scatter)
+}
+
+/// [`run_tet_packs_body`] compiled with AVX.
+///
+/// # Safety
+/// The CPU must have AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn run_tet_packs_avx<S: Real, L: LaneReal<S, N>, const N: usize>(
+    packs: &[TetPack<L, N>],
+    pass: &mut TetPass<'_, S>,
+    u: &[[S; 3]],
+) -> Option<usize> {
+    run_tet_packs_body(packs, pass, u)
+}
+
+/// [`run_tet_packs_body`] compiled with AVX-512.
+///
+/// # Safety
+/// The CPU must have AVX-512F and AVX-512DQ.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx,avx2,avx512f,avx512dq")]
+unsafe fn run_tet_packs_avx512<S: Real, L: LaneReal<S, N>, const N: usize>(
+    packs: &[TetPack<L, N>],
+    pass: &mut TetPass<'_, S>,
+    u: &[[S; 3]],
+) -> Option<usize> {
+    run_tet_packs_body(packs, pass, u)
+}
+
+/// [`run_tet_packs_body`] for the portable lanes, compiled for several instruction sets.
+#[multiversion(targets(
+    "x86_64+avx512f+avx512vl+avx2+avx",
+    "x86_64+avx2+avx",
+    "x86_64+avx",
+    "aarch64+neon"
+))]
+fn run_tet_packs<S: Real, L: LaneReal<S, N>, const N: usize>(
+    packs: &[TetPack<L, N>],
+    pass: &mut TetPass<'_, S>,
+    u: &[[S; 3]],
+) -> Option<usize> {
+    run_tet_packs_body(packs, pass, u)
 }

@@ -33,6 +33,7 @@ mod isa;
 mod lanes;
 mod pack;
 mod parallel;
+mod tets;
 
 pub use isa::Isa;
 pub use lanes::HostLanes;
@@ -52,6 +53,20 @@ pub trait ElementLoop<T: Real>: Send + Sync {
         u: &[[T; 3]],
         f: &mut [[T; 3]],
     ) -> Result<(), PhysicsError>;
+    /// Adds the tetrahedra's internal forces at `u` into `f` (after the hexahedra's, on
+    /// this thread): the bits and errors of [`Tetrahedra::add_forces`]. The default runs
+    /// the scalar loop.
+    ///
+    /// [`Tetrahedra::add_forces`]: crate::problem::elements::Tetrahedra::add_forces
+    fn tet_forces(
+        &self,
+        elements: &Elements<T>,
+        laws: &[MaterialLaw<T>],
+        u: &[[T; 3]],
+        f: &mut [[T; 3]],
+    ) -> Result<(), PhysicsError> {
+        elements.tets.add_forces(laws, u, f)
+    }
     /// What runs: the lane type ("f64x4 avx", ...).
     fn describe(&self) -> String;
     /// How `parts` threads share the elements ([`Plan`]); None (the default) when this
@@ -80,6 +95,7 @@ pub struct Batched<T: Real>(Box<dyn ElementLoop<T>>);
 
 struct Loop<L, const N: usize> {
     packs: Packs<L, N>,
+    tets: Vec<pe_firmware::physics::element::tet_lanes::TetPack<L, N>>,
 }
 
 impl<T: Real> Batched<T> {
@@ -101,8 +117,10 @@ impl<T: Real> Batched<T> {
         {
             let e = elements.downcast_ref::<Elements<S>>()?;
             let l = laws.downcast_ref::<Vec<MaterialLaw<S>>>()?;
-            let b: Box<dyn ElementLoop<S>> = match Packs::<L, N>::build(e, l) {
-                Ok(packs) => Box::new(Loop { packs }),
+            let built = Packs::<L, N>::build(e, l)
+                .and_then(|packs| Ok((packs, tets::pack_tets(&e.tets.records, l)?)));
+            let b: Box<dyn ElementLoop<S>> = match built {
+                Ok((packs, tets)) => Box::new(Loop { packs, tets }),
                 Err(err) => return Some(Err(err)),
             };
             // S is T here: the downcasts above succeeded.
@@ -196,7 +214,16 @@ impl<S: Real, L: HostLanes<S, N>, const N: usize> ElementLoop<S> for Loop<L, N> 
         };
         r.map_err(|e| elements.hexes.in_mesh(e))?;
         // The tetrahedra after every hexahedron, as the scalar loop runs them.
-        elements.tets.add_forces(laws, u, f)
+        self.tet_forces(elements, laws, u, f)
+    }
+    fn tet_forces(
+        &self,
+        elements: &Elements<S>,
+        laws: &[MaterialLaw<S>],
+        u: &[[S; 3]],
+        f: &mut [[S; 3]],
+    ) -> Result<(), PhysicsError> {
+        tets::run_tets(&self.tets, &elements.tets, laws, u, f)
     }
     fn describe(&self) -> String {
         L::ISA.describe_lanes::<S, N>()

@@ -70,7 +70,8 @@ impl<T: Real> Tetrahedra<T> {
         self.records.is_empty()
     }
 
-    fn with_loop<R>(
+    /// Runs `run` on the tetrahedra's loop and its scratch; errors renamed to mesh cells.
+    pub(crate) fn with_loop<R>(
         &self,
         laws: &[MaterialLaw<T>],
         run: impl FnOnce(&TetLoop<'_, T>, Scratch<'_, T>) -> Result<R, PhysicsError>,

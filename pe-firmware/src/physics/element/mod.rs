@@ -58,6 +58,7 @@ mod hex_reduced;
 pub mod hourglass;
 pub mod kernel;
 pub mod tet;
+pub mod tet_lanes;
 pub mod tet_pressure;
 
 pub use hex::{
