@@ -16,19 +16,8 @@ use host_tools::problem::elements::Elements;
 use host_tools::problem::Problem;
 use pe_firmware::physics::{MaterialLaw, PhysicsError, Real, Volumetric};
 
+use crate::batched::Rng;
 use crate::tetrahedra::beam;
-
-/// A seeded generator (SplitMix64).
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-    }
-}
 
 /// The beam's law, and with `mixed` two more of other kinds.
 fn laws(p: &Problem, mixed: bool) -> Vec<MaterialLaw<f64>> {

@@ -220,15 +220,7 @@ impl<T: Real> MaterialLaw<T> {
                 (a, b / j, cof)
             }
         };
-        Ok(array(
-            #[inline(always)]
-            |i| {
-                array(
-                    #[inline(always)]
-                    |k| a * f[i][k] + b_over_j * cof[i][k],
-                )
-            },
-        ))
+        Ok(f_and_cofactor(a, f, b_over_j, &cof))
     }
 
     /// Strain energy density `W(F)` per unit reference volume (J/m³).
@@ -340,15 +332,7 @@ impl<T: Real> MaterialLaw<T> {
                 (a, p - a * i1 / T::from_i32(3) / j, cof)
             }
         };
-        Ok(array(
-            #[inline(always)]
-            |i| {
-                array(
-                    #[inline(always)]
-                    |k| a * f[i][k] + b_over_j * cof[i][k],
-                )
-            },
-        ))
+        Ok(f_and_cofactor(a, f, b_over_j, &cof))
     }
 
     /// The pressure-like derivative `U'(J)` (Pa): `λ ln J / J` (compressible neo-Hookean),
@@ -405,6 +389,20 @@ fn positive_cofactor<T: Real>(f: &Mat3<T>) -> Result<(Mat3<T>, T), NonPositiveJa
         });
     }
     Ok((cof, j))
+}
+
+/// `a F + c cof F`: the neo-Hookean laws' first Piola-Kirchhoff stress.
+#[inline(always)]
+fn f_and_cofactor<T: Real>(a: T, f: &Mat3<T>, c: T, cof: &Mat3<T>) -> Mat3<T> {
+    array(
+        #[inline(always)]
+        |i| {
+            array(
+                #[inline(always)]
+                |k| a * f[i][k] + c * cof[i][k],
+            )
+        },
+    )
 }
 
 /// `J^(−2/3)`.

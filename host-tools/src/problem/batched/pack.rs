@@ -29,13 +29,45 @@ where
     E: HexElement<S> + Pack<S, L, N>,
     MaterialLaw<S>: Pack<S, L, N, Packed = MaterialLaw<L>>,
 {
+    pack_runs(
+        elements,
+        laws,
+        |e| e.material(),
+        |pick, law, active, first| {
+            Some(Batch {
+                kernel: E::pack(pick)?,
+                law,
+                nodes: pick.map(|e| *e.nodes()),
+                active,
+                first,
+            })
+        },
+    )
+}
+
+/// Splits `items` (laws indexed by `material`) into runs of at most `N` consecutive items
+/// whose laws pack together (one kind), in order, and makes each run's pack with
+/// `make(lanes, law, active, first)`: the lanes hold the run's items, the last repeated
+/// after `active`. An item whose material has no law, or a run `make` refuses, is
+/// [`PhysicsError::BadIndex`] naming it (the run's first).
+pub(super) fn pack_runs<X, S, L, P, const N: usize>(
+    items: &[X],
+    laws: &[MaterialLaw<S>],
+    material: impl Fn(&X) -> usize,
+    make: impl Fn([&X; N], MaterialLaw<L>, usize, usize) -> Option<P>,
+) -> Result<Vec<P>, PhysicsError>
+where
+    S: Real,
+    L: LaneReal<S, N>,
+    MaterialLaw<S>: Pack<S, L, N, Packed = MaterialLaw<L>>,
+{
     let law_of = |k: usize| {
-        elements
+        items
             .get(k)
-            .and_then(|e| laws.get(e.material()))
+            .and_then(|x| laws.get(material(x)))
             .ok_or(PhysicsError::BadIndex { element: k as u32 })
     };
-    // The laws of elements `first..` (the last repeated after `end`), packed.
+    // The laws of items `first..` (the last repeated after `end`), packed.
     let laws_of = |first: usize, end: usize| -> Result<Option<MaterialLaw<L>>, PhysicsError> {
         let mut ls = [law_of(first)?; N];
         for (l, v) in ls.iter_mut().enumerate() {
@@ -43,28 +75,20 @@ where
         }
         Ok(<MaterialLaw<S> as Pack<S, L, N>>::pack(ls))
     };
-    let mut out = Vec::with_capacity(elements.len().div_ceil(N));
+    let mut out = Vec::with_capacity(items.len().div_ceil(N));
     let mut first = 0;
-    while first < elements.len() {
+    while first < items.len() {
         // The longest run (at most N) whose laws pack together.
         let mut end = first + 1;
-        while end < elements.len() && end - first < N && laws_of(first, end + 1)?.is_some() {
+        while end < items.len() && end - first < N && laws_of(first, end + 1)?.is_some() {
             end += 1;
         }
-        let law = laws_of(first, end)?.ok_or(PhysicsError::BadIndex {
+        let bad = PhysicsError::BadIndex {
             element: first as u32,
-        })?;
-        let pick: [&E; N] = core::array::from_fn(|l| &elements[(first + l).min(end - 1)]);
-        let kernel = E::pack(pick).ok_or(PhysicsError::BadIndex {
-            element: first as u32,
-        })?;
-        out.push(Batch {
-            kernel,
-            law,
-            nodes: pick.map(|e| *e.nodes()),
-            active: end - first,
-            first,
-        });
+        };
+        let law = laws_of(first, end)?.ok_or(bad)?;
+        let pick: [&X; N] = core::array::from_fn(|l| &items[(first + l).min(end - 1)]);
+        out.push(make(pick, law, end - first, first).ok_or(bad)?);
         first = end;
     }
     Ok(out)

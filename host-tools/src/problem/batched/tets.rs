@@ -10,6 +10,7 @@ use pe_firmware::physics::element::Scratch;
 use pe_firmware::physics::{LaneReal, MaterialLaw, Pack, PhysicsError, Real, Tet4, TetPressure};
 
 use super::lanes::HostLanes;
+use super::pack::pack_runs;
 use crate::problem::elements::Tetrahedra;
 
 /// Packs `tets` (laws indexed by material) `N` at a time, in order, each pack's laws of
@@ -18,41 +19,20 @@ pub(super) fn pack_tets<S: Real, L: LaneReal<S, N>, const N: usize>(
     tets: &[Tet4<S>],
     laws: &[MaterialLaw<S>],
 ) -> Result<Vec<TetPack<L, N>>, PhysicsError> {
-    let law_of = |k: usize| {
-        tets.get(k)
-            .and_then(|t| laws.get(t.material as usize))
-            .ok_or(PhysicsError::BadIndex { element: k as u32 })
-    };
-    let laws_of = |first: usize, end: usize| -> Result<Option<MaterialLaw<L>>, PhysicsError> {
-        let mut ls = [law_of(first)?; N];
-        for (l, v) in ls.iter_mut().enumerate() {
-            *v = law_of((first + l).min(end - 1))?;
-        }
-        Ok(<MaterialLaw<S> as Pack<S, L, N>>::pack(ls))
-    };
-    let mut out = Vec::with_capacity(tets.len().div_ceil(N));
-    let mut first = 0;
-    while first < tets.len() {
-        let mut end = first + 1;
-        while end < tets.len() && end - first < N && laws_of(first, end + 1)?.is_some() {
-            end += 1;
-        }
-        let bad = PhysicsError::BadIndex {
-            element: first as u32,
-        };
-        let law = laws_of(first, end)?.ok_or(bad)?;
-        let pick: [&Tet4<S>; N] = core::array::from_fn(|l| &tets[(first + l).min(end - 1)]);
-        let tet = <Tet4<S> as Pack<S, L, N>>::pack(pick).ok_or(bad)?;
-        out.push(TetPack {
-            tet,
-            law,
-            nodes: pick.map(|t| t.nodes),
-            active: end - first,
-            first,
-        });
-        first = end;
-    }
-    Ok(out)
+    pack_runs(
+        tets,
+        laws,
+        |t| t.material as usize,
+        |pick, law, active, first| {
+            Some(TetPack {
+                tet: <Tet4<S> as Pack<S, L, N>>::pack(pick)?,
+                law,
+                nodes: pick.map(|t| t.nodes),
+                active,
+                first,
+            })
+        },
+    )
 }
 
 /// What a run over the packs does with each lane's result.
